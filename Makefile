@@ -1,0 +1,28 @@
+# Two entry points (see README "Quick start"): `make demo` and `make test`.
+# Each creates .venv on first use with the project and its dev extras.
+PYTHON ?= python3
+VENV := .venv
+BIN := $(VENV)/bin
+STAMP := $(VENV)/.frbjax-installed
+
+.PHONY: demo test bench clean
+
+$(STAMP): pyproject.toml
+	test -x $(BIN)/python || $(PYTHON) -m venv $(VENV)
+	$(BIN)/python -m pip install --quiet --upgrade pip
+	$(BIN)/python -m pip install --quiet -e ".[dev]"
+	touch $(STAMP)
+
+demo: $(STAMP)
+	$(BIN)/frbjax demo
+
+# pytest exits 5 when it collects no test; that is reported, not hidden.
+test: $(STAMP)
+	$(BIN)/python -m pytest -n 2 -q --durations=15 tests; rc=$$?; \
+	if [ $$rc -eq 5 ]; then echo "pytest collected no tests"; fi; exit $$rc
+
+bench: $(STAMP)
+	$(BIN)/python benchmarks/special.py
+
+clean:
+	rm -rf $(VENV) .pytest_cache .hypothesis

@@ -1,0 +1,48 @@
+"""Small helpers shared by the special functions: dtypes, iteration counts, safe branches."""
+
+from __future__ import annotations
+
+import jax.numpy as jnp
+import numpy as np
+
+
+def promote(*args):
+    """Broadcast the arguments to one floating dtype (float64 only when x64 is on)."""
+    arrays = [jnp.asarray(a) for a in args]
+    dtype = jnp.result_type(*arrays, float)
+    arrays = [a.astype(dtype) for a in arrays]
+    return jnp.broadcast_arrays(*arrays)
+
+
+def is_double(x) -> bool:
+    """True when ``x`` is float64: iteration counts are chosen per dtype at trace time."""
+    return jnp.asarray(x).dtype == jnp.float64
+
+
+def where_safe(condition, value, substitute):
+    """``value`` where ``condition`` holds, ``substitute`` elsewhere (the safe-where pattern).
+
+    Used on *inputs* of a branch, so that the branch not taken is evaluated at a harmless point and
+    never produces NaN in values or gradients.
+    """
+    return jnp.where(condition, value, substitute)
+
+
+def zero_if_no_tangent(tangent, partial):
+    """``tangent * partial`` that is exactly 0 where the tangent is 0, even if ``partial`` is infinite.
+
+    Carlson functions have infinite partial derivatives in an argument that is zero; a zero tangent
+    in that direction must contribute nothing rather than NaN (0 * inf).
+    """
+    return jnp.where(tangent == 0, jnp.zeros_like(partial), tangent * partial)
+
+
+def complement(m, mc):
+    """Return ``(m, mc)`` with ``mc = 1 - m`` when the caller did not pass the complement."""
+    if mc is None:
+        m, = promote(m)
+        return m, 1 - m
+    return tuple(promote(m, mc))
+
+
+PI_HIGH = np.pi

@@ -1,0 +1,10 @@
+"""Shared pytest configuration for the frbjax test suite.
+
+The library never enables 64-bit mode by itself; the tests do, at import of this file (before any
+test module creates an array), so that float64 inputs stay float64.  float32 behaviour is tested by
+passing float32 arrays explicitly.
+"""
+
+import jax
+
+jax.config.update("jax_enable_x64", True)
