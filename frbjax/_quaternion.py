@@ -1,0 +1,83 @@
+"""Small quaternion helpers: (w, x, y, z) order, Hamilton product, unit quaternions map body to space."""
+
+from __future__ import annotations
+
+import jax.numpy as jnp
+
+
+def multiply(p, q):
+    """Hamilton product p ⊗ q of (..., 4) arrays."""
+    pw, px, py, pz = p[..., 0], p[..., 1], p[..., 2], p[..., 3]
+    qw, qx, qy, qz = q[..., 0], q[..., 1], q[..., 2], q[..., 3]
+    return jnp.stack(
+        [
+            pw * qw - px * qx - py * qy - pz * qz,
+            pw * qx + px * qw + py * qz - pz * qy,
+            pw * qy - px * qz + py * qw + pz * qx,
+            pw * qz + px * qy - py * qx + pz * qw,
+        ],
+        axis=-1,
+    )
+
+
+def conjugate(q):
+    """q* = (w, -x, -y, -z), the inverse of a unit quaternion."""
+    return q * jnp.array([1, -1, -1, -1], dtype=q.dtype)
+
+
+def as_matrix(q):
+    """Rotation matrix R(q) with R v = q ⊗ (0, v) ⊗ q* for a unit quaternion q, shape (..., 3, 3)."""
+    w, x, y, z = q[..., 0], q[..., 1], q[..., 2], q[..., 3]
+    return jnp.stack(
+        [
+            jnp.stack([1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)], -1),
+            jnp.stack([2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)], -1),
+            jnp.stack([2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)], -1),
+        ],
+        axis=-2,
+    )
+
+
+def from_matrix(matrix):
+    """Unit quaternion (w >= 0 where possible) of a rotation matrix, by Shepperd's method.
+
+    Picks the largest of 1 + trace and 1 + 2 R_ii - trace so that the square root is of a number >= 1,
+    then divides the off-diagonal sums by it.
+    """
+    r = matrix
+    trace = r[..., 0, 0] + r[..., 1, 1] + r[..., 2, 2]
+    candidates = jnp.stack(
+        [1 + trace, 1 + 2 * r[..., 0, 0] - trace, 1 + 2 * r[..., 1, 1] - trace, 1 + 2 * r[..., 2, 2] - trace],
+        axis=-1,
+    )
+    choice = jnp.argmax(candidates, axis=-1)
+    largest = jnp.sqrt(jnp.max(candidates, axis=-1)) / 2
+    quarter = 1 / (4 * largest)
+    from_w = jnp.stack(
+        [largest, (r[..., 2, 1] - r[..., 1, 2]) * quarter, (r[..., 0, 2] - r[..., 2, 0]) * quarter,
+         (r[..., 1, 0] - r[..., 0, 1]) * quarter], -1)
+    from_x = jnp.stack(
+        [(r[..., 2, 1] - r[..., 1, 2]) * quarter, largest, (r[..., 0, 1] + r[..., 1, 0]) * quarter,
+         (r[..., 0, 2] + r[..., 2, 0]) * quarter], -1)
+    from_y = jnp.stack(
+        [(r[..., 0, 2] - r[..., 2, 0]) * quarter, (r[..., 0, 1] + r[..., 1, 0]) * quarter, largest,
+         (r[..., 1, 2] + r[..., 2, 1]) * quarter], -1)
+    from_z = jnp.stack(
+        [(r[..., 1, 0] - r[..., 0, 1]) * quarter, (r[..., 0, 2] + r[..., 2, 0]) * quarter,
+         (r[..., 1, 2] + r[..., 2, 1]) * quarter, largest], -1)
+    options = jnp.stack([from_w, from_x, from_y, from_z], axis=-2)
+    return jnp.take_along_axis(options, choice[..., None, None], axis=-2)[..., 0, :]
+
+
+def exp_pure(rotation_vector):
+    """exp(v/2) as a unit quaternion for a rotation vector v (..., 3): rotation by |v| about v/|v|.
+
+    Uses the safe-where pattern: the series 1 - θ²/8 and 1/2 - θ²/48 below θ² = 1e-8 keep the value
+    and its gradient finite at v = 0.
+    """
+    theta2 = jnp.sum(rotation_vector * rotation_vector, axis=-1)
+    small = theta2 < 1e-8
+    theta = jnp.sqrt(jnp.where(small, 1, theta2))
+    scalar = jnp.where(small, 1 - theta2 / 8, jnp.cos(theta / 2))
+    vector_scale = jnp.where(small, 0.5 - theta2 / 48, jnp.sin(theta / 2) / theta)
+    return jnp.concatenate([scalar[..., None], vector_scale[..., None] * rotation_vector], axis=-1)
