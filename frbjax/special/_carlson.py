@@ -24,6 +24,7 @@ from __future__ import annotations
 
 import jax
 import jax.numpy as jnp
+from jax import lax
 
 from ._common import is_double, promote
 
@@ -58,12 +59,15 @@ def _safe_sqrt_jvp(primals, tangents):
 def _rf_series(x, y, z, steps):
     mean0 = (x + y + z) / 3
     dx0, dy0 = mean0 - x, mean0 - y
-    mean = mean0
-    for _ in range(steps):
+
+    def duplicate(_, state):
+        x, y, z, mean = state
         sx, sy, sz = _sqrt_for_tangents(x), _sqrt_for_tangents(y), _sqrt_for_tangents(z)
         lam = sx * (sy + sz) + sy * sz
-        x, y, z = (x + lam) / 4, (y + lam) / 4, (z + lam) / 4
-        mean = (mean + lam) / 4
+        return (x + lam) / 4, (y + lam) / 4, (z + lam) / 4, (mean + lam) / 4
+
+    # A rolled loop: XLA compiles one duplication step instead of `steps` copies (compile time).
+    x, y, z, mean = lax.fori_loop(0, steps, duplicate, (x, y, z, mean0))
     # DLMF 19.36.1 with X = 1 - x_N/A_N computed without cancellation as (A_0 - x_0) / (4^N A_N).
     scale = 0.25**steps / mean
     big_x, big_y = dx0 * scale, dy0 * scale
@@ -130,10 +134,9 @@ def _rj_series(x, y, z, p, steps):
     mean0 = (x + y + z + 2 * p) / 5
     dx0, dy0, dz0 = mean0 - x, mean0 - y, mean0 - z
     px0, py0, pz0 = p - x, p - y, p - z
-    mean = mean0
-    correction = jnp.zeros_like(mean0)
-    quarter_power = 1.0
-    for _ in range(steps):
+
+    def duplicate(_, state):
+        x, y, z, p, mean, correction, quarter_power = state
         sx, sy, sz = _sqrt_for_tangents(x), _sqrt_for_tangents(y), _sqrt_for_tangents(z)
         sp = _sqrt_for_tangents(p)
         lam = sx * (sy + sz) + sy * sz
@@ -153,8 +156,11 @@ def _rj_series(x, y, z, p, steps):
         one_plus_e = jnp.where(e < 0, one_minus_product, 1 + e)
         correction = correction + quarter_power * _rc_one_plus(e, one_plus_e) / d
         x, y, z, p = (x + lam) / 4, (y + lam) / 4, (z + lam) / 4, (p + lam) / 4
-        mean = (mean + lam) / 4
-        quarter_power = quarter_power / 4
+        return x, y, z, p, (mean + lam) / 4, correction, quarter_power / 4
+
+    zero = jnp.zeros_like(mean0)
+    state = (x, y, z, p, mean0, zero, jnp.ones_like(mean0))
+    x, y, z, p, mean, correction, _ = lax.fori_loop(0, steps, duplicate, state)
     scale = 0.25**steps / mean
     big_x, big_y, big_z = dx0 * scale, dy0 * scale, dz0 * scale
     big_p = -(big_x + big_y + big_z) / 2
@@ -184,16 +190,17 @@ def _rj_series(x, y, z, p, steps):
 def _rd_series(x, y, z, steps):
     mean0 = (x + y + 3 * z) / 5
     dx0, dy0 = mean0 - x, mean0 - y
-    mean = mean0
-    correction = jnp.zeros_like(mean0)
-    quarter_power = 1.0
-    for _ in range(steps):
+
+    def duplicate(_, state):
+        x, y, z, mean, correction, quarter_power = state
         sx, sy, sz = _sqrt_for_tangents(x), _sqrt_for_tangents(y), _sqrt_for_tangents(z)
         lam = sx * (sy + sz) + sy * sz
         correction = correction + quarter_power / (sz * (z + lam))
         x, y, z = (x + lam) / 4, (y + lam) / 4, (z + lam) / 4
-        mean = (mean + lam) / 4
-        quarter_power = quarter_power / 4
+        return x, y, z, (mean + lam) / 4, correction, quarter_power / 4
+
+    state = (x, y, z, mean0, jnp.zeros_like(mean0), jnp.ones_like(mean0))
+    x, y, z, mean, correction, _ = lax.fori_loop(0, steps, duplicate, state)
     scale = 0.25**steps / mean
     big_x, big_y = dx0 * scale, dy0 * scale
     big_z = -(big_x + big_y) / 3
@@ -248,11 +255,13 @@ def _rj_jvp(primals, tangents):
 def _rc_series(x, y, steps):
     mean0 = (x + 2 * y) / 3
     dy0 = y - mean0
-    mean = mean0
-    for _ in range(steps):
+
+    def duplicate(_, state):
+        x, y, mean = state
         lam = 2 * jnp.sqrt(x) * jnp.sqrt(y) + y
-        x, y = (x + lam) / 4, (y + lam) / 4
-        mean = (mean + lam) / 4
+        return (x + lam) / 4, (y + lam) / 4, (mean + lam) / 4
+
+    x, y, mean = lax.fori_loop(0, steps, duplicate, (x, y, mean0))
     s = dy0 * (0.25**steps) / mean
     # DLMF 19.36.8 (Carlson 1995, eq. (2.13)).
     series = 1 + s * s * (
@@ -318,11 +327,12 @@ def _rj_any_parameter(x, y, z, p):
     #   (p - z) R_J(x, y, z, p) + (q - z) R_J(x, y, z, q) = 3 R_F(x, y, z) - 3 R_C(xy/z, pq/z),
     #   (p - z)(q - z) = (x - z)(y - z);  every term is positive, so nothing cancels.
     p_large = jnp.where(large, p, 2 * high)
-    q_minus_high = (low - high) * (middle - high) / (p_large - high)
+    q_minus_high = (low - high) / (p_large - high) * (middle - high)  # no overflow
     q = high + q_minus_high
     transformed = (
         3 * _rf(low, middle, high)
-        - 3 * _rc_positive(low * middle / high, p_large * q / high)
+        # R_C is homogeneous of degree -1/2: scale by the largest argument so that p q cannot overflow.
+        - 3 * _rc_positive((low / high) * (middle / high), (p_large / high) * (q / high)) / jnp.sqrt(high)
         - q_minus_high * _rj(low, middle, high, q)
     ) / (p_large - high)
     return jnp.where(large, transformed, direct)

@@ -28,15 +28,6 @@ def where_safe(condition, value, substitute):
     return jnp.where(condition, value, substitute)
 
 
-def zero_if_no_tangent(tangent, partial):
-    """``tangent * partial`` that is exactly 0 where the tangent is 0, even if ``partial`` is infinite.
-
-    Carlson functions have infinite partial derivatives in an argument that is zero; a zero tangent
-    in that direction must contribute nothing rather than NaN (0 * inf).
-    """
-    return jnp.where(tangent == 0, jnp.zeros_like(partial), tangent * partial)
-
-
 def complement(m, mc):
     """Return ``(m, mc)`` with ``mc = 1 - m`` when the caller did not pass the complement."""
     if mc is None:

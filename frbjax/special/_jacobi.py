@@ -21,6 +21,7 @@ from __future__ import annotations
 
 import jax
 import jax.numpy as jnp
+from jax import lax
 
 from ._carlson import _rd, _rf
 from ._common import complement, is_double, promote
@@ -33,25 +34,31 @@ def _agm_steps(x) -> int:
 
 
 def _amplitude_reduced(u_reduced, m, mc):
-    """am(u_r|m) for |u_r| <= K(m), m < 1, by the AGM (DLMF 22.20.ii)."""
+    """am(u_r|m) for |u_r| <= K(m), m < 1, by the AGM (DLMF 22.20.ii).
+
+    Two rolled loops (lax.scan), so that XLA compiles one step of each instead of ``steps`` copies.
+    """
     steps = _agm_steps(u_reduced)
-    a = jnp.ones_like(mc)
-    b = jnp.sqrt(mc)
-    c = jnp.sqrt(m)
-    sequence = []
-    for _ in range(steps):
+
+    def descend(state, _):
+        a, b, c = state
         a_next = (a + b) / 2
-        b = jnp.sqrt(a * b)
-        c = c * c / (4 * a_next)
-        a = a_next
-        sequence.append((b, c))
-    phi = (2.0**steps) * a * u_reduced
-    for b_n, c_n in reversed(sequence):
+        b_next = jnp.sqrt(a * b)
+        c_next = c * c / (4 * a_next)
+        return (a_next, b_next, c_next), (b_next, c_next)
+
+    start = (jnp.ones_like(mc), jnp.sqrt(mc), jnp.sqrt(m))
+    (a, _, _), sequence = lax.scan(descend, start, None, length=steps)
+
+    def ascend(phi, b_and_c):
+        b_n, c_n = b_and_c
         # arcsin((c_n/a_n) sin phi) written as atan2(c_n sin phi, sqrt(b_n^2 + c_n^2 cos^2 phi)), using
         # a_n^2 = b_n^2 + c_n^2: the plain arcsin loses digits when m -> 1 and phi -> pi/2.
         sin_phi, cos_phi = jnp.sin(phi), jnp.cos(phi)
         landen = jnp.arctan2(c_n * sin_phi, jnp.sqrt(b_n * b_n + (c_n * cos_phi) ** 2))
-        phi = (phi + landen) / 2
+        return (phi + landen) / 2, None
+
+    phi, _ = lax.scan(ascend, (2.0**steps) * a * u_reduced, sequence, reverse=True)
     return phi
 
 
@@ -109,7 +116,9 @@ def _ellipj_jvp(primals, tangents):
     ) / 6
     dam_dm_generic = -safe_dn * df_dm
     # m = 1 (DLMF 22.10.ii): d am/dm = -(sinh u - u sech u)/4.
-    safe_u = jnp.where(limit, u, 0)
+    # The m-derivatives at m = 1 grow like e^|u|/8; |u| is capped where sinh would overflow, so that a
+    # zero parameter tangent contributes 0 rather than 0 * inf = NaN (d/du is exact for every u).
+    safe_u = jnp.where(limit, jnp.clip(u, -700, 700), 0)
     dam_dm_limit = -(jnp.sinh(safe_u) - safe_u / jnp.cosh(safe_u)) / 4
     dam_dm = jnp.where(limit, dam_dm_limit, dam_dm_generic)
 

@@ -22,7 +22,7 @@ from __future__ import annotations
 import jax
 import jax.numpy as jnp
 
-from ._carlson import _rc_positive, _rd, _rf, _rj
+from ._carlson import _rd, _rf, _rj
 from ._common import complement, promote
 
 
@@ -43,7 +43,9 @@ def _delta_squared(sin_phi, cos_phi, mc):
 
 @jax.custom_jvp
 def _ellipk(m, mc):
-    return _rf(jnp.zeros_like(mc), mc, jnp.ones_like(mc))
+    # K(1) = R_F(0, 0, 1) = +inf (scipy's convention); the duplication alone would stop at a finite value.
+    value = _rf(jnp.zeros_like(mc), mc, jnp.ones_like(mc))
+    return jnp.where(mc == 0, jnp.inf, value)
 
 
 @_ellipk.defjvp
@@ -145,21 +147,26 @@ _LARGE_NEGATIVE_CHARACTERISTIC = -1.0
 
 
 def _pi_reduced(n, s, c, m, mc):
-    """Pi(n; phi_r|m) for |phi_r| <= pi/2 from s = sin phi_r, c = cos phi_r >= 0 (DLMF 19.25.14)."""
+    """Pi(n; phi_r|m) for |phi_r| <= pi/2 from s = sin phi_r, c = cos phi_r >= 0 (DLMF 19.25.14).
+
+    For n >= -1:  Pi = s R_F(c^2, Delta^2, 1) + (n/3) s^3 R_J(c^2, Delta^2, 1, 1 - n s^2).
+    For n < -1, DLMF 19.7.8 multiplied through by sin^4, with omega = m/n in (-1, 0]:
+        Pi = s R_C(c^2 Delta^2, (1 - n s^2)(1 - omega s^2)) - (omega/3) s^3 R_J(c^2, Delta^2, 1, 1 - omega s^2);
+    both terms are >= 0 for n < 0, so nothing cancels.  Both forms are one R_F (R_C(a, b) = R_F(a, b, b))
+    plus one R_J, so each is evaluated once with its arguments chosen per point.
+    """
     one = jnp.ones_like(s)
     x, y = c * c, _delta_squared(s, c, mc)
     transformed = n < _LARGE_NEGATIVE_CHARACTERISTIC
-    n_direct = jnp.where(transformed, 0, n)
-    direct = s * _rf(x, y, one) + n_direct * s**3 * _rj(x, y, one, 1 - n_direct * s * s) / 3
-    # DLMF 19.7.8 multiplied through by sin^4: with omega = m/n,
-    #   Pi(n; phi) = s R_C(c^2 Delta^2, (1 - n s^2)(1 - omega s^2)) - (omega/3) s^3 R_J(c^2, Delta^2, 1, 1 - omega s^2);
-    # both terms are >= 0 for n < 0, so nothing cancels.
     n_far = jnp.where(transformed, n, 2 * _LARGE_NEGATIVE_CHARACTERISTIC)
     omega = m / n_far
-    p_omega = 1 - omega * s * s
-    rc_term = s * _rc_positive(x * y, (1 - n_far * s * s) * p_omega)
-    far = rc_term - omega * s**3 * _rj(x, y, one, p_omega) / 3
-    return jnp.where(transformed, far, direct)
+    characteristic = jnp.where(transformed, omega, n)
+    p = 1 - characteristic * s * s
+    rc_second = (1 - n_far * s * s) * p
+    first = _rf(jnp.where(transformed, x * y, x), jnp.where(transformed, rc_second, y),
+                jnp.where(transformed, rc_second, one))
+    coefficient = jnp.where(transformed, -omega, n)
+    return s * first + coefficient * s**3 * _rj(x, y, one, p) / 3
 
 
 def _pi_complete(n, m, mc):

@@ -1,0 +1,29 @@
+"""The benchmark script runs (a tiny smoke run, so CI proves it works)."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[2]
+
+
+def test_benchmark_quick(tmp_path):
+    output = tmp_path / "special.json"
+    proc = subprocess.run(
+        [sys.executable, str(ROOT / "benchmarks" / "special.py"), "--quick", "--output", str(output)],
+        cwd=ROOT, capture_output=True, text=True, timeout=900,
+    )
+    assert proc.returncode == 0, proc.stdout + proc.stderr
+    result = json.loads(output.read_text())
+    names = {row["function"] for row in result["functions"]}
+    assert names == {"ellipj", "ellipk", "ellipe", "ellipkinc", "ellippiinc", "elliprf", "elliprd",
+                     "elliprj", "elliprc"}
+    for row in result["functions"]:
+        assert row["frbjax_ns_per_point"] > 0 and row["scipy_ns_per_point"] > 0, row
+        # Same function on the same points (scipy's ellipj is accurate on this moderate grid).
+        assert row["max_diff_vs_scipy"] < 1e-10, row
+    assert result["gradient"]["compile_s"] > 0
+    assert "ellippiinc" in proc.stdout
