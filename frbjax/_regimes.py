@@ -18,7 +18,8 @@ gaps a = J2 - J1, b = J3 - J2, c = J3 - J1:
   chart built on 1 + L1;
 - uniform rotation (L along a principal direction, a sphere, L = 0) is handled in ``_body``.
 
-u = B (t0 + t) where the phase t0 matches the initial angular momentum.  The complement mc = 1 - m is
+u = u0 + B t where the phase u0 matches the initial angular momentum (computed from the ratios of its
+components, not from an amplitude, so that it keeps its digits next to the separatrix).  The complement mc = 1 - m is
 formed from g2 directly (mc = c |g2| / (g1 b) or c g2 / (g3 a)) so that it keeps full relative precision
 next to the separatrix.
 """
@@ -27,7 +28,8 @@ from __future__ import annotations
 
 import jax.numpy as jnp
 
-from .special import ellipj, ellipkinc, ellippiinc
+from .special import ellipj, ellippi, elliprf
+from .special._legendre import _pi_reduced
 
 MAJOR, MINOR, SEPARATRIX, UNIFORM = 0, 1, 2, 3
 
@@ -91,9 +93,8 @@ def constants(inertia, unit_momentum, regime):
         nu=-j1 * g3 / (j3 * g1),
         precession=1 / j1,
     )
-    major_amplitude = major["amplitude"]
-    # Phase: sn = l2/A2, cn = l1/A1 (l1 >= 0, so the amplitude lies in [-pi/2, pi/2]).
-    major_am0 = jnp.arctan2(l[..., 1] * major_amplitude[..., 0], l[..., 0] * major_amplitude[..., 1])
+    major_phase = _phase(l[..., 1] * major["amplitude"][..., 0], l[..., 0] * major["amplitude"][..., 1],
+                         major["mc"])
 
     # Around the minor axis.
     j, l = _substitute(is_minor, inertia, unit_momentum, _SAFE_MINOR)
@@ -109,8 +110,8 @@ def constants(inertia, unit_momentum, regime):
         nu=-j3 * g1 / (j1 * g3),
         precession=1 / j3,
     )
-    minor_amplitude = minor["amplitude"]
-    minor_am0 = jnp.arctan2(l[..., 1] * minor_amplitude[..., 2], l[..., 2] * minor_amplitude[..., 1])
+    minor_phase = _phase(l[..., 1] * minor["amplitude"][..., 2], l[..., 2] * minor["amplitude"][..., 1],
+                         minor["mc"])
 
     # Separatrix: constants depend on the moments alone.
     j, l = _substitute(is_sep, inertia, unit_momentum, (0.0, 0.0, 1.0))
@@ -127,51 +128,81 @@ def constants(inertia, unit_momentum, regime):
         nu=jnp.zeros_like(j1),
         precession=1 / j2,
     )
-    separatrix_u0 = jnp.arctanh(l[..., 1])
+    # sech(u0) = l1/A1 and tanh(u0) = l2, so sinh(u0) = l2 A1/l1 (l1 > 0 on a moving separatrix orbit):
+    # unlike artanh(l2) this keeps its precision when l is within rounding of the saddle (l2 -> 1).
+    separatrix_u0 = jnp.arcsinh(l[..., 1] * separatrix["amplitude"][..., 0] / jnp.where(is_sep, l[..., 0], 1))
 
     def pick(key):
-        mask = lambda x: x if x.ndim == regime.ndim else x[..., None]  # noqa: E731
-        value = jnp.where(mask(is_minor), minor[key], major[key])
-        return jnp.where(mask(is_sep), separatrix[key], value)
+        # Vector constants (the amplitudes) need the regime masks with a trailing axis.
+        vector = major[key].ndim > regime.ndim
+        minor_mask = is_minor[..., None] if vector else is_minor
+        separatrix_mask = is_sep[..., None] if vector else is_sep
+        return jnp.where(separatrix_mask, separatrix[key], jnp.where(minor_mask, minor[key], major[key]))
 
     out = {key: pick(key) for key in major}
-    am0 = jnp.where(is_minor, minor_am0, major_am0)
-    u0_elliptic = ellipkinc(am0, jnp.where(is_sep, 0.5, out["m"]), mc=jnp.where(is_sep, 0.5, out["mc"]))
-    out["u0"] = jnp.where(is_sep, separatrix_u0, u0_elliptic)
-    out["t0"] = out["u0"] / out["rate"]
+    out["u0"] = jnp.where(is_sep, separatrix_u0, jnp.where(is_minor, minor_phase, major_phase))
+    # The complete integral Pi(nu|m) of every whole half-period of the amplitude, once per body; the
+    # separatrix needs none (it is infinite there) and gets a harmless stand-in.
+    safe_nu = jnp.where(is_sep, 0, out["nu"])
+    safe_m = jnp.where(is_sep, 0.5, out["m"])
+    safe_mc = jnp.where(is_sep, 0.5, out["mc"])
+    out["pi_complete"] = ellippi(safe_nu, safe_m, mc=safe_mc)
     out["regime"] = regime
     return out
 
 
-def working_momentum(consts, tau):
-    """Unit angular momentum in the working frame at unit-|L| time tau (any broadcastable shape)."""
+def _phase(sn_scaled, cn_scaled, mc):
+    """u0 = F(am0|m) from (sn0, cn0) known up to a common positive factor, cn0 >= 0.
+
+    F = sn R_F(cn^2, dn^2, 1) with dn^2 = cn^2 + mc sn^2 (DLMF 19.25.5) takes cn itself rather than an
+    amplitude: near the separatrix am0 is within 1e-13 of pi/2 and only cn0 (a ratio of the given
+    angular momentum components) carries the digits that fix the phase.
+    """
+    norm = jnp.sqrt(sn_scaled * sn_scaled + cn_scaled * cn_scaled)
+    sn, cn = sn_scaled / norm, cn_scaled / norm
+    cn2 = cn * cn
+    return sn * elliprf(cn2, cn2 + mc * sn * sn, jnp.ones_like(sn))
+
+
+def evaluate(consts, tau, attitude=True):
+    """Unit angular momentum and (if ``attitude``) the particular quaternion q̂ at unit-|L| time tau.
+
+    q̂ is the solution of formulas.md at phase u = u0 + B tau, except that the precession angle psi
+    counts from tau = 0 (psi = precession * tau + the bounded terms at u): only differences of psi
+    enter the motion (q̂ is a rotation about the fixed spatial axis by psi times a function of L), and
+    the phase time t0 = u0/B of formulas.md is unbounded for nearly spherical bodies (B -> 0).
+    """
     u = consts["u0"] + consts["rate"] * tau
     sn, cn, dn, am = ellipj(u, consts["m"], mc=consts["mc"])
-    minor = consts["regime"] == MINOR
-    first = jnp.where(minor, dn, cn)
-    third = jnp.where(minor, cn, dn)
-    return consts["amplitude"] * jnp.stack([first, sn, third], -1), u, am
-
-
-def working_quaternion(consts, tau):
-    """The particular solution q̂ at unit-|L| time t0 + tau (formulas.md), with its momentum."""
-    momentum, u, am = working_momentum(consts, tau)
     regime = consts["regime"]
     minor, separatrix = regime == MINOR, regime == SEPARATRIX
+    first = jnp.where(minor, dn, cn)
+    third = jnp.where(minor, cn, dn)
+    momentum = consts["amplitude"] * jnp.stack([first, sn, third], -1)
+    if not attitude:
+        return momentum, None
     l1, l2, l3 = momentum[..., 0], momentum[..., 1], momentum[..., 2]
-    elapsed = consts["t0"] + tau
 
-    # Pi is not needed on the separatrix (and diverges there as u grows): feed it a harmless point.
+    # Pi(nu; am|m) = 2j Pi(nu|m) + Pi(nu; am_r|m) (DLMF 19.2.10) from the reduced sn and cn themselves
+    # (their relative precision matters near the separatrix; see _phase).  Not needed on the separatrix.
+    turns = jnp.round(am / jnp.pi)
+    parity = 1 - 2 * jnp.mod(turns, 2)
     nu = jnp.where(separatrix, 0, consts["nu"])
     m = jnp.where(separatrix, 0.5, consts["m"])
     mc = jnp.where(separatrix, 0.5, consts["mc"])
-    third_kind = ellippiinc(nu, am, m, mc=mc)
+    sn_reduced = jnp.where(separatrix, 0.5, parity * sn)
+    cn_reduced = jnp.where(separatrix, 0.5, jnp.abs(cn))
+    third_kind = 2 * turns * consts["pi_complete"] + _pi_reduced(nu, sn_reduced, cn_reduced, m, mc)
     orientation = jnp.where(minor, -1, 1)
     partner = jnp.where(minor, l1, l3)
     psi_elliptic = orientation * (jnp.arctan2(l2, partner) - consts["alpha"] * third_kind)
     psi_separatrix = 2 * jnp.arctan(consts["alpha"] * jnp.tanh(u / 2))
-    psi = consts["precession"] * elapsed + jnp.where(separatrix, psi_separatrix, psi_elliptic)
+    psi = consts["precession"] * tau + jnp.where(separatrix, psi_separatrix, psi_elliptic)
+    return _chart(psi, l1, l2, l3, minor), momentum
 
+
+def _chart(psi, l1, l2, l3, minor):
+    """q̂ = exp(psi/2 about the spatial axis) ⊗ (the rotation taking that axis to l), formulas.md."""
     half_cos, half_sin = jnp.cos(psi / 2), jnp.sin(psi / 2)
     # Chart on 1 + L1 (major axis regime and separatrix): 1 + L1 >= 1 - A1 > 0.
     base = 1 + l1
@@ -197,4 +228,4 @@ def working_quaternion(consts, tau):
         ],
         -1,
     )
-    return jnp.where(minor[..., None], chart_minor, chart_major), momentum
+    return jnp.where(minor[..., None], chart_minor, chart_major)

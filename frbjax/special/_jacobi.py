@@ -4,10 +4,12 @@ Evaluation (fixed operation count, per dtype):
 1. Reduce u by whole half-periods: u = 2jK + u_r with |u_r| <= K (DLMF 22.4.3 table: sn and cn change
    sign, dn does not, am gains j pi).  K = R_F(0, mc, 1) is computed from the complement, so the
    reduction error grows only linearly with the number of periods.
-2. On |u_r| <= K the descending Landen transformation / arithmetic-geometric mean (DLMF 22.20.1,
-   22.20.ii): a_0 = 1, b_0 = sqrt(mc), c_0 = sqrt(m), c_{n+1} = c_n^2/(4 a_{n+1}) (no cancellation),
-   phi_N = 2^N a_N u_r and phi_{n-1} = (phi_n + arcsin(c_n sin(phi_n)/a_n))/2; am_r = phi_0.
-3. sn = sin am, cn = cos am, dn = sqrt(cn^2 + mc sn^2) (no cancellation as m -> 1, cn -> 0).
+2. For |u_r| <= K/2, Bulirsch's form of the descending Landen transformation (AGM, DLMF 22.20.ii),
+   which carries cn/sn and dn down the AGM levels with positive products and sums only; for
+   K/2 < |u_r| <= K the quarter-period reflection u_r = K - w (DLMF 22.4.3).  sn, cn and dn then all
+   have a few ulp *relative* error, also where cn and dn are as small as sqrt(mc) (u near K, m -> 1),
+   which is what the rigid body near its separatrix needs.
+3. am = j pi + atan2(sn_r, cn_r).
 m = 1 (mc = 0) is the limit sn = tanh, cn = dn = sech, am = gd(u) (DLMF 22.5.ii, 4.23.39).
 
 Derivatives (custom JVP):
@@ -28,38 +30,53 @@ from ._common import complement, is_double, promote
 
 
 def _agm_steps(x) -> int:
-    # c_n/a_n falls quadratically once a_n ~ b_n; from b_0 = sqrt(mc) = 1e-150 that takes 10 steps,
-    # after which c_n is below 1e-17 (checked against mpmath down to mc = 1e-300).
+    # b_n/a_n -> 1 quadratically once a_n ~ b_n; from b_0 = sqrt(mc) = 1e-150 that takes 10 steps
+    # (checked against mpmath down to mc = 1e-300).  Extra steps are exact identities.
     return 13 if is_double(x) else 8
 
 
-def _amplitude_reduced(u_reduced, m, mc):
-    """am(u_r|m) for |u_r| <= K(m), m < 1, by the AGM (DLMF 22.20.ii).
+def _tiny_argument(x) -> float:
+    # Below this |w| the Bulirsch recursion (cot^2 w) would overflow; sn = w, cn = dn = 1 is then exact
+    # to w^2 (1e-200 in float64, 1e-30 in float32).
+    return 1e-100 if is_double(x) else 1e-15
 
-    Two rolled loops (lax.scan), so that XLA compiles one step of each instead of ``steps`` copies.
+
+def _jacobi_to_half_quarter(w, mc):
+    """(sn, cn, dn)(w|m) for 0 <= w <= K(m)/2 and mc = 1 - m > 0, each to a few ulp *relative*.
+
+    Bulirsch's form of the descending Landen transformation (R. Bulirsch, Numer. Math. 7 (1965)
+    78-90, procedure sncndn; DLMF 22.7.i and 22.20.ii): the AGM a_{n+1} = (a_n + b_n)/2,
+    b_{n+1} = sqrt(a_n b_n) from a_0 = 1, b_0 = sqrt(mc), then from the top angle theta = a_N w
+    (<= pi/4 here, so sin and cos lose nothing) the ratio c = cn/sn and dn are carried down with
+    products and sums of positive numbers only.  Nothing cancels, so cn and dn keep their relative
+    precision even when they are as small as mc^(1/4) (m -> 1, w -> K/2).  Two rolled loops.
     """
-    steps = _agm_steps(u_reduced)
+    steps = _agm_steps(w)
 
     def descend(state, _):
-        a, b, c = state
-        a_next = (a + b) / 2
-        b_next = jnp.sqrt(a * b)
-        c_next = c * c / (4 * a_next)
-        return (a_next, b_next, c_next), (b_next, c_next)
+        a, b = state
+        return ((a + b) / 2, jnp.sqrt(a * b)), (a, b)
 
-    start = (jnp.ones_like(mc), jnp.sqrt(mc), jnp.sqrt(m))
-    (a, _, _), sequence = lax.scan(descend, start, None, length=steps)
+    (mean, _), (a_levels, b_levels) = lax.scan(descend, (jnp.ones_like(mc), jnp.sqrt(mc)), None,
+                                               length=steps)
+    tiny = w < _tiny_argument(w)
+    theta = mean * jnp.where(tiny, 1, w)
+    ratio = jnp.cos(theta) / jnp.sin(theta)
 
-    def ascend(phi, b_and_c):
-        b_n, c_n = b_and_c
-        # arcsin((c_n/a_n) sin phi) written as atan2(c_n sin phi, sqrt(b_n^2 + c_n^2 cos^2 phi)), using
-        # a_n^2 = b_n^2 + c_n^2: the plain arcsin loses digits when m -> 1 and phi -> pi/2.
-        sin_phi, cos_phi = jnp.sin(phi), jnp.cos(phi)
-        landen = jnp.arctan2(c_n * sin_phi, jnp.sqrt(b_n * b_n + (c_n * cos_phi) ** 2))
-        return (phi + landen) / 2, None
+    def ascend(state, levels):
+        ratio, cot_ratio, dn = state
+        a_n, b_n = levels
+        ratio = ratio * cot_ratio
+        cot_ratio = cot_ratio * dn
+        dn = (b_n + ratio) / (a_n + ratio)
+        return (cot_ratio / a_n, cot_ratio, dn), None
 
-    phi, _ = lax.scan(ascend, (2.0**steps) * a * u_reduced, sequence, reverse=True)
-    return phi
+    start = (ratio, mean * ratio, jnp.ones_like(w))
+    (_, cot_ratio, dn), _ = lax.scan(ascend, start, (a_levels, b_levels), reverse=True)
+    sn = 1 / jnp.sqrt(cot_ratio * cot_ratio + 1)
+    cn = cot_ratio * sn
+    one = jnp.ones_like(w)
+    return jnp.where(tiny, w, sn), jnp.where(tiny, one, cn), jnp.where(tiny, one, dn)
 
 
 def _half_periods(u, mc):
@@ -72,19 +89,28 @@ def _half_periods(u, mc):
 
 def _ellipj_primal(u, m, mc):
     limit = mc == 0
-    turns, u_reduced, _ = _half_periods(u, mc)
-    safe_m = jnp.where(limit, 0.5, m)
     safe_mc = jnp.where(limit, 0.5, mc)
-    am_reduced = _amplitude_reduced(jnp.where(limit, 0, u_reduced), safe_m, safe_mc)
+    turns, u_reduced, quarter = _half_periods(u, mc)
+    # |u_r| in (K/2, K]: the quarter-period reflection u_r = K - w (DLMF 22.4.3, 22.6.1):
+    # sn = cd(w), cn = sqrt(mc) sd(w), dn = sqrt(mc) nd(w), so that cn and dn near u = K, where they are
+    # as small as sqrt(mc), come out with full relative precision (K - |u_r| is exact to eps K).
+    magnitude = jnp.abs(jnp.where(limit, 0, u_reduced))
+    upper = magnitude > quarter / 2
+    w = jnp.where(upper, quarter - magnitude, magnitude)
+    sn_w, cn_w, dn_w = _jacobi_to_half_quarter(w, safe_mc)
+    root_mc = jnp.sqrt(safe_mc)
+    # cd^2 + mc sd^2 = 1 holds to a few ulp; dividing by the rounded norm makes sn^2 + cn^2 = 1 to one.
+    norm = jnp.sqrt(cn_w * cn_w + (root_mc * sn_w) ** 2)
+    sn_abs = jnp.where(upper, cn_w / norm, sn_w)
+    cn_reduced = jnp.where(upper, root_mc * sn_w / norm, cn_w)
+    dn_generic = jnp.where(upper, root_mc / dn_w, dn_w)
+    sn_reduced = jnp.where(u_reduced < 0, -sn_abs, sn_abs)
     sign = 1 - 2 * jnp.mod(turns, 2)
-    sn_generic = sign * jnp.sin(am_reduced)
-    cn_generic = sign * jnp.cos(am_reduced)
-    dn_generic = jnp.sqrt(cn_generic * cn_generic + mc * sn_generic * sn_generic)
-    am_generic = am_reduced + turns * jnp.pi
+    am_generic = turns * jnp.pi + jnp.arctan2(sn_reduced, cn_reduced)
     # m = 1: sn = tanh u, cn = dn = sech u, am = gd(u) = 2 arctan(tanh(u/2)).
     sech = 1 / jnp.cosh(u)
-    sn = jnp.where(limit, jnp.tanh(u), sn_generic)
-    cn = jnp.where(limit, sech, cn_generic)
+    sn = jnp.where(limit, jnp.tanh(u), sign * sn_reduced)
+    cn = jnp.where(limit, sech, sign * cn_reduced)
     dn = jnp.where(limit, sech, dn_generic)
     am = jnp.where(limit, 2 * jnp.arctan(jnp.tanh(u / 2)), am_generic)
     return sn, cn, dn, am
