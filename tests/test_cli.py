@@ -1,0 +1,237 @@
+"""The ``frbjax`` command: ``run`` on the CALGO 903 example files, its errors, and ``demo``.
+
+Most tests call :func:`frbjax.cli.main` in this process (sharing its compiled programs); two run the
+installed console script in a subprocess, end to end.
+"""
+
+from __future__ import annotations
+
+import os
+import pathlib
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+
+from frbjax import _calgo903 as calgo
+from frbjax import cli
+
+REPOSITORY = pathlib.Path(__file__).resolve().parents[1]
+DATA = REPOSITORY.parent / "shared" / "reference" / "calgo903"
+
+needs_data = pytest.mark.skipif(
+    not DATA.is_dir(), reason=f"CALGO 903 reference data not found: {DATA} (../shared/reference/calgo903 "
+                              "beside the repository) is absent")
+
+TOLERANCE = {"example0": 1e-14, "example1": 1e-10, "example2": 1e-14, "example3": 1e-9,
+             "example4": 1e-9}
+EXAMPLE1_STEPS = 200
+PNG_SIGNATURE = b"\x89PNG\r\n\x1a\n"
+
+
+@pytest.fixture(autouse=True)
+def cache_environment(pytestconfig, monkeypatch):
+    """Environment of a subprocess: compiled programs go to pytest's cache, not the user's."""
+    cache = getattr(pytestconfig, "cache", None)
+    directory = str(cache.mkdir("jax-compilation-cache")) if cache is not None else ""
+    monkeypatch.setenv("FRBJAX_CACHE_DIR", directory)
+    return dict(os.environ)
+
+
+def console_script():
+    """The installed ``frbjax`` script next to this Python, or ``python -m frbjax.cli``."""
+    script = pathlib.Path(sys.executable).with_name("frbjax")
+    return [str(script)] if script.exists() else [sys.executable, "-m", "frbjax.cli"]
+
+
+def compare(path, name, records=None):
+    """Max difference between the output file at ``path`` and out_<name>.dat (first ``records``)."""
+    layout = calgo.LAYOUTS[name]
+    produced = calgo.read_output(path, layout)
+    expected = calgo.read_output(DATA / f"out_{name}.dat", layout)
+    records = len(expected.time) if records is None else records
+    assert len(produced.time) == records
+    recorded = ~np.isnan(produced.time)
+    np.testing.assert_array_equal(produced.time[recorded], expected.time[:records][recorded])
+    return max(np.abs(produced.momentum - expected.momentum[:records]).max(),
+               np.abs(produced.attitude - expected.attitude[:records]).max())
+
+
+# ------------------------------------------------------------------------------------------------ run
+
+
+@needs_data
+@pytest.mark.parametrize("name", ["example0", "example1", "example2", "example3", "example4"])
+def test_run_matches_reference(name, tmp_path, capsys, cache_environment):
+    output = tmp_path / f"out_{name}.dat"
+    argv = ["run", str(DATA / f"init_{name}.dat"), "-o", str(output)]
+    if name == "example1":
+        argv += ["--steps", str(EXAMPLE1_STEPS)]
+    assert cli.main(argv) == 0
+    records = EXAMPLE1_STEPS + 1 if name == "example1" else None
+    assert compare(output, name, records) <= TOLERANCE[name]
+    captured = capsys.readouterr()
+    assert captured.out == ""
+    assert ("NP = 5" in captured.err) == (name in ("example3", "example4"))
+    assert sorted(p.name for p in tmp_path.iterdir()) == [output.name]
+
+
+@needs_data
+def test_forced_layout_and_standard_output(capsys, cache_environment):
+    assert cli.main(["run", str(DATA / "init_example2.dat"), "--layout", "example2"]) == 0
+    text = capsys.readouterr().out
+    assert len(text.splitlines()) == 15
+    expected = calgo.read_output(DATA / "out_example2.dat", "example2")
+    produced = calgo.parse_output(text, "example2")
+    assert np.abs(produced.attitude - expected.attitude).max() <= 1e-14
+
+
+@needs_data
+def test_console_script(tmp_path, cache_environment):
+    """The installed command, end to end: output file, note on stderr, exit status 0."""
+    output = tmp_path / "out.dat"
+    result = subprocess.run(
+        [*console_script(), "run", str(DATA / "init_example4.dat"), "-o", str(output)],
+        capture_output=True, text=True, cwd=tmp_path, env=cache_environment, timeout=300)
+    assert result.returncode == 0, result.stderr
+    assert "NP = 5" in result.stderr and "ignored" in result.stderr
+    assert compare(output, "example4") <= 1e-9
+
+
+def test_help_mentions_that_np_is_ignored(capsys):
+    with pytest.raises(SystemExit) as stop:
+        cli.main(["run", "--help"])
+    assert stop.value.code == 0
+    text = capsys.readouterr().out
+    assert "NP" in text and "ignored" in text and "--layout" in text
+
+
+# --------------------------------------------------------------------------------------------- errors
+
+
+def malformed_example0(tmp_path, edit):
+    """A copy of init_example0.dat with its lines edited by ``edit(lines)``."""
+    lines = (DATA / "init_example0.dat").read_text().splitlines()
+    edit(lines)
+    path = tmp_path / "init_bad.dat"
+    path.write_text("\n".join(lines) + "\n")
+    return path
+
+
+def delete_line_8(lines):
+    del lines[7]
+
+
+def replace_line_6(lines):
+    lines[5] = "  -0.68514471715x487e+00"
+
+
+def add_a_line(lines):
+    lines.insert(3, "1.5")
+
+
+@needs_data
+@pytest.mark.parametrize(
+    "edit, layout, line, words",
+    [
+        (delete_line_8, None, 15, "15 values"),
+        (delete_line_8, "example0", 16, "end of file after 15 values: expected Q(3,3)"),
+        (replace_line_6, None, 6, "expected a number for Pi(2)"),
+        (add_a_line, None, 17, "17 values"),
+        (add_a_line, "example0", 17, "unexpected value"),
+    ],
+    ids=["missing-line", "missing-line-layout", "not-a-number", "wrong-count", "wrong-count-layout"],
+)
+def test_malformed_file(tmp_path, capsys, edit, layout, line, words):
+    path = malformed_example0(tmp_path, edit)
+    output = tmp_path / "out.dat"
+    argv = ["run", str(path), "-o", str(output)] + (["--layout", layout] if layout else [])
+    assert cli.main(argv) == 2
+    message = capsys.readouterr().err
+    assert f"{path}, line {line}:" in message
+    assert words in message
+    assert sorted(p.name for p in tmp_path.iterdir()) == [path.name]
+
+
+@needs_data
+def test_malformed_file_leaves_an_existing_output_alone(tmp_path, capsys):
+    path = malformed_example0(tmp_path, replace_line_6)
+    output = tmp_path / "out.dat"
+    output.write_text("previous results\n")
+    assert cli.main(["run", str(path), "-o", str(output)]) == 2
+    assert output.read_text() == "previous results\n"
+
+
+@needs_data
+def test_malformed_file_console_script(tmp_path, cache_environment):
+    path = malformed_example0(tmp_path, delete_line_8)
+    output = tmp_path / "out.dat"
+    result = subprocess.run([*console_script(), "run", str(path), "-o", str(output)],
+                            capture_output=True, text=True, env=cache_environment, timeout=300)
+    assert result.returncode == 2
+    assert f"{path}, line 15:" in result.stderr
+    assert not output.exists()
+
+
+def test_missing_input_file(tmp_path, capsys):
+    assert cli.main(["run", str(tmp_path / "absent.dat")]) == 2
+    assert "absent.dat" in capsys.readouterr().err
+
+
+@needs_data
+def test_output_folder_must_exist(tmp_path, capsys):
+    output = tmp_path / "no" / "out.dat"
+    assert cli.main(["run", str(DATA / "init_example2.dat"), "-o", str(output)]) == 2
+    assert "no folder" in capsys.readouterr().err
+
+
+@needs_data
+def test_steps_rejected_for_single_step_layouts(capsys):
+    assert cli.main(["run", str(DATA / "init_example0.dat"), "--steps", "3"]) == 2
+    assert "--steps" in capsys.readouterr().err
+
+
+def test_write_atomically(tmp_path):
+    path = tmp_path / "out.dat"
+    cli.write_atomically(path, "1.0\n")
+    assert path.read_text() == "1.0\n"
+    assert [p.name for p in tmp_path.iterdir()] == ["out.dat"]
+    with pytest.raises(OSError):
+        cli.write_atomically(tmp_path / "missing" / "out.dat", "1.0\n")
+
+
+# ----------------------------------------------------------------------------------------------- demo
+
+
+def test_demo_console_script(tmp_path, cache_environment):
+    """``frbjax demo --quick``: a PNG, the table, and flips recurring with the period 4K/B."""
+    output = tmp_path / "tmp.png"
+    result = subprocess.run([*console_script(), "demo", "--quick", "--out", str(output)],
+                            capture_output=True, text=True, cwd=tmp_path, env=cache_environment,
+                            timeout=300)
+    assert result.returncode == 0, result.stderr
+    assert output.read_bytes().startswith(PNG_SIGNATURE)
+    lines = result.stdout.splitlines()
+    table = [line for line in lines if line[:8].strip().replace(".", "").isdigit()]
+    assert len(table) == 11
+    flips = next(line for line in lines if line.startswith("flips"))
+    assert flips.count(",") == 4
+    period = float(next(line for line in lines if "4K(m)/B" in line).split("=")[-1])
+    assert 100 < period < 120
+    observed = next(line for line in lines if "rises through 0 every" in line)
+    assert float(observed.split("relative difference")[1].strip(" )")) < 1e-10
+    assert "plot saved" in result.stdout
+
+
+def test_flip_period_against_the_seed():
+    """tau = 4K/B = 116.472 for I = (1, 2, 3) and d = 2E/|L|^2 = 0.5000001 (seed 000)."""
+    d = 0.5000001
+    momentum = np.array([np.sqrt(1.5 * (d - 1 / 3)), 0.0, np.sqrt(1.5 * (1 - d))])
+    assert abs(cli.flip_period((1.0, 2.0, 3.0), momentum) - 116.472) < 5e-4
+    assert abs(cli.flip_period((1.0, 2.0, 3.0), 2 * momentum) - 116.472 / 2) < 5e-4
+
+
+def test_demo_folder_must_exist(tmp_path, capsys):
+    assert cli.main(["demo", "--quick", "--out", str(tmp_path / "no" / "demo.png")]) == 2
+    assert "no folder" in capsys.readouterr().err
