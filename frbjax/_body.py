@@ -3,7 +3,9 @@
 from __future__ import annotations
 
 import equinox as eqx
+import jax
 import jax.numpy as jnp
+import numpy as np
 from jaxtyping import Array, Float, Int
 
 from . import _quaternion as quaternion
@@ -42,6 +44,48 @@ def _permutation_sign(order):
     return jnp.where((j - i) * (k - i) * (k - j) > 0, 1, -1)
 
 
+def _validate(inertia, angular_momentum, attitude):
+    """Eager checks of the constructor's inputs; raises ValueError naming the offending argument.
+
+    Shapes are checked always (they are static under jit too).  Values are checked only for concrete
+    inputs: a JAX tracer (under jit, vmap, grad) has no value yet, and an invalid body built from
+    tracers gives NaN outputs instead (see FreeRigidBody).
+    """
+    inertia, angular_momentum = jnp.asarray(inertia), jnp.asarray(angular_momentum)
+    attitude = None if attitude is None else jnp.asarray(attitude)
+    arrays = dict(inertia=inertia, angular_momentum=angular_momentum)
+    if attitude is not None:
+        arrays["attitude"] = attitude
+    shapes = {}
+    for name, value in arrays.items():
+        shape = tuple(value.shape)
+        size = 4 if name == "attitude" else 3
+        if len(shape) == 0 or shape[-1] != size:
+            raise ValueError(f"{name} must have shape (..., {size}), got shape {shape}")
+        shapes[name] = shape
+    try:
+        np.broadcast_shapes(*(shape[:-1] for shape in shapes.values()))
+    except ValueError:
+        described = ", ".join(f"{name} {shape}" for name, shape in shapes.items())
+        raise ValueError(f"incompatible leading (batch) shapes: {described}") from None
+
+    def concrete(value):
+        return None if isinstance(value, jax.core.Tracer) else np.asarray(value)
+
+    value = concrete(inertia)
+    if value is not None and not (np.all(np.isfinite(value)) and np.all(value > 0)):
+        raise ValueError("inertia: the moments of inertia must be finite and > 0")
+    value = concrete(angular_momentum)
+    if value is not None and not np.all(np.isfinite(value)):
+        raise ValueError("angular_momentum must be finite")
+    value = None if attitude is None else concrete(attitude)
+    if value is not None:
+        if not np.all(np.isfinite(value)):
+            raise ValueError("attitude must be finite")
+        if not np.all(np.any(value != 0, axis=-1)):
+            raise ValueError("attitude must be a non-zero quaternion")
+
+
 class FreeRigidBody(eqx.Module):
     r"""Exact torque-free motion of a rigid body (Euler's equations and the attitude), batched.
 
@@ -58,6 +102,16 @@ class FreeRigidBody(eqx.Module):
     "The exact computation of the free rigid body motion and its use in splitting methods", SIAM J. Sci.
     Comput. 30 (2008); formulas in shared/design/formulas.md).  Everything per body (regime, phase, the
     particular solution at the phase) is computed once here; evaluations at many times reuse it.
+
+    Invalid inputs: wrong trailing shapes or leading shapes that do not broadcast raise ValueError,
+    always (shapes are static, under jit too).  With concrete inputs (not JAX tracers) the values are
+    checked as well: a moment of inertia that is <= 0 or not finite, a non-finite angular momentum,
+    and a zero or non-finite attitude raise ValueError naming the argument.  Under jax.jit, vmap or
+    grad the values are unknown at construction and cannot be checked: a body with any such invalid
+    value instead has NaN in all its per-body data (the stored inertia, initial angular momentum,
+    initial attitude and momentum_norm included), so that every output for that body (angular
+    momentum, angular velocity, quaternion, rotation matrix, at every time) is NaN, never a plausible
+    finite number.  The other bodies of a batch are not affected.
     """
 
     inertia: Float[Array, "... 3"]
@@ -71,6 +125,7 @@ class FreeRigidBody(eqx.Module):
     _frame_rotation: Float[Array, "... 4"]
 
     def __init__(self, inertia, angular_momentum, attitude=None):
+        _validate(inertia, angular_momentum, attitude)
         inertia = jnp.asarray(inertia)
         angular_momentum = jnp.asarray(angular_momentum)
         dtype = jnp.result_type(inertia, angular_momentum, float)
@@ -83,6 +138,17 @@ class FreeRigidBody(eqx.Module):
         inertia = jnp.broadcast_to(inertia, batch + (3,))
         angular_momentum = jnp.broadcast_to(angular_momentum, batch + (3,))
         attitude = jnp.broadcast_to(attitude, batch + (4,))
+        # Invalid values (possible only under tracing; _validate rejects concrete ones): every per-body
+        # input becomes NaN, and with it every output of that body (class docstring).
+        valid = (
+            jnp.all((inertia > 0) & jnp.isfinite(inertia), axis=-1)
+            & jnp.all(jnp.isfinite(angular_momentum), axis=-1)
+            & jnp.all(jnp.isfinite(attitude), axis=-1)
+            & jnp.any(attitude != 0, axis=-1)
+        )
+        inertia = jnp.where(valid[..., None], inertia, jnp.nan)
+        angular_momentum = jnp.where(valid[..., None], angular_momentum, jnp.nan)
+        attitude = jnp.where(valid[..., None], attitude, jnp.nan)
         attitude = attitude / jnp.linalg.norm(attitude, axis=-1, keepdims=True)
 
         norm_squared = jnp.sum(angular_momentum**2, axis=-1)
@@ -107,7 +173,9 @@ class FreeRigidBody(eqx.Module):
         self.inertia = inertia
         self.initial_angular_momentum = angular_momentum
         self.initial_attitude = attitude
-        self.momentum_norm = norm
+        # An invalid body has norm 0 here (its L is NaN), so it is classified UNIFORM and its outputs
+        # come from the NaN inputs; its |L| is reported as NaN too.
+        self.momentum_norm = jnp.where(valid, norm, jnp.nan)
         self.permutation = permutation
         self.regime = regime
         self._constants = consts

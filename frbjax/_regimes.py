@@ -158,6 +158,10 @@ def _phase(sn_scaled, cn_scaled, mc):
     amplitude: near the separatrix am0 is within 1e-13 of pi/2 and only cn0 (a ratio of the given
     angular momentum components) carries the digits that fix the phase.
     """
+    # Scale by the larger one first: both can be ~1e-222 (an L component of 1e-111), whose squares underflow.
+    largest = jnp.maximum(jnp.abs(sn_scaled), jnp.abs(cn_scaled))
+    largest = jnp.exp2(jnp.floor(jnp.log2(jnp.where(largest > 0, largest, 1))))  # a power of 2: exact
+    sn_scaled, cn_scaled = sn_scaled / largest, cn_scaled / largest
     norm = jnp.sqrt(sn_scaled * sn_scaled + cn_scaled * cn_scaled)
     sn, cn = sn_scaled / norm, cn_scaled / norm
     cn2 = cn * cn

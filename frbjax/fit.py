@@ -1,0 +1,409 @@
+"""Fit a free rigid body (moments of inertia, angular velocity, attitude) to attitude observations.
+
+:func:`fit_attitude` takes observed attitudes q_k (unit quaternions, w x y z, body to space, either
+sign) at times t_k, and optionally observed body angular velocities, and returns the torque-free
+motion that best explains them (:class:`AttitudeFit`).
+
+What the data can tell
+----------------------
+The motion depends on the moments only through their ratios: I -> c I together with L -> c L leaves
+Omega = L / I and the attitude unchanged.  The fitted (identifiable) parameters are therefore the 8
+numbers
+
+    theta = (log(I2/I1), log(I3/I1), Omega_1, Omega_2, Omega_3, delta_1, delta_2, delta_3)
+
+with Omega the body angular velocity at the reference time t_ref (the sample time nearest 0; it is 0
+whenever the data contain t = 0) and delta a rotation vector: q(t_ref) = q_ref ⊗ exp(delta / 2), q_ref
+the observed attitude at t_ref.  The result reports the moments scaled so that the largest is 1, and
+the covariance of theta (``AttitudeFit.covariance``, from the Jacobian: (J^T J)^-1 s^2 with s^2 the
+residual variance) and of the scaled moments (``inertia_covariance``).
+
+Residuals
+---------
+Per sample, r_k = 2 sign(e_w) e_vec with e = conj(q_model(t_k)) ⊗ q_k: the rotation vector (for small
+errors) taking the model attitude to the observed one, the same for q_k and -q_k.  Observed angular
+velocities add (Omega_model(t_k) - Omega_k) / angular_velocity_sigma (attitude residuals are divided
+by attitude_sigma).  A robust loss (``"huber"`` or ``"cauchy"``) replaces each sample's residual vector
+r by r sqrt(rho(|r|^2 / c^2) / (|r|^2 / c^2)), so that the sum of squares is c^2 sum rho(|r|^2/c^2):
+the Levenberg-Marquardt solver then minimises the robust cost (scale c = ``loss_scale``, by default
+2.5 times the median residual norm of the least-squares fit).
+
+Optimisation
+------------
+optimistix's Levenberg-Marquardt (``optx.least_squares``), from a batch of starting points run with
+``jax.vmap`` (one compilation for all of them): the observed attitude at t_ref, the angular velocity
+from finite differences of the data around t_ref, and several inertia ratios (permutations of a few
+triaxial shapes, then random ones from ``seed``), since the regimes (rotation around the largest or the
+smallest axis) and the orderings of the moments are separate basins.  Each start is solved on growing
+time windows around t_ref (continuation: the phase of a wrong model drifts with time, so a long record
+alone has many local minima), then on all samples, then (robust losses only) with the robust loss.
+The start with the lowest cost wins.
+"""
+
+from __future__ import annotations
+
+import itertools
+import math
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import numpy as np
+import optimistix as optx
+from jaxtyping import Array, Float
+
+from . import _quaternion as quaternion
+from ._body import FreeRigidBody
+
+__all__ = ["AttitudeFit", "fit_attitude"]
+
+_LOSSES = {"squared": 0, "huber": 1, "cauchy": 2}
+# Fractions of the samples (nearest t_ref first) of the continuation windows; the last is all of them.
+_WINDOWS = (0.12, 0.3, 0.6, 1.0)
+_MIN_WINDOW = 12  # samples in the smallest window (at least)
+_BASE_SHAPES = ((0.6, 0.8, 1.0), (0.85, 0.92, 1.0), (0.4, 0.9, 1.0), (0.5, 0.55, 1.0))
+
+
+class AttitudeFit(eqx.Module):
+    """Result of :func:`fit_attitude`.
+
+    - ``inertia`` (3,): principal moments in the data's body axes, scaled so that the largest is 1;
+    - ``angular_velocity`` (3,): body angular velocity at t = 0;
+    - ``attitude`` (4,): attitude (w, x, y, z; w >= 0) at t = 0;
+    - ``body``: the fitted :class:`FreeRigidBody` (moments ``inertia``, angular momentum
+      ``inertia * angular_velocity``, attitude ``attitude``);
+    - ``parameters`` (8,): theta = (log I2/I1, log I3/I1, Omega(t_ref), delta) of the module docstring;
+    - ``covariance`` (8, 8): covariance of ``parameters``, (J^T J)^-1 s^2, s^2 = 2 cost / (m - 8);
+    - ``inertia_covariance`` (3, 3): the same propagated to ``inertia`` (rank 2);
+    - ``residuals`` (N, 3) attitude residuals (rad, unweighted, least-squares form) and
+      ``angular_velocity_residuals`` (N, 3) (zeros without gyro data);
+    - ``cost``: half the sum of the squared (weighted, robustified) residuals at the solution;
+    - ``success``: the solver converged for the chosen start; ``start_costs``, ``start_success``:
+      per start; ``reference_time``: t_ref; ``loss_scale``: c of the robust loss.
+    """
+
+    inertia: Float[Array, "3"]
+    angular_velocity: Float[Array, "3"]
+    attitude: Float[Array, "4"]
+    body: FreeRigidBody
+    parameters: Float[Array, "8"]
+    covariance: Float[Array, "8 8"]
+    inertia_covariance: Float[Array, "3 3"]
+    residuals: Float[Array, "N 3"]
+    angular_velocity_residuals: Float[Array, "N 3"]
+    cost: Float[Array, ""]
+    success: Array
+    start_costs: Float[Array, "S"]
+    start_success: Array
+    reference_time: Float[Array, ""]
+    loss_scale: Float[Array, ""]
+
+
+# ------------------------------------------------------------------------------------ the model
+
+
+def _model(theta, reference, times, time_scale):
+    """(q(t), Omega(t)) of the motion with parameters theta at times - t_ref (already subtracted)."""
+    inertia = jnp.exp(jnp.concatenate([jnp.zeros(1, theta.dtype), theta[:2]]))
+    omega = theta[2:5] / time_scale
+    attitude = quaternion.multiply(reference, quaternion.exp_pure(theta[5:8]))
+    body = FreeRigidBody(inertia, inertia * omega, attitude)
+    return body.quaternion(times), body.angular_velocity(times)
+
+
+def _attitude_residual(q_model, q_observed):
+    """2 sign(e_w) e_vec, e = conj(q_model) ⊗ q_observed: invariant under q_observed -> -q_observed."""
+    e = quaternion.multiply(quaternion.conjugate(q_model), q_observed)
+    sign = jnp.where(e[..., :1] < 0, -1.0, 1.0).astype(e.dtype)
+    return 2 * sign * e[..., 1:]
+
+
+def _robust_factor(squared, loss):
+    """sqrt(rho(s)/s) for s = |r|^2 / c^2: 1 (squared), Huber, Cauchy; finite with its gradient at 0."""
+    small = squared < 1e-8
+    s = jnp.where(small, 1.0, squared)
+    huber = jnp.where(squared <= 1, 1.0, (2 * jnp.sqrt(s) - 1) / s)
+    cauchy = jnp.where(small, 1 - squared / 2, jnp.log1p(s) / s)
+    ratio = jnp.where(loss == 1, huber, jnp.where(loss == 2, cauchy, 1.0))
+    return jnp.sqrt(ratio)
+
+
+def _residuals(theta, args):
+    data, mask, loss, scale = args
+    times, q_obs, w_obs, reference, time_scale, gyro_weight, attitude_weight, _ = data
+    q_model, w_model = _model(theta, reference, times, time_scale)
+    r_att = _attitude_residual(q_model, q_obs) * attitude_weight
+    r_gyro = (w_model - w_obs) * gyro_weight
+    r = jnp.concatenate([r_att, r_gyro], -1)  # (N, 6): one sample's residual vector
+    squared = jnp.sum(r * r, -1) / scale**2
+    factor = _robust_factor(squared, loss) * mask
+    return r * factor[:, None]
+
+
+# ------------------------------------------------------------------------------------ the solver
+
+
+def _flat_residuals_and_jacobian(theta, args):
+    """(r, dr/dtheta), r flattened, by forward mode (8 tangents in one vmapped pass)."""
+    flat = lambda p: (lambda r: (r, r))(_residuals(p, args).reshape(-1))  # noqa: E731
+    jacobian, residual = jax.jacfwd(flat, has_aux=True)(theta)
+    return residual, jacobian
+
+
+@jax.custom_jvp
+def _residuals_with_jacobian(theta, args):
+    """(r, (r, J)): the residuals and, as an auxiliary output, themselves and their Jacobian.
+
+    The JVP rule is J @ dtheta with J from one forward-mode pass: the compiled solver then holds one
+    copy of the body's derivative code (jax.linearize of the plain residuals inside the solver loop
+    holds a linearisation and its transpose, and compiles several times slower).
+    """
+    residual, jacobian = _flat_residuals_and_jacobian(theta, args)
+    return residual, jacobian
+
+
+@_residuals_with_jacobian.defjvp
+def _residuals_with_jacobian_jvp(primals, tangents):
+    theta, args = primals
+    dtheta = tangents[0]
+    residual, jacobian = _flat_residuals_and_jacobian(theta, args)
+    return (residual, jacobian), (jacobian @ dtheta, jnp.zeros_like(jacobian))
+
+
+def _least_squares_fn(theta, args):
+    residual, jacobian = _residuals_with_jacobian(theta, args)
+    return residual, (residual, jacobian)
+
+
+def _solve_start(theta0, reference, data, masks, losses, final_loss, loss_scale, rtol, atol, max_steps):
+    """Continuation over the windows ``masks`` (all but the last stage use the squared loss)."""
+    solver = optx.LevenbergMarquardt(rtol=rtol, atol=atol)
+    data = (data[0], data[1], data[2], reference) + data[3:]
+    n_out = masks.shape[1] * 6
+
+    def stage(carry, stage_args):
+        theta, previous = carry
+        mask, loss = stage_args
+        # The scale of the robust loss: given, or 2.5 median residual norm of the previous stage.
+        norms = jnp.sqrt(jnp.sum(previous.reshape(-1, 6) ** 2, -1))
+        scale = jnp.where(loss_scale > 0, loss_scale, 2.5 * jnp.median(norms) + 1e-12)
+        solution = optx.least_squares(
+            _least_squares_fn, solver, theta, args=(data, mask, loss, scale), has_aux=True,
+            max_steps=max_steps, throw=False)
+        residual, jacobian = solution.aux
+        ok = solution.result == optx.RESULTS.successful
+        finite = jnp.all(jnp.isfinite(solution.value)) & jnp.all(jnp.isfinite(residual))
+        theta_new = jnp.where(finite, solution.value, theta)
+        residual = jnp.where(finite, residual, previous)
+        return (theta_new, residual), (ok & finite, scale, jacobian)
+
+    stage_losses = losses.at[-1].set(final_loss)
+    initial = (theta0, jnp.zeros(n_out, theta0.dtype))
+    (theta, residual), (ok, scales, jacobians) = jax.lax.scan(stage, initial, (masks, stage_losses))
+    cost = 0.5 * jnp.sum(residual * residual)
+    cost = jnp.where(jnp.isfinite(cost) & ok[-1], cost, jnp.inf)
+    return theta, cost, ok[-1], scales[-1], residual, jacobians[-1]
+
+
+@eqx.filter_jit
+def _fit(thetas0, references, data, masks, final_loss, loss_scale, rtol, atol, max_steps):
+    losses = jnp.zeros(masks.shape[0], jnp.int32)
+    solve = lambda theta0, reference: _solve_start(  # noqa: E731
+        theta0, reference, data, masks, losses, final_loss, loss_scale, rtol, atol, max_steps)
+    thetas, costs, oks, scales, residuals, jacobians = jax.vmap(solve)(thetas0, references)
+    # The best start: lowest cost among converged ones (any start if none converged).
+    finite_costs = jnp.where(jnp.isfinite(costs), costs, jnp.inf)
+    best = jnp.argmin(finite_costs)
+    theta, scale, reference = thetas[best], scales[best], references[best]
+    r, jac = residuals[best], jacobians[best]
+    # Residuals that count: 3 per sample, 6 with gyro data (the gyro ones are zeros without).
+    m = 3 * jnp.sum(masks[-1] != 0) * jnp.where(data[4] != 0, 2, 1)
+    variance = jnp.sum(r * r) / jnp.maximum(m - theta.size, 1)
+    covariance = jnp.linalg.pinv(jac.T @ jac) * variance
+    # The motion at the sample times and at t = 0 (times are relative to t_ref), unweighted.
+    times, q_obs, w_obs, time_scale, _, _, t_ref = data
+    q_model, w_model = _model(theta, reference, jnp.append(times, -t_ref), time_scale)
+    return dict(theta=theta, reference=reference, costs=costs, oks=oks, best=best,
+                covariance=covariance, scale=scale,
+                residuals=_attitude_residual(q_model[:-1], q_obs), gyro_residuals=w_model[:-1] - w_obs,
+                attitude0=q_model[-1], omega0=w_model[-1])
+
+
+@jax.jit
+def _normalised_inertia(p):
+    moments = jnp.exp(jnp.concatenate([jnp.zeros(1, p.dtype), p[:2]]))
+    return moments / jnp.max(moments)
+
+
+_make_body = eqx.filter_jit(FreeRigidBody)
+
+
+def _hamilton_log(q):
+    """Rotation vector of a unit quaternion (either sign)."""
+    q = jnp.where(q[..., :1] < 0, -q, q)
+    vector_norm = jnp.linalg.norm(q[..., 1:], axis=-1)
+    angle = 2 * jnp.arctan2(vector_norm, q[..., 0])
+    scale = jnp.where(vector_norm > 1e-12, angle / jnp.where(vector_norm > 1e-12, vector_norm, 1), 2.0)
+    return q[..., 1:] * scale[..., None]
+
+
+def _finite_difference_rate(times, q, index, span):
+    """Mean body rate over [index - span, index + span] (clipped): log(conj(q_a) q_b) / (t_b - t_a)."""
+    n = len(times)
+    a, b = max(index - span, 0), min(index + span, n - 1)
+    if a == b:
+        return np.zeros(3)
+    # Chain the steps: the rotation per step is below pi for reasonably sampled data.
+    total = np.zeros(3)
+    for k in range(a, b):
+        step = np.asarray(_hamilton_log(quaternion.multiply(quaternion.conjugate(jnp.asarray(q[k])),
+                                                            jnp.asarray(q[k + 1]))))
+        total = total + step
+    return total / (times[b] - times[a])
+
+
+def _start_shapes(n_starts, rng):
+    """Inertia guesses: permutations of the base triaxial shapes, then random ones."""
+    shapes = []
+    for base in _BASE_SHAPES:
+        for perm in itertools.permutations(range(3)):
+            candidate = tuple(base[p] for p in perm)
+            if candidate not in shapes:
+                shapes.append(candidate)
+    shapes = shapes[:n_starts]
+    while len(shapes) < n_starts:
+        shapes.append(tuple(np.exp(rng.uniform(np.log(0.3), 0.0, size=3))))
+    return np.asarray(shapes)
+
+
+def fit_attitude(
+    times,
+    quaternions,
+    *,
+    angular_velocity_data=None,
+    loss: str = "squared",
+    loss_scale: float | None = None,
+    attitude_sigma: float = 1.0,
+    angular_velocity_sigma: float = 1.0,
+    n_starts: int = 12,
+    seed: int = 0,
+    key=None,
+    rtol: float = 1e-10,
+    atol: float = 1e-10,
+    max_steps: int = 200,
+) -> AttitudeFit:
+    """Fit moments of inertia (ratios), angular velocity and attitude to observed attitudes.
+
+    Arguments: ``times`` (N,), ``quaternions`` (N, 4) observed attitudes (w, x, y, z, body to space;
+    the sign of each is irrelevant); ``angular_velocity_data`` (N, 3): observed body angular velocities
+    at the same times (optional, e.g. a gyroscope); ``loss``: "squared", "huber" or "cauchy";
+    ``loss_scale``: c of the robust loss (in units of the weighted residuals; default: 2.5 times the
+    median residual norm of the least-squares solution); ``attitude_sigma``, ``angular_velocity_sigma``:
+    the residuals are divided by them (their ratio weighs gyro against attitude data);
+    ``n_starts``: starting points (solved together under ``jax.vmap``); ``seed`` or ``key`` (a
+    ``jax.random`` key): randomises the starts beyond the deterministic ones and their inertia guesses.
+
+    Only the ratios of the moments are identifiable (I -> c I, L -> c L give the same motion): see the
+    module docstring for the 8 fitted parameters.  Runs in the dtype of the inputs (use float64).
+    All starts share one compilation for a given (N, n_starts) and dtype.
+    """
+    if loss not in _LOSSES:
+        raise ValueError(f"loss must be one of {sorted(_LOSSES)}, got {loss!r}")
+    times_np = np.asarray(times, dtype=float)
+    q_np = np.asarray(quaternions, dtype=float)
+    if times_np.ndim != 1 or q_np.shape != times_np.shape + (4,):
+        raise ValueError("times must be (N,) and quaternions (N, 4)")
+    n = len(times_np)
+    if n < 4:
+        raise ValueError("need at least 4 samples")
+    dtype = jnp.result_type(jnp.asarray(times), jnp.asarray(quaternions), float)
+    if key is not None:
+        seed = int(jax.random.randint(key, (), 0, 2**31 - 1))
+    rng = np.random.default_rng(seed)
+
+    order = np.argsort(times_np, kind="stable")
+    times_sorted, q_sorted = times_np[order], q_np[order]
+    q_sorted = q_sorted / np.linalg.norm(q_sorted, axis=-1, keepdims=True)
+    index = int(np.argmin(np.abs(times_sorted)))
+    t_ref = times_sorted[index]
+    reference = q_sorted[index] * (1.0 if q_sorted[index, 0] >= 0 else -1.0)
+
+    # Angular velocity guesses from finite differences around t_ref (short and longer spans).
+    rates = [_finite_difference_rate(times_sorted, q_sorted, index, span) for span in (1, 3)]
+    if angular_velocity_data is not None:
+        gyro = np.asarray(angular_velocity_data, dtype=float)[order]
+        rates.insert(0, gyro[index])
+    rate_norm = max(float(np.linalg.norm(rates[0])), 1e-300)
+    time_scale = 1.0 / rate_norm if rate_norm > 1e-300 else 1.0
+
+    shapes = _start_shapes(n_starts, rng)
+    thetas0 = np.zeros((n_starts, 8))
+    thetas0[:, 0] = np.log(shapes[:, 1] / shapes[:, 0])
+    thetas0[:, 1] = np.log(shapes[:, 2] / shapes[:, 0])
+    for s in range(n_starts):
+        # Cycle the rate guesses over the inertia guesses (the first shapes get the first guess).
+        thetas0[s, 2:5] = rates[(s // 6) % len(rates)] * time_scale
+    references = np.broadcast_to(reference, (n_starts, 4))
+
+    # Continuation windows: the samples nearest t_ref.
+    distance = np.abs(times_sorted - t_ref)
+    ranked = np.sort(distance)
+    masks = np.zeros((len(_WINDOWS), n))
+    for k, fraction in enumerate(_WINDOWS):
+        count = n if fraction >= 1 else min(n, max(math.ceil(fraction * n), _MIN_WINDOW))
+        masks[k] = distance <= ranked[count - 1]
+
+    if angular_velocity_data is None:
+        gyro = np.zeros((n, 3))
+        gyro_weight = 0.0
+    else:
+        gyro_weight = 1.0 / angular_velocity_sigma
+    data = (
+        jnp.asarray(times_sorted - t_ref, dtype),
+        jnp.asarray(q_sorted, dtype),
+        jnp.asarray(gyro, dtype),
+        jnp.asarray(time_scale, dtype),
+        jnp.asarray(gyro_weight, dtype),
+        jnp.asarray(1.0 / attitude_sigma, dtype),
+        jnp.asarray(t_ref, dtype),
+    )
+    scale_in = jnp.asarray(-1.0 if loss_scale is None else loss_scale, dtype)
+    out = _fit(
+        jnp.asarray(thetas0, dtype), jnp.asarray(references, dtype), data, jnp.asarray(masks, dtype),
+        jnp.asarray(_LOSSES[loss], jnp.int32), scale_in, rtol, atol, max_steps)
+
+    # Back to physical parameters (Omega in 1/time).
+    unscale = jnp.ones(8, dtype).at[2:5].set(1.0 / time_scale)
+    theta_physical = out["theta"] * unscale
+    covariance = out["covariance"] * unscale[:, None] * unscale[None, :]
+    inertia = _normalised_inertia(theta_physical)
+    d_inertia = jax.jacfwd(_normalised_inertia)(theta_physical)
+    inertia_covariance = d_inertia @ covariance @ d_inertia.T
+    omega0 = out["omega0"]
+    attitude0 = out["attitude0"]
+    attitude0 = jnp.where(attitude0[0] < 0, -attitude0, attitude0)
+    body = _make_body(inertia, inertia * omega0, attitude0)
+    unsort = np.argsort(order)
+    residuals = out["residuals"][unsort]
+    if angular_velocity_data is None:
+        w_residuals = jnp.zeros_like(residuals)
+    else:
+        w_residuals = out["gyro_residuals"][unsort]
+    costs, oks, best, scale = out["costs"], out["oks"], out["best"], out["scale"]
+    return AttitudeFit(
+        inertia=inertia,
+        angular_velocity=omega0,
+        attitude=attitude0,
+        body=body,
+        parameters=theta_physical,
+        covariance=covariance,
+        inertia_covariance=inertia_covariance,
+        residuals=residuals,
+        angular_velocity_residuals=w_residuals,
+        cost=costs[best],
+        success=oks[best],
+        start_costs=costs,
+        start_success=oks,
+        reference_time=jnp.asarray(t_ref, dtype),
+        loss_scale=scale,
+    )
