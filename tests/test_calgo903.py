@@ -24,9 +24,11 @@ from frbjax import _calgo903 as calgo
 REPOSITORY = pathlib.Path(__file__).resolve().parents[1]
 DATA = REPOSITORY.parent / "shared" / "reference" / "calgo903"
 
-needs_data = pytest.mark.skipif(
-    not DATA.is_dir(), reason=f"CALGO 903 reference data not found: {DATA} (../shared/reference/calgo903 "
-                              "beside the repository) is absent")
+def needs_data(test):
+    """The CALGO 903 files must be there (../shared beside the repository, as in CI): no skip, a
+    missing folder fails loudly here."""
+    assert DATA.is_dir(), f"CALGO 903 reference data not found: {DATA}"
+    return test
 
 # Tolerances on max |frbjax - Fortran| over Pi and the attitude (see the module docstring).
 TOLERANCE = {"example0": 1e-14, "example2": 1e-14, "example3": 1e-9, "example4": 1e-9}
