@@ -12,7 +12,7 @@ from . import _quaternion as quaternion
 from ._regimes import UNIFORM, classify, constants, evaluate
 
 
-def working_frame(inertia, unit_momentum):
+def working_frame(inertia, momentum):
     """Signed permutation P (det +1, columns = working axes in body coordinates) and the working data.
 
     The working frame sorts the moments (J1 <= J2 <= J3) and uses the body's symmetry under a rotation
@@ -26,7 +26,7 @@ def working_frame(inertia, unit_momentum):
     column_signs = jnp.stack([jnp.ones_like(parity), parity, jnp.ones_like(parity)], -1)
     permutation = permutation * column_signs[..., None, :]
     sorted_inertia = jnp.take_along_axis(inertia, order, axis=-1)
-    momentum = _apply(jnp.swapaxes(permutation, -1, -2), unit_momentum)
+    momentum = _apply(jnp.swapaxes(permutation, -1, -2), momentum)
     s1 = jnp.where(momentum[..., 0] < 0, -1.0, 1.0).astype(inertia.dtype)
     s3 = jnp.where(momentum[..., 2] < 0, -1.0, 1.0).astype(inertia.dtype)
     flips = jnp.stack([s1, s1 * s3, s3], -1)
@@ -151,13 +151,16 @@ class FreeRigidBody(eqx.Module):
         attitude = jnp.where(valid[..., None], attitude, jnp.nan)
         attitude = attitude / jnp.linalg.norm(attitude, axis=-1, keepdims=True)
 
-        norm_squared = jnp.sum(angular_momentum**2, axis=-1)
+        # Normalised in the working frame (a signed permutation: exact), where the components come in
+        # the order of the sorted moments: |L| then rounds the same way for the moments in any order,
+        # and a body with its axes relabelled computes bit for bit the same motion.
+        permutation, sorted_inertia, momentum_working = working_frame(inertia, angular_momentum)
+        norm_squared = jnp.sum(momentum_working**2, axis=-1)
         moving = norm_squared > 0
         norm = jnp.sqrt(jnp.where(moving, norm_squared, 1))
-        unit = angular_momentum / norm[..., None]
+        unit_working = momentum_working / norm[..., None]
         norm = jnp.where(moving, norm, 0)
 
-        permutation, sorted_inertia, unit_working = working_frame(inertia, unit)
         regime = classify(sorted_inertia, unit_working, norm)
         consts = constants(sorted_inertia, unit_working, regime)
 

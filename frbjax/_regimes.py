@@ -18,6 +18,10 @@ gaps a = J2 - J1, b = J3 - J2, c = J3 - J1:
   chart built on 1 + L1;
 - uniform rotation (L along a principal direction, a sphere, L = 0) is handled in ``_body``.
 
+Where nu >= -1 the code uses alpha Pi = alpha u + alpha (Pi - F) (F(am u|m) = u, alpha B = 1/J1 - 1/J3):
+psi = t/J3 + atan2(L2, L3) - alpha (Pi - F) in the major regime, psi = t/J1 - atan2(L2, L1) +
+alpha (Pi - F) in the minor one, up to a constant (see ``constants``).
+
 u = u0 + B t where the phase u0 matches the initial angular momentum (computed from the ratios of its
 components, not from an amplitude, so that it keeps its digits next to the separatrix).  The complement mc = 1 - m is
 formed from g2 directly (mc = c |g2| / (g1 b) or c g2 / (g3 a)) so that it keeps full relative precision
@@ -28,8 +32,8 @@ from __future__ import annotations
 
 import jax.numpy as jnp
 
-from .special import ellipj, ellippi, elliprf
-from .special._legendre import _pi_reduced
+from .special import ellipj, elliprf
+from .special._legendre import _LARGE_NEGATIVE_CHARACTERISTIC, _pi_reduced_terms
 
 MAJOR, MINOR, SEPARATRIX, UNIFORM = 0, 1, 2, 3
 
@@ -141,12 +145,23 @@ def constants(inertia, unit_momentum, regime):
 
     out = {key: pick(key) for key in major}
     out["u0"] = jnp.where(is_sep, separatrix_u0, jnp.where(is_minor, minor_phase, major_phase))
-    # The complete integral Pi(nu|m) of every whole half-period of the amplitude, once per body; the
-    # separatrix needs none (it is infinite there) and gets a harmless stand-in.
+    # alpha Pi(nu; am u|m) = alpha u + alpha (Pi - F)(nu; am u|m) for nu >= -1 (F(am u|m) = u).  The
+    # constant alpha u0 drops out (only differences of psi matter) and alpha B = 1/J1 - 1/J3 turns the
+    # precession rate 1/J1 (1/J3) into 1/J3 (1/J1).  This matters where alpha ~ 1/sqrt(J2 - J1) is huge
+    # (nearly symmetric bodies with L near the plane of the two close axes): alpha Pi ~ alpha K there,
+    # and its rounding error alone (1e-7 for a one-ulp gap) would swamp the motion, while
+    # alpha (Pi - F) = alpha nu (...) stays O(1) because nu ~ J2 - J1.  For nu < -1 (L near the axis
+    # the orbit circles, alpha ~ 1/sqrt(g) but Pi ~ sqrt(g)) the whole Pi is used.
+    out["without_first_kind"] = (out["nu"] >= _LARGE_NEGATIVE_CHARACTERISTIC) & ~is_sep
+    swapped_rate = jnp.where(is_minor, 1 / inertia[..., 0], 1 / inertia[..., 2])
+    out["precession"] = jnp.where(out["without_first_kind"], swapped_rate, out["precession"])
+    # The complete integral of every whole half-period of the amplitude (Pi(nu|m), or Pi - K), once per
+    # body; the separatrix needs none (it is infinite there) and gets a harmless stand-in.
     safe_nu = jnp.where(is_sep, 0, out["nu"])
     safe_m = jnp.where(is_sep, 0.5, out["m"])
     safe_mc = jnp.where(is_sep, 0.5, out["mc"])
-    out["pi_complete"] = ellippi(safe_nu, safe_m, mc=safe_mc)
+    head, tail = _pi_reduced_terms(safe_nu, jnp.ones_like(safe_m), jnp.zeros_like(safe_m), safe_m, safe_mc)
+    out["third_kind_complete"] = jnp.where(out["without_first_kind"], tail, head + tail)
     out["regime"] = regime
     return out
 
@@ -189,14 +204,23 @@ def evaluate(consts, tau, attitude=True):
 
     # Pi(nu; am|m) = 2j Pi(nu|m) + Pi(nu; am_r|m) (DLMF 19.2.10) from the reduced sn and cn themselves
     # (their relative precision matters near the separatrix; see _phase).  Not needed on the separatrix.
+    # The reduced amplitude am - turns pi must have cos = parity cn >= 0.  Rounding am/pi alone fails
+    # where am is within rounding of an odd multiple of pi/2 (cn ~ 1e-22 next to the separatrix, where
+    # am rounds to -pi/2 but cn still tells the side): Pi is steep there (scale sqrt(mc)), and the wrong
+    # side costs O(1).  So the side is taken from the sign of cn.
     turns = jnp.round(am / jnp.pi)
     parity = 1 - 2 * jnp.mod(turns, 2)
+    wrong_side = parity * cn < 0
+    turns = turns + jnp.where(wrong_side, jnp.where(am < turns * jnp.pi, -1, 1), 0)
+    parity = jnp.where(wrong_side, -parity, parity)
     nu = jnp.where(separatrix, 0, consts["nu"])
     m = jnp.where(separatrix, 0.5, consts["m"])
     mc = jnp.where(separatrix, 0.5, consts["mc"])
     sn_reduced = jnp.where(separatrix, 0.5, parity * sn)
     cn_reduced = jnp.where(separatrix, 0.5, jnp.abs(cn))
-    third_kind = 2 * turns * consts["pi_complete"] + _pi_reduced(nu, sn_reduced, cn_reduced, m, mc)
+    head, tail = _pi_reduced_terms(nu, sn_reduced, cn_reduced, m, mc)
+    reduced = jnp.where(consts["without_first_kind"], tail, head + tail)
+    third_kind = 2 * turns * consts["third_kind_complete"] + reduced
     orientation = jnp.where(minor, -1, 1)
     partner = jnp.where(minor, l1, l3)
     psi_elliptic = orientation * (jnp.arctan2(l2, partner) - consts["alpha"] * third_kind)

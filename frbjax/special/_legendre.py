@@ -147,7 +147,16 @@ _LARGE_NEGATIVE_CHARACTERISTIC = -1.0
 
 
 def _pi_reduced(n, s, c, m, mc):
-    """Pi(n; phi_r|m) for |phi_r| <= pi/2 from s = sin phi_r, c = cos phi_r >= 0 (DLMF 19.25.14).
+    """Pi(n; phi_r|m) for |phi_r| <= pi/2 from s = sin phi_r, c = cos phi_r >= 0 (see _pi_reduced_terms)."""
+    head, tail = _pi_reduced_terms(n, s, c, m, mc)
+    return head + tail
+
+
+def _pi_reduced_terms(n, s, c, m, mc):
+    """(head, tail) with Pi(n; phi_r|m) = head + tail for |phi_r| <= pi/2, s = sin phi_r, c = cos phi_r >= 0.
+
+    For n >= -1 the head is exactly F(phi_r|m) and the tail is Pi - F (DLMF 19.25.14), which callers
+    that know F by other means (the rigid body: F(am u|m) = u) use alone.
 
     For n >= -1:  Pi = s R_F(c^2, Delta^2, 1) + (n/3) s^3 R_J(c^2, Delta^2, 1, 1 - n s^2).
     For n < -1, DLMF 19.7.8 multiplied through by sin^4, with omega = m/n in (-1, 0]:
@@ -166,7 +175,7 @@ def _pi_reduced(n, s, c, m, mc):
     first = _rf(jnp.where(transformed, x * y, x), jnp.where(transformed, rc_second, y),
                 jnp.where(transformed, rc_second, one))
     coefficient = jnp.where(transformed, -omega, n)
-    return s * first + coefficient * s**3 * _rj(x, y, one, p) / 3
+    return s * first, coefficient * s**3 * _rj(x, y, one, p) / 3
 
 
 def _pi_complete(n, m, mc):
