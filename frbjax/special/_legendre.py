@@ -182,12 +182,24 @@ def _pi_complete(n, m, mc):
     return _pi_reduced(n, jnp.ones_like(m), jnp.zeros_like(m), m, mc)
 
 
+def _pi_continued(n, turns, s, c, m, mc):
+    """2 turns Pi(n|m) + Pi(n; phi_r|m) (DLMF 19.2.10).
+
+    The complete and the reduced integral go through the Carlson functions together (stacked on a new
+    leading axis): one R_F and one R_J loop instead of two of each, which halves the compiled code
+    (the gradient's too).
+    """
+    safe_mc = jnp.where(turns == 0, 1, mc)
+    stack = lambda reduced, complete: jnp.stack(jnp.broadcast_arrays(reduced, complete))  # noqa: E731
+    values = _pi_reduced(stack(n, n), stack(s, jnp.ones_like(s)), stack(c, jnp.zeros_like(c)),
+                         stack(m, m), stack(mc, safe_mc))
+    return jnp.where(turns == 0, 0, 2 * turns * values[1]) + values[0]
+
+
 @jax.custom_jvp
 def _ellippiinc(n, phi, m, mc):
     turns, s, c = _reduce_amplitude(phi)
-    safe_mc = jnp.where(turns == 0, 1, mc)
-    complete = jnp.where(turns == 0, 0, 2 * turns * _pi_complete(n, m, safe_mc))
-    return complete + _pi_reduced(n, s, c, m, mc)
+    return _pi_continued(n, turns, s, c, m, mc)
 
 
 @_ellippiinc.defjvp
@@ -199,9 +211,7 @@ def _ellippiinc_jvp(primals, tangents):
     dparam = 0.5 * (dm - dmc)
 
     def at_fixed_amplitude(n_, m_, mc_):
-        safe_mc = jnp.where(turns == 0, 1, mc_)
-        complete = jnp.where(turns == 0, 0, 2 * turns * _pi_complete(n_, m_, safe_mc))
-        return complete + _pi_reduced(n_, s, c, m_, mc_)
+        return _pi_continued(n_, turns, s, c, m_, mc_)
 
     value, tangent_nm = jax.jvp(at_fixed_amplitude, (n, m, mc), (dn, dparam, -dparam))
     # DLMF 19.2.7 integrand.
