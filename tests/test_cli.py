@@ -237,3 +237,24 @@ def test_flip_period_against_the_seed():
 def test_demo_folder_must_exist(tmp_path, capsys):
     assert cli.main(["demo", "--quick", "--out", str(tmp_path / "no" / "demo.png")]) == 2
     assert "no folder" in capsys.readouterr().err
+
+
+# ------------------------------------------------------------------------------------- README
+
+
+def test_readme_quick_start_commands(cache_environment):
+    """The README's Quick start block is exactly `make demo` and `make test`, and `make demo` runs.
+
+    (`make test` is what CI runs: this very suite.)  `make demo` reuses the .venv that `make test`
+    created, so it costs one demo run here; its plot goes to the git-ignored frbjax_demo.png.
+    """
+    root = pathlib.Path(__file__).resolve().parent.parent
+    readme = (root / "README.md").read_text()
+    section = readme.split("## Quick start", 1)[1]
+    block = section.split("```", 2)[1]
+    commands = [line.strip() for line in block.splitlines()[1:] if line.strip()]
+    assert commands == ["make demo", "make test"]
+    result = subprocess.run(["make", "demo"], capture_output=True, text=True, cwd=root,
+                            env=cache_environment, timeout=600)
+    assert result.returncode == 0, result.stdout + result.stderr
+    assert "4K(m)/B" in result.stdout and "plot saved to frbjax_demo.png" in result.stdout
