@@ -13,6 +13,7 @@ The library never changes JAX's global configuration: enable float64 yourself
 
 from . import special
 from ._body import FreeRigidBody
+from ._sharding import batch_mesh, pad_batch, shard_batch, shard_bodies
 
 __all__ = ["AttitudeFit", "FreeRigidBody", "fit_attitude", "special"]
 
