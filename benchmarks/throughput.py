@@ -209,13 +209,14 @@ def parse(argv):
     parser.add_argument("--repeats", type=int, default=5)
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument("--quick", action="store_true",
-                        help="smoke run: sizes 1 and 100, 10 bodies built, gradient on 10 x 10")
+                        help="smoke run: one batch of 10, 10 bodies built, gradient on 10 x 10; compile times may "
+                             "come from the persistent compilation cache (JAX_COMPILATION_CACHE_DIR) if one is set")
     parser.add_argument("--output-dir", type=Path, default=DEFAULT_OUTPUT_DIR)
     parser.add_argument("--no-plot", action="store_true")
     parser.add_argument("--worker", type=Path, help=argparse.SUPPRESS)
     options = parser.parse_args(argv)
     if options.quick:
-        options.sizes = [1, 100]
+        options.sizes = [10]
         options.construction_sizes = [10]
         options.gradient_bodies, options.gradient_times, options.repeats = 10, 10, 2
     if options.sizes is None:
@@ -226,6 +227,9 @@ def parse(argv):
 def main(argv=None):
     argv = list(sys.argv[1:] if argv is None else argv)
     options = parse(argv)
+    if not options.quick:
+        # Compile times are part of the result: never load them from a persistent cache.
+        jax.config.update("jax_enable_compilation_cache", False)
     if options.worker is not None:
         result = measurements(options, "one core")
         options.worker.write_text(json.dumps(result, indent=2) + "\n")
@@ -291,6 +295,8 @@ def main(argv=None):
         "gradient": gradient,
         "summary": summary,
         "quick": options.quick,
+        "compilation_cache": _cache_state(),
+        "frbjax": _provenance(),
         "device": str(jax.devices()[0]),
         "cpu_count": os.cpu_count(),
         "cpu": _cpu_name(),
@@ -309,6 +315,28 @@ def main(argv=None):
         plot(result, png)
         print(f"wrote {png}")
     return result
+
+
+def _cache_state():
+    enabled = jax.config.jax_enable_compilation_cache and jax.config.jax_compilation_cache_dir
+    return f"persistent cache {jax.config.jax_compilation_cache_dir}" if enabled else "off"
+
+
+def _provenance():
+    """Where frbjax was imported from, and the git commit of this checkout (and whether frbjax/ is modified)."""
+    import frbjax
+
+    info = {"path": str(Path(frbjax.__file__).resolve().parent)}
+    try:
+        root = HERE.parent
+        info["git_head"] = subprocess.run(["git", "-C", str(root), "rev-parse", "HEAD"], capture_output=True,
+                                          text=True, check=True).stdout.strip()
+        info["frbjax_modified_in_checkout"] = bool(subprocess.run(
+            ["git", "-C", str(root), "status", "--porcelain", "frbjax"], capture_output=True, text=True,
+            check=True).stdout.strip())
+    except (OSError, subprocess.CalledProcessError):
+        pass
+    return info
 
 
 def _cpu_name():

@@ -17,6 +17,9 @@ per body).  Methods, on the same batch in the same process:
 * the numpy/scipy closed form of benchmarks/_scipy_closed_form.py (what a user would write by hand
   on scipy.special.ellipj, elliprf and elliprj), construction included.
 
+equinox's runtime checks are set to EQX_ON_ERROR=nan (unless set otherwise): diffrax's failures are
+read from its result codes (throw=False), and a failed body counts as an infinite error.
+
 Times are wall times after compilation (best of ``--repeats``; a run that takes more than 2 s is timed
 once), with ``block_until_ready``.  frbjax and diffrax use XLA's CPU thread pool (all cores), numpy /
 scipy one core.  A diffrax configuration whose predicted run time (previous tolerance's time times
@@ -27,12 +30,15 @@ Error: per body, the largest over its times of max(|q - q_ref| up to the sign of
 included); the JSON also has the largest and the median over the random bodies alone.
 
 Reference: diffrax Dopri8 in float64 at rtol = atol = 1e-16 (as in tests/_reference.py), independent
-of both closed forms.  Its own error floor is estimated in two ways and written next to every result:
-(1) the largest difference to the same integration at 1e-15 (a proxy: the two share rounding
-behaviour); (2) at T = 10 only, the largest difference to mpmath's Taylor integrator (``odefun``, 30
-digits) on ``--mpmath-bodies`` bodies.  Errors near that floor are the reference's, not the method's;
-the agreement of frbjax with the scipy closed form (two independent codes of the exact solution) is
-reported as well.
+of both closed forms.  Its own error floor is estimated in three ways, the largest is written next to
+every result and drawn in the plot: (1) the largest difference to the same integration at 1e-15 (a
+proxy: the two share rounding behaviour); (2) the largest difference to the independent 30-digit
+mpmath closed form of benchmarks/stability.py (``Reference``: its own derivation of the attitude,
+checked there against mpmath.odefun) on ``--mpmath-bodies`` bodies (half random, half hard), at every
+time; (3) at T = 10 only, the largest difference to mpmath's Taylor integrator (``odefun``, 30 digits)
+on two bodies.  Errors near that floor are the reference's, not the method's.  Every method's error
+against the mpmath closed form on that subsample is reported too (``max_error_vs_mpmath_subsample``,
+free of the reference's floor), and so is the agreement of frbjax with the scipy closed form.
 
 Usage: python benchmarks/work_precision.py [--bodies 1000] [--quick] [--output-dir DIR]
 Writes work_precision.json and work_precision.png into benchmarks/results/ (or --output-dir).
@@ -49,7 +55,12 @@ import sys
 import time
 from pathlib import Path
 
-import jax
+# equinox's runtime checks inside diffrax (not frbjax) become NaN instead of a host callback: failures
+# are read from diffrax's result codes (throw=False) anyway, and programs without host callbacks can
+# be kept in JAX's persistent compilation cache.
+os.environ.setdefault("EQX_ON_ERROR", "nan")
+
+import jax  # noqa: E402
 
 jax.config.update("jax_enable_x64", True)
 
@@ -63,6 +74,7 @@ HERE = Path(__file__).resolve().parent
 sys.path.insert(0, str(HERE))
 sys.path.append(str(HERE.parent))
 from _scipy_closed_form import ScipyFreeRigidBody  # noqa: E402
+from stability import Reference as StabilityReference  # noqa: E402  (an independent mpmath closed form)
 
 from frbjax import FreeRigidBody  # noqa: E402
 
@@ -269,14 +281,19 @@ def main(argv=None):
     parser.add_argument("--tolerances", type=float, nargs="+", default=TOLERANCES)
     parser.add_argument("--repeats", type=int, default=3)
     parser.add_argument("--budget", type=float, default=60.0, help="largest predicted seconds of one diffrax run")
-    parser.add_argument("--mpmath-bodies", type=int, default=4)
+    parser.add_argument("--mpmath-bodies", type=int, default=6,
+                        help="bodies (half random, half hard) checked against the mpmath closed form")
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument("--quick", action="store_true",
-                        help="smoke run: 6 + 2 bodies, 1 sample (dense = state), tolerances 1e-4 and 1e-8, "
-                             "1 mpmath body at 20 digits")
+                        help="smoke run: 6 + 2 bodies, 1 sample (dense = state: one compiled program per "
+                             "method), tolerances 1e-4 and 1e-8, 1 mpmath body at 20 digits; compile times may come "
+                             "from the persistent compilation cache (JAX_COMPILATION_CACHE_DIR) if one is set")
     parser.add_argument("--output-dir", type=Path, default=DEFAULT_OUTPUT_DIR)
     parser.add_argument("--no-plot", action="store_true")
     options = parser.parse_args(argv)
+    if not options.quick:
+        # Compile times are reported: never load them from a persistent cache.
+        jax.config.update("jax_enable_compilation_cache", False)
     mp_dps = 30
     if options.quick:
         options.bodies, options.samples, options.repeats = 6, 1, 1
@@ -307,6 +324,12 @@ def main(argv=None):
     diffrax_fns = {name: diffrax_function(name) for name in SOLVERS}
 
     cases = []
+    mp_cache, mp_closed, reference_cache = {}, {}, {}
+    n_hard = len(hard_names)
+    hard_picks = min(n_hard, -(-options.mpmath_bodies // 2))
+    mp_picks = list(range(min(options.mpmath_bodies - hard_picks, n_random))) + list(
+        range(n_random, n_random + hard_picks))
+    odefun_picks = mp_picks[:1] if options.quick else [0, n_random]
     for final_time in options.final_times:
         for kind in ("state", "dense"):
             samples = 1 if kind == "state" else options.samples
@@ -317,44 +340,73 @@ def main(argv=None):
 
             # Reference and its check run.
             dop8 = compiled(("Dopri8", shape_key), diffrax_fns["Dopri8"], *device_args, ts_dev, 1e-8)
-            start = time.perf_counter()
-            L_ref, q_ref, steps_ref, ok = (np.asarray(a) for a in dop8(*device_args, ts_dev, REFERENCE_TOL))
-            reference_s = time.perf_counter() - start
-            if not ok.all():
-                raise RuntimeError(f"reference failed for bodies {np.flatnonzero(~ok)}")
-            L_chk, q_chk, _, ok_chk = (np.asarray(a) for a in dop8(*device_args, ts_dev, CHECK_TOL))
-            floor = body_errors(L_chk, q_chk, L_ref, q_ref, norms)[0]
+            if tuple(ts) not in reference_cache:  # (--quick: state and dense have the same times)
+                start = time.perf_counter()
+                L_ref, q_ref, steps_ref, ok = (np.asarray(a) for a in dop8(*device_args, ts_dev, REFERENCE_TOL))
+                reference_s = time.perf_counter() - start
+                if not ok.all():
+                    raise RuntimeError(f"reference failed for bodies {np.flatnonzero(~ok)}")
+                L_chk, q_chk, _, _ = (np.asarray(a) for a in dop8(*device_args, ts_dev, CHECK_TOL))
+                floor = body_errors(L_chk, q_chk, L_ref, q_ref, norms)[0]
+                reference_cache[tuple(ts)] = L_ref, q_ref, steps_ref, reference_s, floor
+            L_ref, q_ref, steps_ref, reference_s, floor = reference_cache[tuple(ts)]
             reference = {
                 "method": f"diffrax Dopri8 float64 rtol=atol={REFERENCE_TOL:g}",
                 "time_s": reference_s,
                 "max_steps_per_body": int(steps_ref.max()),
                 "floor_estimate_vs_tol_1e-15": float(floor.max()),
             }
-            if final_time <= 10 and options.mpmath_bodies > 0:
-                picks = list(range(min(options.mpmath_bodies - 1, n_random))) + [n_random]  # + a hard one
+            # The reference against mpmath on a subsample: the independent 30-digit closed form of
+            # benchmarks/stability.py at every time, and mpmath.odefun (Taylor series) at T <= 10.
+            start = time.perf_counter()
+            for b in mp_picks:
+                key = (b, tuple(ts))
+                if key not in mp_closed:
+                    exact = StabilityReference(inertia[b], momentum[b], attitude[b], dps=30)
+                    values = [exact.at(t) for t in ts]
+                    mp_closed[key] = (np.array([[float(x) for x in v[0]] for v in values]),
+                                      np.array([[float(x) for x in v[1]] for v in values]))
+            L_mp = np.stack([mp_closed[(b, tuple(ts))][0] for b in mp_picks])
+            q_mp = np.stack([mp_closed[(b, tuple(ts))][1] for b in mp_picks])
+            reference["floor_vs_mpmath_closed_form"] = float(
+                body_errors(L_ref[mp_picks], q_ref[mp_picks], L_mp, q_mp, norms[mp_picks])[0].max())
+            reference["mpmath_closed_form"] = (f"benchmarks/stability.py Reference at 30 digits on bodies {mp_picks} "
+                                               f"({time.perf_counter() - start:.0f} s)")
+            if final_time <= 10 and odefun_picks:
                 worst = 0.0
                 start = time.perf_counter()
-                for b in picks:
-                    L_mp, q_mp = mpmath_solution(inertia[b], momentum[b], attitude[b], ts, dps=mp_dps)
-                    e = body_errors(L_ref[b:b + 1], q_ref[b:b + 1], L_mp[None], q_mp[None], norms[b:b + 1])[0]
+                for b in odefun_picks:
+                    key = (b, tuple(ts))
+                    if key not in mp_cache:
+                        mp_cache[key] = mpmath_solution(inertia[b], momentum[b], attitude[b], ts, dps=mp_dps)
+                    L_o, q_o = mp_cache[key]
+                    e = body_errors(L_ref[b:b + 1], q_ref[b:b + 1], L_o[None], q_o[None], norms[b:b + 1])[0]
                     worst = max(worst, float(e.max()))
-                reference["floor_vs_mpmath"] = worst
-                reference["mpmath"] = f"odefun at {mp_dps} digits on bodies {picks} ({time.perf_counter() - start:.0f} s)"
-            floor_value = max(reference["floor_estimate_vs_tol_1e-15"], reference.get("floor_vs_mpmath", 0.0))
+                reference["floor_vs_mpmath_odefun"] = worst
+                reference["mpmath_odefun"] = (f"odefun at {mp_dps} digits on bodies {odefun_picks} "
+                                              f"({time.perf_counter() - start:.0f} s)")
+            floor_value = max(reference[k] for k in ("floor_estimate_vs_tol_1e-15", "floor_vs_mpmath_closed_form",
+                                                     "floor_vs_mpmath_odefun") if k in reference)
             reference["floor"] = floor_value
-            print(f"  reference: {reference['method']}, {reference_s:.1f} s, estimated error floor "
-                  f"{floor_value:.1e} (vs 1e-15: {reference['floor_estimate_vs_tol_1e-15']:.1e}"
-                  + (f", vs mpmath: {reference['floor_vs_mpmath']:.1e})" if "floor_vs_mpmath" in reference else ")"),
+            print(f"  reference: {reference['method']}, {reference_s:.1f} s, estimated error floor {floor_value:.1e} "
+                  f"(vs 1e-15: {reference['floor_estimate_vs_tol_1e-15']:.1e}, vs mpmath closed form "
+                  f"{reference['floor_vs_mpmath_closed_form']:.1e}"
+                  + (f", vs mpmath odefun: {reference['floor_vs_mpmath_odefun']:.1e})"
+                     if "floor_vs_mpmath_odefun" in reference else ")"),
                   flush=True)
 
             rows = []
-            print(f"  {'method':<22} {'tol':>8} {'time s':>9} {'max err':>9} {'rand max':>9} {'rand med':>9}")
+            print(f"  {'method':<22} {'tol':>8} {'time s':>9} {'max err':>9} {'rand max':>9} {'rand med':>9} "
+                  f"{'vs mpmath':>9}")
 
             def record(row, L, q):
                 row.update(summarize(body_errors(L, q, L_ref, q_ref, norms), n_random))
+                row["max_error_vs_mpmath_subsample"] = float(
+                    body_errors(L[mp_picks], q[mp_picks], L_mp, q_mp, norms[mp_picks])[0].max())
                 rows.append(row)
                 print(f"  {row['method']:<22} {_fmt(row.get('tol'))} {row['time_s']:9.3g} {row['max_error']:9.2e} "
-                      f"{row['max_error_random_bodies']:9.2e} {row['median_error_random_bodies']:9.2e}", flush=True)
+                      f"{row['max_error_random_bodies']:9.2e} {row['median_error_random_bodies']:9.2e} "
+                      f"{row['max_error_vs_mpmath_subsample']:9.2e}", flush=True)
                 return row
 
             # frbjax (construction included).
@@ -464,14 +516,20 @@ def main(argv=None):
                                           "direction and attitude uniform", "seed": options.seed},
         "error_definition": "per body max over times of max(|q - q_ref|_inf up to sign, |L - L_ref|_inf / |L|); "
                             "max_error = max over all bodies",
-        "reference": f"diffrax Dopri8 float64 rtol=atol={REFERENCE_TOL:g}; floor estimated per case "
-                     f"(vs rtol=atol={CHECK_TOL:g}, and vs mpmath odefun at T <= 10)",
+        "reference": f"diffrax Dopri8 float64 rtol=atol={REFERENCE_TOL:g}; its error floor estimated per case "
+                     f"as the largest of: the difference to rtol=atol={CHECK_TOL:g}, the error against the 30-digit "
+                     f"mpmath closed form of benchmarks/stability.py on bodies {mp_picks}, and (T <= 10) against "
+                     f"mpmath.odefun on bodies {odefun_picks}",
+        "max_error_vs_mpmath_subsample": "per method: the error against the mpmath closed form on the same subsample "
+                                         "(free of the diffrax reference's floor)",
         "timing": "wall time after compilation, best of repeats (runs > 2 s timed once), block_until_ready; "
                   "frbjax and diffrax: XLA CPU (all cores); numpy/scipy: one core",
         "compile_s": {f"{k[0]} {k[1]}": v[1] for k, v in compile_s.items()},
         "cases": cases,
         "summary": summary,
         "quick": options.quick,
+        "compilation_cache": _cache_state(),
+        "frbjax": _provenance(),
         "device": str(jax.devices()[0]),
         "cpu_count": os.cpu_count(),
         "jax": jax.__version__,
@@ -490,6 +548,30 @@ def main(argv=None):
         plot(result, png)
         print(f"wrote {png}")
     return result
+
+
+def _cache_state():
+    enabled = jax.config.jax_enable_compilation_cache and jax.config.jax_compilation_cache_dir
+    return f"persistent cache {jax.config.jax_compilation_cache_dir}" if enabled else "off"
+
+
+def _provenance():
+    """Where frbjax was imported from, and the git commit of this checkout (and whether frbjax/ is modified)."""
+    import subprocess
+
+    import frbjax
+
+    info = {"path": str(Path(frbjax.__file__).resolve().parent)}
+    try:
+        root = HERE.parent
+        info["git_head"] = subprocess.run(["git", "-C", str(root), "rev-parse", "HEAD"], capture_output=True,
+                                          text=True, check=True).stdout.strip()
+        info["frbjax_modified_in_checkout"] = bool(subprocess.run(
+            ["git", "-C", str(root), "status", "--porcelain", "frbjax"], capture_output=True, text=True,
+            check=True).stdout.strip())
+    except (OSError, subprocess.CalledProcessError):
+        pass
+    return info
 
 
 def plot(result, path):
@@ -518,7 +600,7 @@ def plot(result, path):
             ax.plot([r["time_s"]], [max(r["max_error"], 1e-17)], marker, color=color, ms=size, ls="none",
                     label=method + (" (incl. construction)" if r.get("includes_construction") else ""))
         ax.axhline(floor, color="gray", ls="--", lw=1, label=f"reference error floor est. {floor:.0e}")
-        ax.axhline(TARGET_ERROR, color="gray", ls=":", lw=1)
+        ax.axhline(TARGET_ERROR, color="gray", ls=":", lw=1, label="1e-12")
         ax.set_xscale("log")
         ax.set_yscale("log")
         ax.set_xlabel("wall time [s] (after compilation)")
