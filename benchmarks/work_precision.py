@@ -29,8 +29,8 @@ Error: per body, the largest over its times of max(|q - q_ref| up to the sign of
 (max norm over components); the plotted number is the largest over the whole batch (hard cases
 included); the JSON also has the largest and the median over the random bodies alone.
 
-Reference: diffrax Dopri8 in float64 at rtol = atol = 1e-16 (as in tests/_reference.py), independent
-of both closed forms.  Its own error floor is estimated in three ways, the largest is written next to
+Reference: diffrax Dopri8 in float64 at rtol = atol = 1e-16 (as in tests/_reference.py), with its
+steps ending exactly on the output times (no dense interpolation), independent of both closed forms.  Its own error floor is estimated in three ways, the largest is written next to
 every result and drawn in the plot: (1) the largest difference to the same integration at 1e-15 (a
 proxy: the two share rounding behaviour); (2) the largest difference to the independent 30-digit
 mpmath closed form of benchmarks/stability.py (``Reference``: its own derivation of the attitude,
@@ -155,9 +155,17 @@ def _field(t, y, args):
     return jnp.concatenate([dl, dq])
 
 
-def diffrax_function(solver_name):
-    """jit(vmap) of one diffrax solve per body; (inertia, momentum, attitude, ts, tol) -> L, q, steps, ok."""
+def diffrax_function(solver_name, step_to_outputs=False):
+    """jit(vmap) of one diffrax solve per body; (inertia, momentum, attitude, ts, tol) -> L, q, steps, ok.
+
+    With ``step_to_outputs`` (the reference) the steps end exactly on the output times
+    (ClipStepSizeController(step_ts=ts)) instead of interpolating between steps.
+    """
     solver = SOLVERS[solver_name][0]()
+
+    def controller(tol, ts):
+        pid = diffrax.PIDController(rtol=tol, atol=tol)
+        return diffrax.ClipStepSizeController(pid, step_ts=ts) if step_to_outputs else pid
 
     def run(inertia, momentum, attitude, ts, tol):
         def one(inertia, momentum, attitude):
@@ -172,7 +180,7 @@ def diffrax_function(solver_name):
                 y0=y0,
                 args=(inertia, scale),
                 saveat=diffrax.SaveAt(ts=ts),
-                stepsize_controller=diffrax.PIDController(rtol=tol, atol=tol),
+                stepsize_controller=controller(tol, ts),
                 max_steps=MAX_STEPS,
                 throw=False,
             )
@@ -322,6 +330,7 @@ def main(argv=None):
 
     frbjax_fn = frbjax_function()
     diffrax_fns = {name: diffrax_function(name) for name in SOLVERS}
+    reference_fn = diffrax_function("Dopri8", step_to_outputs=True)
 
     cases = []
     mp_cache, mp_closed, reference_cache = {}, {}, {}
@@ -339,7 +348,7 @@ def main(argv=None):
             print(f"\nT = {final_time:g}, {kind} ({samples} time(s) per body)", flush=True)
 
             # Reference and its check run.
-            dop8 = compiled(("Dopri8", shape_key), diffrax_fns["Dopri8"], *device_args, ts_dev, 1e-8)
+            dop8 = compiled(("reference Dopri8", shape_key), reference_fn, *device_args, ts_dev, 1e-8)
             if tuple(ts) not in reference_cache:  # (--quick: state and dense have the same times)
                 start = time.perf_counter()
                 L_ref, q_ref, steps_ref, ok = (np.asarray(a) for a in dop8(*device_args, ts_dev, REFERENCE_TOL))
@@ -351,7 +360,7 @@ def main(argv=None):
                 reference_cache[tuple(ts)] = L_ref, q_ref, steps_ref, reference_s, floor
             L_ref, q_ref, steps_ref, reference_s, floor = reference_cache[tuple(ts)]
             reference = {
-                "method": f"diffrax Dopri8 float64 rtol=atol={REFERENCE_TOL:g}",
+                "method": f"diffrax Dopri8 float64 rtol=atol={REFERENCE_TOL:g}, steps ending on the output times",
                 "time_s": reference_s,
                 "max_steps_per_body": int(steps_ref.max()),
                 "floor_estimate_vs_tol_1e-15": float(floor.max()),
@@ -516,7 +525,7 @@ def main(argv=None):
                                           "direction and attitude uniform", "seed": options.seed},
         "error_definition": "per body max over times of max(|q - q_ref|_inf up to sign, |L - L_ref|_inf / |L|); "
                             "max_error = max over all bodies",
-        "reference": f"diffrax Dopri8 float64 rtol=atol={REFERENCE_TOL:g}; its error floor estimated per case "
+        "reference": f"diffrax Dopri8 float64 rtol=atol={REFERENCE_TOL:g} stepping onto the output times; its error floor estimated per case "
                      f"as the largest of: the difference to rtol=atol={CHECK_TOL:g}, the error against the 30-digit "
                      f"mpmath closed form of benchmarks/stability.py on bodies {mp_picks}, and (T <= 10) against "
                      f"mpmath.odefun on bodies {odefun_picks}",
