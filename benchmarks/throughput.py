@@ -212,6 +212,7 @@ def parse(argv):
                         help="smoke run: one batch of 10, 10 bodies built, gradient on 10 x 10; compile times may "
                              "come from the persistent compilation cache (JAX_COMPILATION_CACHE_DIR) if one is set")
     parser.add_argument("--output-dir", type=Path, default=DEFAULT_OUTPUT_DIR)
+    parser.add_argument("--note", default="", help="free text stored in the JSON (e.g. which frbjax was measured)")
     parser.add_argument("--no-plot", action="store_true")
     parser.add_argument("--worker", type=Path, help=argparse.SUPPRESS)
     options = parser.parse_args(argv)
@@ -297,6 +298,7 @@ def main(argv=None):
         "quick": options.quick,
         "compilation_cache": _cache_state(),
         "frbjax": _provenance(),
+        "note": options.note,
         "device": str(jax.devices()[0]),
         "cpu_count": os.cpu_count(),
         "cpu": _cpu_name(),
@@ -326,7 +328,10 @@ def _provenance():
     """Where frbjax was imported from, and the git commit of this checkout (and whether frbjax/ is modified)."""
     import frbjax
 
-    info = {"path": str(Path(frbjax.__file__).resolve().parent)}
+    path = Path(frbjax.__file__).resolve().parent
+    info = {"path": str(path)}
+    if path != HERE.parent / "frbjax":
+        return info  # not this checkout's frbjax: its git state says nothing (see --note)
     try:
         root = HERE.parent
         info["git_head"] = subprocess.run(["git", "-C", str(root), "rev-parse", "HEAD"], capture_output=True,

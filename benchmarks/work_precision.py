@@ -297,6 +297,7 @@ def main(argv=None):
                              "method), tolerances 1e-4 and 1e-8, 1 mpmath body at 20 digits; compile times may come "
                              "from the persistent compilation cache (JAX_COMPILATION_CACHE_DIR) if one is set")
     parser.add_argument("--output-dir", type=Path, default=DEFAULT_OUTPUT_DIR)
+    parser.add_argument("--note", default="", help="free text stored in the JSON (e.g. which frbjax was measured)")
     parser.add_argument("--no-plot", action="store_true")
     options = parser.parse_args(argv)
     if not options.quick:
@@ -539,6 +540,7 @@ def main(argv=None):
         "quick": options.quick,
         "compilation_cache": _cache_state(),
         "frbjax": _provenance(),
+        "note": options.note,
         "device": str(jax.devices()[0]),
         "cpu_count": os.cpu_count(),
         "jax": jax.__version__,
@@ -570,7 +572,10 @@ def _provenance():
 
     import frbjax
 
-    info = {"path": str(Path(frbjax.__file__).resolve().parent)}
+    path = Path(frbjax.__file__).resolve().parent
+    info = {"path": str(path)}
+    if path != HERE.parent / "frbjax":
+        return info  # not this checkout's frbjax: its git state says nothing (see --note)
     try:
         root = HERE.parent
         info["git_head"] = subprocess.run(["git", "-C", str(root), "rev-parse", "HEAD"], capture_output=True,
