@@ -16,6 +16,8 @@ and reports the ratio error / floor (the issue's target: <= 10 everywhere) per s
 
 (a) ``separatrix``: |d I2 - 1| from 1e-1 down to 1e-16 on both sides (d = 2E/|L|^2), I = (1, 2, 3);
     the x axis is the exact d I2 - 1 of the float64 inputs; plus one body exactly on the separatrix.
+(a') ``saddle``: L at a distance 1e-1 ... 1e-15 from the middle axis (where the separatrices cross; d I2 - 1
+    ~ distance^2, and the phase u0 ~ K(m) is large), on both sides, |L| t from 0.1 to 100.
 (b) ``gaps``: the relative inertia gaps (I2 - I1)/I1 and (I3 - I2)/I2 from 1e-1 down to one ulp, for
     a generic L and for L near the plane of the two close axes.
 (c) ``time``: |L| t from 1 to 1e6 (four bodies), error growth per period of L.
@@ -101,10 +103,21 @@ class Reference:
     """Exact motion of one body at DPS digits from the exact values of float64 inputs (any moment order)."""
 
     def __init__(self, inertia, momentum, attitude, dps=DPS):
-        self.dps = dps
         inertia, momentum, attitude = (list(map(float, a)) for a in (inertia, momentum, attitude))
-        with mpmath.workdps(dps):
-            self._setup(inertia, momentum, attitude)
+        # Working precision: ``dps`` digits beyond what the body needs.  Within 10^-k of the saddle
+        # (mc = 1 - m ~ 10^-k) m itself needs k digits, and within 10^-k of a uniform rotation about the
+        # pole (1 - A^2 ~ 10^-k) the two terms of H cancel to k digits; a one-ulp perturbation of a zero
+        # component (5e-324) makes k ~ 650, so the precision is raised to fit rather than fixed.
+        self.dps, self._requested = dps, dps
+        while True:
+            with mpmath.workdps(self.dps):
+                self._setup(inertia, momentum, attitude)
+            if self._needed() <= self.dps:
+                break
+            self.dps = self._needed()
+
+    def _needed(self):
+        return self._requested + max(0, self._digits_lost - 20)  # dps covers 20 lost digits by itself
 
     def _setup(self, inertia, momentum, attitude):
         mpf = mpmath.mpf
@@ -120,6 +133,7 @@ class Reference:
         w = [a / b for a, b in zip(exact_L, exact_I)]
         cross = [exact_L[1] * w[2] - exact_L[2] * w[1], exact_L[2] * w[0] - exact_L[0] * w[2],
                  exact_L[0] * w[1] - exact_L[1] * w[0]]
+        self._digits_lost = 0
         if all(x == 0 for x in cross):
             self.regime = "uniform"
             return
@@ -138,9 +152,12 @@ class Reference:
         el1, el3 = exact_L[order[0]], exact_L[order[2]]
         side = el1 * el1 * (e2 - e1) * e3 - el3 * el3 * (e3 - e2) * e1  # sign of d J2 - 1, exactly
         self.l_initial = l
+        # d J2 - 1 to full relative precision from the exact side (no cancellation at any distance).
+        g2 = mpf(side.numerator) / mpf(side.denominator) / (j1 * j3 * sum(x * x for x in L))
         if side < 0:  # around the major axis J3
             self.regime = "major"
-            self.m = g3 * a / (g1 * b)
+            mc = c * (-g2) / (g1 * b)
+            self.m = 1 - mc if mc < mpf("0.5") else g3 * a / (g1 * b)
             self.rate = mpmath.sqrt(g1 * b / (j1 * j2 * j3))
             self.amp = [mpmath.sqrt(j1 * g3 / c), mpmath.sqrt(j2 * g3 / b), mpmath.sqrt(j3 * g1 / c)]
             self.s = _sign(w3)
@@ -148,7 +165,8 @@ class Reference:
             self.pole, self.A, alpha = order[2], self.amp[2], j1 * g3 / c  # alpha = 1 - A^2
         elif side > 0:  # around the minor axis J1
             self.regime = "minor"
-            self.m = g1 * b / (g3 * a)
+            mc = c * g2 / (g3 * a)
+            self.m = 1 - mc if mc < mpf("0.5") else g1 * b / (g3 * a)
             self.rate = mpmath.sqrt(g3 * a / (j1 * j2 * j3))
             self.amp = [mpmath.sqrt(j1 * g3 / c), mpmath.sqrt(j2 * g1 / a), mpmath.sqrt(j3 * g1 / c)]
             self.s = _sign(w1)
@@ -164,10 +182,14 @@ class Reference:
         self.pole_sign = _sign(l[self.pole])
         self.pole_inertia = I[self.pole]
         if self.regime != "separatrix":
+            small = min(mc, alpha)
+            self._digits_lost = max(0, int(-mpmath.log10(small)) + 1) if small > 0 else 0
+            if self._needed() > mpmath.mp.dps:
+                return  # __init__ retries at a higher precision
             self.u0 = mpmath.ellipf(am0, self.m)
             self.K = mpmath.ellipk(self.m)
             self.alpha, self.beta = alpha, self.A**2 * self.m
-            self.n = -self.beta / alpha
+            self.n = -j3 * a / (j1 * b) if self.regime == "major" else -j1 * b / (j3 * a)  # = -beta/alpha
             self.arc = self.A / mpmath.sqrt(alpha * (alpha + self.beta))
             self.H_half_period = 2 * mpmath.ellippi(self.n, self.m) / alpha - mpmath.pi * self.arc
         self.H0 = self._jacobi(self.u0)[1]
@@ -378,6 +400,16 @@ def build_cases(quick=False, seed=0):
     # exactly on the separatrix: I = (1, 1.5, 3), L = (1, 0.3, 1) has d I2 - 1 = 0 exactly.
     add("separatrix", "d I2 = 1 exactly", 0.0, (1.0, 1.5, 3.0), (1.0, 0.3, 1.0), taus)
 
+    # (a') L near the middle axis (the saddle, where the separatrices cross): distance 1e-1 .. 1e-15,
+    # so d I2 - 1 ~ distance^2 and the phase u0 ~ K(m) is large; short and long times.
+    exponents = (1, 8, 15) if quick else range(1, 16)
+    for k in exponents:
+        for direction, series in (((0.6, 0.0, 0.8), "d I2 > 1 (around I1)"), ((0.3, 0.0, 0.95), "d I2 < 1 (around I3)")):
+            signs = rng.choice([-1.0, 1.0], 3)
+            momentum = signs * (np.array([0.0, 1.0, 0.0]) + 10.0**-k * _unit(direction))
+            add("saddle", series, math.hypot(momentum[0], momentum[2]) / np.linalg.norm(momentum),
+                inertia, momentum, (0.1, -1.0, 10.0, -100.0))
+
     # (b) relative gaps (I2 - I1)/I1 and (I3 - I2)/I2 from 1e-1 down to one ulp.
     exponents = (1, 8, 16) if quick else range(1, 17)
     for k in exponents:
@@ -466,8 +498,9 @@ def frbjax_values(cases):
 # --------------------------------------------------------------------------------------------------
 # Summary, plots, main.
 
-SWEEPS = ("separatrix", "gaps", "time", "ratios", "momentum")
-X_LABELS = dict(separatrix="|d I2 - 1| (exact, of the float64 inputs)", gaps="relative inertia gap",
+SWEEPS = ("separatrix", "saddle", "gaps", "time", "ratios", "momentum")
+X_LABELS = dict(separatrix="|d I2 - 1| (exact, of the float64 inputs)",
+                saddle="distance of L/|L| from the middle axis", gaps="relative inertia gap",
                 time="|L| t", ratios="I3 / I1", momentum="|L|")
 
 
@@ -552,7 +585,7 @@ def plot(cases, summary, path, title):
         bottom.set_yscale("log")
         top.legend(fontsize=6)
         bottom.legend(fontsize=6)
-        if sweep in ("separatrix", "gaps"):
+        if sweep in ("separatrix", "saddle", "gaps"):
             top.invert_xaxis()
             bottom.invert_xaxis()
     fig.suptitle(title)

@@ -20,9 +20,9 @@ import pytest
 STABILITY = Path(__file__).resolve().parent.parent / "benchmarks" / "stability.py"
 EPS = float(np.finfo(np.float64).eps)
 # Measured on these points (3 perturbations, jit, float64): worst error / max(floor, eps) per sweep
-# separatrix 1.39 (q, d I2 - 1 = -1e-4), gaps 1.71 (q, (I2-I1)/I1 = 1e-8 at |L| t = -300), time 1.57
-# (L at |L| t = 1e3), ratios 1.21, momentum 1.03; the full benchmark (benchmarks/results/stability.json,
-# 6 perturbations, all points) measures at most 3.1.  The bound is the target, 10.
+# separatrix 1.14 (L, d I2 - 1 = 1e-12), gaps 1.44 (L, one-ulp gap (I3-I2)/I2), time 0.90, ratios 2.19
+# (q, I = (1, 1e3, 1e6) at |L| t = -100), momentum 0.72; saddle 22.4 (see SADDLE_FACTOR).  The bound
+# is the target, 10.
 FACTOR = 10.0
 
 
@@ -55,6 +55,11 @@ def _cases():
                                                  tuple(rng.choice([-1, 1], 3)))
             add("separatrix", f"d I2 - 1 = {side * 10.0**-exponent:g}", (1.0, 2.0, 3.0), momentum, taus)
     add("separatrix", "d I2 - 1 = 0", (1.0, 1.5, 3.0), (1.0, 0.3, 1.0), taus)
+    for exponent in (8, 13, 15):
+        for direction in ((0.6, 0.0, 0.8), (0.3, 0.0, 0.95)):
+            momentum = rng.choice([-1.0, 1.0], 3) * (np.array([0.0, 1.0, 0.0]) + 10.0**-exponent * stability._unit(direction))
+            add("saddle", f"L at 1e-{exponent} from the middle axis, direction {direction}", (1.0, 2.0, 3.0), momentum,
+                (0.1, -1.0))
     for label, inertia in (("(I2-I1)/I1 = 1e-8", (1.0, 1 + 1e-8, 3.0)), ("(I2-I1)/I1 = 1 ulp", (1 - 2.0**-53, 1.0, 3.0)),
                            ("(I3-I2)/I2 = 1 ulp", (1.0, 2 - 2.0**-52, 2.0))):
         add("gaps", label + ", generic L", inertia, stability._unit(stability.GENERIC), taus)
@@ -73,7 +78,13 @@ def _cases():
 
 
 CASES = _cases()
-SWEEPS = ("separatrix", "gaps", "time", "ratios", "momentum")
+SWEEPS = ("separatrix", "saddle", "gaps", "time", "ratios", "momentum")
+# Next to the middle axis (the saddle) frbjax misses the target: its error there is an error of the
+# angle about L of ~K(m) eps (the phase terms are ~K ~ 30 in size and their rounding does not cancel),
+# while the floor stays at ~1 ulp.  Measured on these points: worst 22.4 (q, 1e-15 from the axis, |L| t
+# = 0.1; benchmark: see stability.json);
+# this bound guards against regressions, test_saddle_target records the gap.
+SADDLE_FACTOR = 60.0
 
 
 @functools.lru_cache(maxsize=None)
@@ -107,8 +118,7 @@ def measured(sweep):
     return out
 
 
-@pytest.mark.parametrize("sweep", SWEEPS)
-def test_error_within_conditioning(sweep):
+def _check(sweep, factor):
     failures, worst = [], 0.0
     for c, m in measured(sweep):
         for k, t in enumerate(c["times"]):
@@ -116,10 +126,20 @@ def test_error_within_conditioning(sweep):
                 error, floor = m[f"error_{quantity}"][k], m[f"floor_{quantity}"][k]
                 ratio = error / max(floor, EPS)
                 worst = max(worst, ratio)
-                if not ratio <= FACTOR:
+                if not ratio <= factor:
                     failures.append(f"{c['label']}, t = {t:g}: {quantity} error {error:.2e}, floor {floor:.2e}")
     assert not failures, "\n".join(failures)
     assert worst > 0
+
+
+@pytest.mark.parametrize("sweep", SWEEPS)
+def test_error_within_conditioning(sweep):
+    _check(sweep, SADDLE_FACTOR if sweep == "saddle" else FACTOR)
+
+
+@pytest.mark.xfail(reason="q error up to ~25x the floor next to the middle axis (angle about L, ~K eps)", strict=False)
+def test_saddle_target():
+    _check("saddle", FACTOR)
 
 
 def test_reference_against_odefun():
