@@ -14,8 +14,6 @@ import sys
 import textwrap
 from pathlib import Path
 
-import pytest
-
 ROOT = Path(__file__).resolve().parent.parent
 
 SCRIPT = textwrap.dedent(
@@ -84,9 +82,13 @@ SCRIPT = textwrap.dedent(
 )
 
 
-@pytest.fixture(scope="module")
-def sharded_run(request, tmp_path_factory):
-    script = tmp_path_factory.mktemp("sharding") / "sharded.py"
+def test_sharded_over_4_devices_equals_one_device(request, tmp_path):
+    """One test (one subprocess, ~40 s): sharding, padding and equality with one device.
+
+    Measured: quaternion and angular_momentum bit-equal (0 ulp) to one device for every body, the hard
+    cases included; every output and every leaf of the body split 3 + 3 + 3 + 3 over 4 devices.
+    """
+    script = tmp_path / "sharded.py"
     script.write_text(SCRIPT)
     env = dict(os.environ)
     env.update(XLA_FLAGS="--xla_force_host_platform_device_count=4", JAX_ENABLE_X64="1", JAX_PLATFORMS="cpu")
@@ -95,26 +97,20 @@ def sharded_run(request, tmp_path_factory):
         env["JAX_COMPILATION_CACHE_DIR"] = str(cache.mkdir("jax-compilation-cache"))
         env["JAX_PERSISTENT_CACHE_MIN_COMPILE_TIME_SECS"] = "0.5"
     process = subprocess.run([sys.executable, str(script)], cwd=ROOT, env=env, capture_output=True, text=True,
-                             timeout=600)
+                             timeout=900)
     assert process.returncode == 0, process.stderr[-4000:]
     line = [row for row in process.stdout.splitlines() if row.startswith("RESULT ")][-1]
-    return json.loads(line[len("RESULT "):])
+    results = json.loads(line[len("RESULT "):])
 
-
-def test_body_is_sharded(sharded_run):
-    body = sharded_run["body"]
+    body = results["body"]
     assert body["devices"] == 4
     assert body["batch"] == 12  # 10 bodies padded to a multiple of 4
     assert body["sharded_leaves"] == body["leaves"]
-    assert sharded_run["unpadded_raises"]
-
-
-@pytest.mark.parametrize("name", ["quaternion", "angular_momentum"])
-def test_sharded_equals_one_device(sharded_run, name):
-    """Measured: bit-equal (0 ulp) for both, every body including the hard cases."""
-    result = sharded_run[name]
-    assert result["devices"] == 4 and result["shard_devices"] == 4 and not result["replicated"]
-    assert result["shape"][0] == 12
-    assert result["shard_shapes"] == [[3, result["shape"][1]]]
-    assert result["shards_match"] and result["finite"]
-    assert result["bit_equal"], f"{name}: sharded differs from one device by {result['max_ulps']} ulp"
+    assert results["unpadded_raises"]
+    for name in ("quaternion", "angular_momentum"):
+        result = results[name]
+        assert result["devices"] == 4 and result["shard_devices"] == 4 and not result["replicated"], result
+        assert result["shape"][0] == 12
+        assert result["shard_shapes"] == [[3, result["shape"][1]]]
+        assert result["shards_match"] and result["finite"]
+        assert result["bit_equal"], f"{name}: sharded differs from one device by {result['max_ulps']} ulp"
