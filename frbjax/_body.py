@@ -6,10 +6,13 @@ import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
+from jax import lax
 from jaxtyping import Array, Float, Int
 
 from . import _quaternion as quaternion
+from ._fusion import materialise
 from ._regimes import UNIFORM, classify, constants, evaluate
+from ._regimes import reference as regime_reference
 
 
 def working_frame(inertia, momentum):
@@ -121,8 +124,7 @@ class FreeRigidBody(eqx.Module):
     permutation: Float[Array, "... 3 3"]
     regime: Int[Array, "..."]
     _constants: dict
-    _attitude_offset: Float[Array, "... 4"]
-    _frame_rotation: Float[Array, "... 4"]
+    _attitude_map: Float[Array, "... 4 4"]
 
     def __init__(self, inertia, angular_momentum, attitude=None):
         _validate(inertia, angular_momentum, attitude)
@@ -167,11 +169,18 @@ class FreeRigidBody(eqx.Module):
         # q(t) = q0 ⊗ P ⊗ conj(q̂(0)) ⊗ q̂(|L| t) ⊗ conj(P)  (formulas.md, "Matching the initial
         # state", with the phase folded into q̂; P is the working frame as a quaternion).
         frame_rotation = quaternion.from_matrix(permutation)
-        reference, _ = evaluate(consts, jnp.zeros_like(norm))
+        reference = regime_reference(consts, unit_working)
         offset = quaternion.multiply(
             quaternion.multiply(attitude, frame_rotation), quaternion.conjugate(reference)
         )
-        self._frame_rotation = frame_rotation
+        # p -> offset ⊗ p ⊗ conj(P) is linear in p: one 4 x 4 matrix per body, columns the images of
+        # the unit quaternions, so that each evaluation costs 16 products instead of two Hamilton
+        # products.
+        unit = jnp.eye(4, dtype=dtype)
+        columns = quaternion.multiply(
+            quaternion.multiply(offset[..., None, :], unit), quaternion.conjugate(frame_rotation)[..., None, :]
+        )
+        attitude_map = jnp.swapaxes(columns, -1, -2)
 
         self.inertia = inertia
         self.initial_angular_momentum = angular_momentum
@@ -182,7 +191,7 @@ class FreeRigidBody(eqx.Module):
         self.permutation = permutation
         self.regime = regime
         self._constants = consts
-        self._attitude_offset = offset
+        self._attitude_map = attitude_map
 
     # ------------------------------------------------------------------------------------ helpers
 
@@ -214,18 +223,23 @@ class FreeRigidBody(eqx.Module):
         """Attitude q(t) (w, x, y, z), body to space, continuous in t, equal to the attitude at t = 0."""
         t, tau = self._time(t)
         particular, _ = evaluate(self._constants, tau)
-        moving = quaternion.multiply(
-            quaternion.multiply(self._attitude_offset, particular),
-            quaternion.conjugate(self._frame_rotation),
-        )
+        # q = offset ⊗ q̂ ⊗ conj(P) (formulas.md, "Matching the initial state"), as one matrix product.
+        moving = _apply(self._attitude_map, materialise(particular))
         # Three products and the chart leave |q| - 1 at up to ~20 ulp; renormalising costs little and
         # keeps |q| = 1 and rotation_matrix (which assumes it) at the ulp level.
+        moving = materialise(moving)
         moving = moving / jnp.sqrt(jnp.sum(moving * moving, axis=-1, keepdims=True))
-        # Uniform rotation about a principal direction (or L = 0): q(t) = q0 ⊗ exp(t Omega0 / 2).
-        omega = self.initial_angular_momentum / self.inertia
-        spin = quaternion.exp_pure(omega * jnp.broadcast_to(t, tau.shape)[..., None])
-        fixed = quaternion.multiply(self.initial_attitude, spin)
-        return jnp.where(self._uniform()[..., None], fixed, moving)
+        uniform = self._uniform()
+
+        def with_uniform(moving):
+            # Uniform rotation about a principal direction (or L = 0): q(t) = q0 ⊗ exp(t Omega0 / 2).
+            omega = self.initial_angular_momentum / self.inertia
+            spin = quaternion.exp_pure(omega * jnp.broadcast_to(t, tau.shape)[..., None])
+            fixed = quaternion.multiply(self.initial_attitude, spin)
+            return jnp.where(uniform[..., None], fixed, moving)
+
+        # Most batches have no uniformly rotating body: then its trigonometry is not evaluated at all.
+        return lax.cond(jnp.any(uniform), with_uniform, lambda moving: moving, moving)
 
     def rotation_matrix(self, t) -> Float[Array, "... 3 3"]:
         """Attitude matrix R(t) with x_space = R x_body (dR/dt = R hat(Omega))."""

@@ -30,10 +30,17 @@ next to the separatrix.
 
 from __future__ import annotations
 
-import jax.numpy as jnp
+import math
 
-from .special import ellipj, elliprf
-from .special._legendre import _LARGE_NEGATIVE_CHARACTERISTIC, _pi_reduced_terms
+import jax
+import jax.numpy as jnp
+from jax import lax
+
+from . import _series
+from ._fusion import materialise
+from .special import elliprf
+from .special._jacobi import ellipj_given, parameter_data
+from .special._legendre import _LARGE_NEGATIVE_CHARACTERISTIC, _pi_reduced_terms, pi_without_first_kind
 
 MAJOR, MINOR, SEPARATRIX, UNIFORM = 0, 1, 2, 3
 
@@ -162,8 +169,57 @@ def constants(inertia, unit_momentum, regime):
     safe_mc = jnp.where(is_sep, 0.5, out["mc"])
     head, tail = _pi_reduced_terms(safe_nu, jnp.ones_like(safe_m), jnp.zeros_like(safe_m), safe_m, safe_mc)
     out["third_kind_complete"] = jnp.where(out["without_first_kind"], tail, head + tail)
+    # K(m) and the AGM levels of the Jacobi functions: per body, not per evaluation.
+    out["jacobi"] = parameter_data(out["mc"])
     out["regime"] = regime
+    out.update(_series_constants(out, regime))
     return out
+
+
+def _series_constants(consts, regime):
+    """Per-body data of the nome series (``_series``) and which bodies they serve.
+
+    third_kind(u) = Pi(nu; am u|m) - u where nu >= -1 (``without_first_kind``), Pi(nu; am u|m) where
+    nu < -1, is expanded as sign (u tail(chi)/K + S_chi(v)) + head(u), with
+      nu >= -1: chi = nu, sign = +1, head = 0  (Pi - F = u (Pi(nu|m) - K)/K + S_nu);
+      nu < -1:  chi = omega = m/nu, sign = -1, and by DLMF 19.7.8
+                Pi_nu = head + F - Pi_omega, head = (j pi + atan2(sqrt(kappa) sn_r, cn_r dn))/sqrt(kappa),
+                kappa = (1 - nu)(1 - omega)  (see special._legendre.pi_without_first_kind);
+    tail(chi) = Pi(chi|m) - K(m), so |chi| <= 1 always and nothing cancels.
+    """
+    elliptic = (regime == MAJOR) | (regime == MINOR)
+    flag = consts["without_first_kind"]
+    nu = jnp.where(elliptic, consts["nu"], -0.5)
+    m = jnp.where(elliptic, consts["m"], 0.5)
+    mc = jnp.where(elliptic, consts["mc"], 0.5)
+    nu_far = jnp.where(flag, -2.0, nu)
+    omega = m / nu_far
+    chi = jnp.where(flag, nu, omega)
+    quarter = elliprf(jnp.zeros_like(mc), mc, jnp.ones_like(mc))
+    rows, amplitude, nome = _series.coefficients(m, mc, quarter, chi)
+    head, tail = _pi_reduced_terms(chi, jnp.ones_like(m), jnp.zeros_like(m), m, mc)
+    del head  # = K(m)
+    sign = jnp.where(flag, 1.0, -1.0).astype(m.dtype)
+    ok = (regime == UNIFORM) | (elliptic & (nome <= _series._largest_nome(m)))
+    return dict(
+        series=rows,
+        series_amplitude=amplitude,
+        series_quarter=quarter,
+        series_slope=tail / quarter,
+        series_sign=sign,
+        series_kappa=(1 - nu_far) * (1 - omega),
+        series_ok=ok,
+    )
+
+
+def _unit_point(sn_scaled, cn_scaled):
+    """(sn, cn) with sn^2 + cn^2 = 1 from (sn, cn) known up to a common positive factor."""
+    # Scale by the larger one first: both can be ~1e-222 (an L component of 1e-111), whose squares underflow.
+    largest = jnp.maximum(jnp.abs(sn_scaled), jnp.abs(cn_scaled))
+    largest = jnp.exp2(jnp.floor(jnp.log2(jnp.where(largest > 0, largest, 1))))  # a power of 2: exact
+    sn_scaled, cn_scaled = sn_scaled / largest, cn_scaled / largest
+    norm = jnp.sqrt(sn_scaled * sn_scaled + cn_scaled * cn_scaled)
+    return sn_scaled / norm, cn_scaled / norm
 
 
 def _phase(sn_scaled, cn_scaled, mc):
@@ -173,17 +229,12 @@ def _phase(sn_scaled, cn_scaled, mc):
     amplitude: near the separatrix am0 is within 1e-13 of pi/2 and only cn0 (a ratio of the given
     angular momentum components) carries the digits that fix the phase.
     """
-    # Scale by the larger one first: both can be ~1e-222 (an L component of 1e-111), whose squares underflow.
-    largest = jnp.maximum(jnp.abs(sn_scaled), jnp.abs(cn_scaled))
-    largest = jnp.exp2(jnp.floor(jnp.log2(jnp.where(largest > 0, largest, 1))))  # a power of 2: exact
-    sn_scaled, cn_scaled = sn_scaled / largest, cn_scaled / largest
-    norm = jnp.sqrt(sn_scaled * sn_scaled + cn_scaled * cn_scaled)
-    sn, cn = sn_scaled / norm, cn_scaled / norm
+    sn, cn = _unit_point(sn_scaled, cn_scaled)
     cn2 = cn * cn
     return sn * elliprf(cn2, cn2 + mc * sn * sn, jnp.ones_like(sn))
 
 
-def evaluate(consts, tau, attitude=True):
+def _evaluate_landen(consts, tau, attitude=True):
     """Unit angular momentum and (if ``attitude``) the particular quaternion q̂ at unit-|L| time tau.
 
     q̂ is the solution of formulas.md at phase u = u0 + B tau, except that the precession angle psi
@@ -192,7 +243,7 @@ def evaluate(consts, tau, attitude=True):
     the phase time t0 = u0/B of formulas.md is unbounded for nearly spherical bodies (B -> 0).
     """
     u = consts["u0"] + consts["rate"] * tau
-    sn, cn, dn, am = ellipj(u, consts["m"], mc=consts["mc"])
+    sn, cn, dn, am = ellipj_given(u, consts["m"], consts["mc"], *consts["jacobi"])
     regime = consts["regime"]
     minor, separatrix = regime == MINOR, regime == SEPARATRIX
     first = jnp.where(minor, dn, cn)
@@ -218,8 +269,8 @@ def evaluate(consts, tau, attitude=True):
     mc = jnp.where(separatrix, 0.5, consts["mc"])
     sn_reduced = jnp.where(separatrix, 0.5, parity * sn)
     cn_reduced = jnp.where(separatrix, 0.5, jnp.abs(cn))
-    head, tail = _pi_reduced_terms(nu, sn_reduced, cn_reduced, m, mc)
-    reduced = jnp.where(consts["without_first_kind"], tail, head + tail)
+    # Pi - F where nu >= -1 (F = u_r is known), Pi itself where nu < -1: one R_J, no R_F.
+    reduced = pi_without_first_kind(nu, sn_reduced, cn_reduced, m, mc)
     third_kind = 2 * turns * consts["third_kind_complete"] + reduced
     orientation = jnp.where(minor, -1, 1)
     partner = jnp.where(minor, l1, l3)
@@ -229,9 +280,118 @@ def evaluate(consts, tau, attitude=True):
     return _chart(psi, l1, l2, l3, minor), momentum
 
 
+def _evaluate_series(consts, tau, attitude=True):
+    """``_evaluate_landen`` through the per-body nome series (``_series``); valid where series_ok."""
+    u = consts["u0"] + consts["rate"] * tau
+    sn_r, cn_r, dn, periodic, turns = _series.evaluate_series(
+        consts["series"], consts["mc"], consts["series_amplitude"], consts["series_quarter"],
+        u, third_kind=attitude)
+    parity = 1 - 2 * jnp.mod(turns, 2)
+    sn, cn = parity * sn_r, parity * cn_r
+    minor = consts["regime"] == MINOR
+    first = jnp.where(minor, dn, cn)
+    third = jnp.where(minor, cn, dn)
+    momentum = consts["amplitude"] * jnp.stack([first, sn, third], -1)
+    if not attitude:
+        return momentum, None
+    l1, l2, l3 = momentum[..., 0], momentum[..., 1], momentum[..., 2]
+    root_kappa = jnp.sqrt(consts["series_kappa"])
+    head = (turns * jnp.pi + jnp.arctan2(root_kappa * sn_r, cn_r * dn)) / root_kappa
+    transformed = ~consts["without_first_kind"]
+    third_kind = consts["series_sign"] * (u * consts["series_slope"] + periodic) + jnp.where(transformed, head, 0)
+    orientation = jnp.where(minor, -1, 1)
+    partner = jnp.where(minor, l1, l3)
+    psi = consts["precession"] * tau + orientation * (jnp.arctan2(l2, partner) - consts["alpha"] * third_kind)
+    return _chart(psi, l1, l2, l3, minor), momentum
+
+
+def _chunk_size(size: int) -> int:
+    # Evaluations outside the series' reach (next to the separatrix; about 1 in 20,000 random bodies)
+    # are recomputed by the Landen path in chunks of this many; only the chunks that hold some are run.
+    return min(size, 256)
+
+
+def evaluate(consts, tau, attitude=True):
+    """Unit angular momentum and (if ``attitude``) the particular quaternion q̂ at unit-|L| time tau.
+
+    Every evaluation goes through the theta series of its body (``_evaluate_series``); those of the
+    bodies outside the series' reach (``series_ok`` false: next to the separatrix, or on it) are
+    gathered, a chunk at a time, and recomputed by the Carlson/Landen path (``_evaluate_landen``); a
+    chunk with none to recompute is skipped.  Both paths compute the same functions.  Under
+    ``jax.vmap`` the skipping becomes a select and every chunk is computed (correct, but slower:
+    batch the bodies and the times in the arrays instead).
+    """
+    ok = consts["series_ok"]
+    shape = jnp.broadcast_shapes(jnp.shape(tau), ok.shape)
+    size = math.prod(shape)
+    series = _evaluate_series(consts, tau, attitude)
+    if size == 0:
+        return series
+    batch = ok.shape
+    bodies = math.prod(batch)
+    chunk = _chunk_size(size)
+    chunks = -(-size // chunk)
+    hard = ~jnp.broadcast_to(ok, shape).reshape(size)
+    count = jnp.sum(hard)
+    # The positions to recompute first, then fillers (= size, dropped by the scatter).
+    (order,) = jnp.nonzero(hard, size=chunks * chunk, fill_value=size)
+    body_of = jnp.broadcast_to(jnp.arange(bodies).reshape(batch), shape).reshape(size)
+    tau_of = jnp.broadcast_to(tau, shape).reshape(size)
+    flat = tuple(None if out is None else out.reshape((size,) + out.shape[len(shape):]) for out in series)
+
+    def recompute(k, outputs):
+        index = lax.dynamic_slice(order, (k * chunk,), (chunk,))
+        safe_index = jnp.minimum(index, size - 1)
+        gathered = jax.tree_util.tree_map(
+            lambda a: a.reshape((bodies,) + a.shape[len(batch):])[body_of[safe_index]], consts)
+        fixed = _evaluate_landen(gathered, tau_of[safe_index], attitude)
+        return tuple(None if out is None else out.at[index].set(part, mode="drop")
+                     for out, part in zip(outputs, fixed))
+
+    def step(outputs, k):
+        return lax.cond(k * chunk < count, lambda o: recompute(k, o), lambda o: o, outputs), None
+
+    flat, _ = lax.scan(step, flat, jnp.arange(chunks))
+    return tuple(None if out is None else out.reshape(full.shape) for out, full in zip(flat, series))
+
+
+def reference(consts, unit_momentum):
+    """q̂ at tau = 0, from the given unit angular momentum itself (no series or Jacobi functions).
+
+    At tau = 0 the phase u0 lies in [-K, K] (cn0 >= 0 in the working frame), so the third-kind
+    integral needs no whole periods, and sn0, cn0 are ratios of the given components.
+    """
+    regime = consts["regime"]
+    minor, separatrix = regime == MINOR, regime == SEPARATRIX
+    # Uniform rotation (L = 0 included) has stand-in constants of the major regime; its stand-in L too,
+    # so that nothing here is NaN (its result is not used).
+    uniform = (regime == UNIFORM)[..., None]
+    unit_momentum = jnp.where(uniform, jnp.asarray(_SAFE_MAJOR, unit_momentum.dtype), unit_momentum)
+    l1, l2, l3 = unit_momentum[..., 0], unit_momentum[..., 1], unit_momentum[..., 2]
+    amplitude = consts["amplitude"]
+    partner = jnp.where(minor, l1, l3)
+    # sn0 : cn0 = l2/A2 : l1/A1 (major axis) or l2/A2 : l3/A3 (minor axis), cn0 >= 0, as in _phase.
+    cn_component = jnp.where(minor, l3, l1)
+    cn_amplitude = jnp.where(minor, amplitude[..., 2], amplitude[..., 0])
+    sn0, cn0 = _unit_point(l2 * cn_amplitude, cn_component * amplitude[..., 1])
+    nu = jnp.where(separatrix, 0, consts["nu"])
+    m = jnp.where(separatrix, 0.5, consts["m"])
+    mc = jnp.where(separatrix, 0.5, consts["mc"])
+    sn0 = jnp.where(separatrix, 0.5, sn0)
+    cn0 = jnp.where(separatrix, 0.5, cn0)
+    third_kind = pi_without_first_kind(nu, sn0, cn0, m, mc)
+    orientation = jnp.where(minor, -1, 1)
+    psi_elliptic = orientation * (jnp.arctan2(l2, partner) - consts["alpha"] * third_kind)
+    psi_separatrix = 2 * jnp.arctan(consts["alpha"] * jnp.tanh(consts["u0"] / 2))
+    psi = jnp.where(separatrix, psi_separatrix, psi_elliptic)
+    return _chart(psi, l1, l2, l3, minor)
+
+
 def _chart(psi, l1, l2, l3, minor):
     """q̂ = exp(psi/2 about the spatial axis) ⊗ (the rotation taking that axis to l), formulas.md."""
-    half_cos, half_sin = jnp.cos(psi / 2), jnp.sin(psi / 2)
+    # Materialised once: each of the eight outputs below would otherwise recompute psi (and the whole
+    # evaluation behind it) in its own fused loop (see _fusion).
+    half_cos, half_sin, l1, l2, l3 = materialise((jnp.cos(psi / 2), jnp.sin(psi / 2), l1, l2, l3))
     # Chart on 1 + L1 (major axis regime and separatrix): 1 + L1 >= 1 - A1 > 0.
     base = 1 + l1
     root, inverse = jnp.sqrt(base / 2), 1 / jnp.sqrt(2 * base)

@@ -130,7 +130,17 @@ def _rc_one_plus(e, w):
     return jnp.where(small, series, closed)
 
 
-def _rj_series(x, y, z, p, steps):
+def _rc_one_plus_nonnegative(e):
+    """R_C(1, 1 + e) = arctan(sqrt e)/sqrt e for e >= 0 (DLMF 19.2.18), the series near e = 0."""
+    small = e < 2.0**-10
+    series = 1 + e * (
+        -1 / 3 + e * (1 / 5 + e * (-1 / 7 + e * (1 / 9 + e * (-1 / 11 + e * (1 / 13 + e * (-1 / 15))))))
+    )
+    root = jnp.sqrt(jnp.where(small, 1, e))
+    return jnp.where(small, series, jnp.arctan(root) / root)
+
+
+def _rj_series(x, y, z, p, steps, parameter_largest=False):
     mean0 = (x + y + z + 2 * p) / 5
     dx0, dy0, dz0 = mean0 - x, mean0 - y, mean0 - z
     px0, py0, pz0 = p - x, p - y, p - z
@@ -149,12 +159,17 @@ def _rj_series(x, y, z, p, steps):
         e = ratio_x * ratio_y * ratio_z
         # 1 + e without cancellation when e -> -1: write each ratio as sign * (1 - t) with
         # t = 1 - |ratio| = 2 min(sqrt p, sqrt x_j)/(sqrt p + sqrt x_j), computed without subtraction.
-        tx = 2 * jnp.minimum(sp, sx) / (sp + sx)
-        ty = 2 * jnp.minimum(sp, sy) / (sp + sy)
-        tz = 2 * jnp.minimum(sp, sz) / (sp + sz)
-        one_minus_product = tx + ty + tz - (tx * ty + tx * tz + ty * tz) + tx * ty * tz
-        one_plus_e = jnp.where(e < 0, one_minus_product, 1 + e)
-        correction = correction + quarter_power * _rc_one_plus(e, one_plus_e) / d
+        if not parameter_largest:
+            tx = 2 * jnp.minimum(sp, sx) / (sp + sx)
+            ty = 2 * jnp.minimum(sp, sy) / (sp + sy)
+            tz = 2 * jnp.minimum(sp, sz) / (sp + sz)
+        if parameter_largest:
+            # p >= x, y, z: every ratio and e are >= 0, and R_C(1, 1 + e) is an arctangent.
+            correction = correction + quarter_power * _rc_one_plus_nonnegative(e) / d
+        else:
+            one_minus_product = tx + ty + tz - (tx * ty + tx * tz + ty * tz) + tx * ty * tz
+            one_plus_e = jnp.where(e < 0, one_minus_product, 1 + e)
+            correction = correction + quarter_power * _rc_one_plus(e, one_plus_e) / d
         x, y, z, p = (x + lam) / 4, (y + lam) / 4, (z + lam) / 4, (p + lam) / 4
         return x, y, z, p, (mean + lam) / 4, correction, quarter_power / 4
 
@@ -247,6 +262,18 @@ def _rj(x, y, z, p):
 def _rj_jvp(primals, tangents):
     steps = _steps(primals[0])
     return jax.jvp(lambda a, b, c, d: _rj_series(a, b, c, d, steps), primals, tangents)
+
+
+@jax.custom_jvp
+def _rj_parameter_largest(x, y, z, p):
+    """R_J(x, y, z, p) for p >= max(x, y, z) (no logarithmic branch: see ``_rj_series``)."""
+    return _rj_series(x, y, z, p, _steps(x), parameter_largest=True)
+
+
+@_rj_parameter_largest.defjvp
+def _rj_parameter_largest_jvp(primals, tangents):
+    steps = _steps(primals[0])
+    return jax.jvp(lambda a, b, c, d: _rj_series(a, b, c, d, steps, True), primals, tangents)
 
 
 # ---------------------------------------------------------------------------------------------- R_C

@@ -41,63 +41,90 @@ def _tiny_argument(x) -> float:
     return 1e-100 if is_double(x) else 1e-15
 
 
-def _jacobi_to_half_quarter(w, mc):
-    """(sn, cn, dn)(w|m) for 0 <= w <= K(m)/2 and mc = 1 - m > 0, each to a few ulp *relative*.
+def _agm_levels(mc):
+    """The AGM levels of DLMF 22.20.1 for parameter m = 1 - mc (mc > 0): (a_n, b_n) for n < N and a_N.
 
-    Bulirsch's form of the descending Landen transformation (R. Bulirsch, Numer. Math. 7 (1965)
-    78-90, procedure sncndn; DLMF 22.7.i and 22.20.ii): the AGM a_{n+1} = (a_n + b_n)/2,
-    b_{n+1} = sqrt(a_n b_n) from a_0 = 1, b_0 = sqrt(mc), then from the top angle theta = a_N w
-    (<= pi/4 here, so sin and cos lose nothing) the ratio c = cn/sn and dn are carried down with
-    products and sums of positive numbers only.  Nothing cancels, so cn and dn keep their relative
-    precision even when they are as small as mc^(1/4) (m -> 1, w -> K/2).  Two rolled loops.
+    a_0 = 1, b_0 = sqrt(mc), a_{n+1} = (a_n + b_n)/2, b_{n+1} = sqrt(a_n b_n); N = ``_agm_steps``.  The
+    levels depend on the parameter alone, so a caller that evaluates many arguments at one parameter
+    (the rigid body) computes them once.  Returned with the level axis last (batch dimensions first,
+    as in a pytree of per-body data).
     """
-    steps = _agm_steps(w)
 
     def descend(state, _):
         a, b = state
         return ((a + b) / 2, jnp.sqrt(a * b)), (a, b)
 
     (mean, _), (a_levels, b_levels) = lax.scan(descend, (jnp.ones_like(mc), jnp.sqrt(mc)), None,
-                                               length=steps)
+                                               length=_agm_steps(mc))
+    return jnp.moveaxis(a_levels, 0, -1), jnp.moveaxis(b_levels, 0, -1), mean
+
+
+def _jacobi_to_half_quarter(w, levels):
+    """(sn, cn, dn)(w|m) for 0 <= w <= K(m)/2 and mc = 1 - m > 0, each to a few ulp *relative*.
+
+    Bulirsch's form of the descending Landen transformation (R. Bulirsch, Numer. Math. 7 (1965)
+    78-90, procedure sncndn; DLMF 22.7.i and 22.20.ii) on the AGM levels of ``_agm_levels``: from the
+    top angle theta = a_N w (<= pi/4 here, so sin and cos lose nothing) the ratio c = cn/sn and dn
+    are carried down with products and sums of positive numbers only.  Nothing cancels, so cn and dn
+    keep their relative precision even when they are as small as mc^(1/4) (m -> 1, w -> K/2).
+    """
+    a_levels, b_levels, mean = levels
     tiny = w < _tiny_argument(w)
     theta = mean * jnp.where(tiny, 1, w)
     ratio = jnp.cos(theta) / jnp.sin(theta)
 
-    def ascend(state, levels):
+    def ascend(state, level):
         ratio, cot_ratio, dn = state
-        a_n, b_n = levels
+        a_n, b_n = level
         ratio = ratio * cot_ratio
         cot_ratio = cot_ratio * dn
         dn = (b_n + ratio) / (a_n + ratio)
         return (cot_ratio / a_n, cot_ratio, dn), None
 
-    start = (ratio, mean * ratio, jnp.ones_like(w))
-    (_, cot_ratio, dn), _ = lax.scan(ascend, start, (a_levels, b_levels), reverse=True)
+    start = (ratio, mean * ratio, jnp.ones_like(ratio))
+    # Unrolled: XLA fuses the whole ascent into one loop over the points (a rolled loop writes every
+    # level's state to memory and back, several times slower).
+    levels = (jnp.moveaxis(a_levels, -1, 0), jnp.moveaxis(b_levels, -1, 0))
+    (_, cot_ratio, dn), _ = lax.scan(ascend, start, levels, reverse=True, unroll=True)
     sn = 1 / jnp.sqrt(cot_ratio * cot_ratio + 1)
     cn = cot_ratio * sn
-    one = jnp.ones_like(w)
+    one = jnp.ones_like(cn)
     return jnp.where(tiny, w, sn), jnp.where(tiny, one, cn), jnp.where(tiny, one, dn)
 
 
-def _half_periods(u, mc):
-    """u = 2jK + u_r; returns (j, u_r, K) with a finite stand-in K = 1 where mc = 0 (K infinite)."""
+def _quarter_period(mc):
+    """K(m) = R_F(0, mc, 1), with a finite stand-in K = 1 where mc = 0 (K infinite there)."""
     limit = mc == 0
-    quarter = _rf(jnp.zeros_like(mc), jnp.where(limit, 1, mc), jnp.ones_like(mc))
-    turns = jnp.where(limit, 0, jnp.round(u / (2 * quarter)))
-    return turns, u - 2 * quarter * turns, quarter
+    return _rf(jnp.zeros_like(mc), jnp.where(limit, 1, mc), jnp.ones_like(mc))
 
 
-def _ellipj_primal(u, m, mc):
+def parameter_data(mc):
+    """Everything ellipj needs that depends on the parameter alone: (K, AGM levels).
+
+    Computed once per parameter by callers that evaluate many arguments (see ``ellipj_given``);
+    mc = 0 (m = 1) gets harmless stand-ins (the tanh/sech limit needs none).
+    """
+    safe_mc = jnp.where(mc == 0, 0.5, mc)
+    return _quarter_period(mc), _agm_levels(safe_mc)
+
+
+def _half_periods(u, mc, quarter):
+    """u = 2jK + u_r; returns (j, u_r) (j = 0 where mc = 0: no period)."""
+    turns = jnp.where(mc == 0, 0, jnp.round(u / (2 * quarter)))
+    return turns, u - 2 * quarter * turns
+
+
+def _ellipj_primal(u, m, mc, quarter, levels):
     limit = mc == 0
     safe_mc = jnp.where(limit, 0.5, mc)
-    turns, u_reduced, quarter = _half_periods(u, mc)
+    turns, u_reduced = _half_periods(u, mc, quarter)
     # |u_r| in (K/2, K]: the quarter-period reflection u_r = K - w (DLMF 22.4.3, 22.6.1):
     # sn = cd(w), cn = sqrt(mc) sd(w), dn = sqrt(mc) nd(w), so that cn and dn near u = K, where they are
     # as small as sqrt(mc), come out with full relative precision (K - |u_r| is exact to eps K).
     magnitude = jnp.abs(jnp.where(limit, 0, u_reduced))
     upper = magnitude > quarter / 2
     w = jnp.where(upper, quarter - magnitude, magnitude)
-    sn_w, cn_w, dn_w = _jacobi_to_half_quarter(w, safe_mc)
+    sn_w, cn_w, dn_w = _jacobi_to_half_quarter(w, levels)
     root_mc = jnp.sqrt(safe_mc)
     # cd^2 + mc sd^2 = 1 holds to a few ulp; dividing by the rounded norm makes sn^2 + cn^2 = 1 to one.
     norm = jnp.sqrt(cn_w * cn_w + (root_mc * sn_w) ** 2)
@@ -116,29 +143,24 @@ def _ellipj_primal(u, m, mc):
     return sn, cn, dn, am
 
 
-@jax.custom_jvp
-def _ellipj(u, m, mc):
-    return _ellipj_primal(u, m, mc)
-
-
-@_ellipj.defjvp
-def _ellipj_jvp(primals, tangents):
-    u, m, mc = primals
+def _ellipj_tangents(u, m, mc, quarter, values, tangents):
+    """The JVP of (sn, cn, dn, am) (module note); ``quarter`` is K(m) (stand-in 1 at m = 1)."""
+    sn, cn, dn, am = values
     du, dm, dmc = tangents
-    sn, cn, dn, am = _ellipj(u, m, mc)
     dparam = 0.5 * (dm - dmc)
     limit = mc == 0
 
     # d am/dm for m < 1: -dn (2j dK/dm + (sn_r^3/6) R_D(cn_r^2, 1, dn^2)).
-    turns, _, _ = _half_periods(u, mc)
+    turns, _ = _half_periods(u, mc, quarter)
+    # dK/dm = R_D(0, 1, mc)/6 depends on the parameter alone (m and mc may have fewer dimensions
+    # than u); a stand-in where m = 1 (no period there).
     safe_mc = jnp.where(limit, 0.5, mc)
-    zero, one = jnp.zeros_like(mc), jnp.ones_like(mc)
-    dk_dm = _rd(zero, one, jnp.where(turns == 0, 1, safe_mc)) / 6
+    dk_dm = _rd(jnp.zeros_like(safe_mc), jnp.ones_like(safe_mc), safe_mc) / 6
     sn_reduced = jnp.abs(sn) * jnp.sign(jnp.sin(am - turns * jnp.pi))
     cn_reduced = jnp.abs(cn)
     safe_dn = jnp.where(limit, 1, dn)
     df_dm = jnp.where(turns == 0, 0, 2 * turns * dk_dm) + sn_reduced**3 * _rd(
-        cn_reduced * cn_reduced, one, safe_dn * safe_dn
+        cn_reduced * cn_reduced, jnp.ones_like(cn_reduced), safe_dn * safe_dn
     ) / 6
     dam_dm_generic = -safe_dn * df_dm
     # m = 1 (DLMF 22.10.ii): d am/dm = -(sinh u - u sech u)/4.
@@ -158,7 +180,37 @@ def _ellipj_jvp(primals, tangents):
         jnp.sinh(safe_u) + safe_u / jnp.cosh(safe_u)
     ) / 4 * dparam
     d_dn = jnp.where(limit, d_dn_limit, d_dn_generic)
-    return (sn, cn, dn, am), (d_sn, d_cn, d_dn, d_am)
+    return d_sn, d_cn, d_dn, d_am
+
+
+@jax.custom_jvp
+def _ellipj(u, m, mc):
+    return _ellipj_primal(u, m, mc, *parameter_data(mc))
+
+
+@_ellipj.defjvp
+def _ellipj_jvp(primals, tangents):
+    u, m, mc = primals
+    values = _ellipj(u, m, mc)
+    return values, _ellipj_tangents(u, m, mc, _quarter_period(mc), values, tangents)
+
+
+@jax.custom_jvp
+def ellipj_given(u, m, mc, quarter, levels):
+    """``ellipj`` with the parameter's data ``(quarter, levels) = parameter_data(mc)`` given.
+
+    For callers that evaluate many arguments at one parameter: K and the AGM levels are not
+    recomputed per argument.  Derivatives are those of ellipj in (u, m, mc); ``quarter`` and
+    ``levels`` are functions of mc and their own tangents are not used.
+    """
+    return _ellipj_primal(u, m, mc, quarter, levels)
+
+
+@ellipj_given.defjvp
+def _ellipj_given_jvp(primals, tangents):
+    u, m, mc, quarter, levels = primals
+    values = ellipj_given(u, m, mc, quarter, levels)
+    return values, _ellipj_tangents(u, m, mc, quarter, values, tangents[:3])
 
 
 def ellipj(u, m, *, mc=None):

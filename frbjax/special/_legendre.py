@@ -22,7 +22,7 @@ from __future__ import annotations
 import jax
 import jax.numpy as jnp
 
-from ._carlson import _rd, _rf, _rj
+from ._carlson import _rd, _rf, _rj, _rj_parameter_largest
 from ._common import complement, promote
 
 
@@ -176,6 +176,30 @@ def _pi_reduced_terms(n, s, c, m, mc):
                 jnp.where(transformed, rc_second, one))
     coefficient = jnp.where(transformed, -omega, n)
     return s * first, coefficient * s**3 * _rj(x, y, one, p) / 3
+
+
+def pi_without_first_kind(n, s, c, m, mc):
+    """Pi(n; phi_r|m) - F(phi_r|m) for -1 <= n <= 0, Pi(n; phi_r|m) itself for n < -1; |phi_r| <= pi/2.
+
+    For callers that know F(phi_r|m) by other means (the rigid body: F(am u|m) = u): one R_J and no
+    R_F.  For -1 <= n <= 0, DLMF 19.25.14: Pi - F = (n/3) s^3 R_J(c^2, Delta^2, 1, 1 - n s^2).  For
+    n < -1, the head of DLMF 19.7.8 (see ``_pi_reduced_terms``) is elementary: with
+    omega = m/n and kappa = (1 - n)(1 - omega), (1 - n s^2)(1 - omega s^2) - c^2 Delta^2 = kappa s^2,
+    so s R_C(c^2 Delta^2, (1 - n s^2)(1 - omega s^2)) = atan2(sqrt(kappa) s, c Delta)/sqrt(kappa)
+    (DLMF 19.2.18), and Pi = that - (omega/3) s^3 R_J(c^2, Delta^2, 1, 1 - omega s^2).  In both cases
+    the parameter of R_J is the largest argument (n, omega <= 0), which has a cheaper duplication.
+    """
+    one = jnp.ones_like(s)
+    x, y = c * c, _delta_squared(s, c, mc)
+    transformed = n < _LARGE_NEGATIVE_CHARACTERISTIC
+    n_far = jnp.where(transformed, n, 2 * _LARGE_NEGATIVE_CHARACTERISTIC)
+    omega = m / n_far
+    characteristic = jnp.where(transformed, omega, n)
+    kappa = (1 - n_far) * (1 - omega)
+    root_kappa = jnp.sqrt(kappa)
+    head = jnp.where(transformed, jnp.arctan2(root_kappa * s, c * jnp.sqrt(y)) / root_kappa, 0)
+    tail = characteristic * s**3 * _rj_parameter_largest(x, y, one, 1 - characteristic * s * s) / 3
+    return head + jnp.where(transformed, -tail, tail)
 
 
 def _pi_complete(n, m, mc):
