@@ -66,8 +66,11 @@ def test_work_precision_quick(tmp_path, request):
         assert rows["frbjax float32"]["max_error"] < 1e-2, rows["frbjax float32"]
         assert case["frbjax_vs_scipy_closed_form_max_difference"] < 1e-10
         assert _finite_positive(case["ratio_scipy_over_frbjax64"])
+        assert math.isfinite(reference["floor_vs_mpmath_closed_form"])
         if case["T"] == 10.0:
-            assert "floor_vs_mpmath" in reference
+            assert math.isfinite(reference["floor_vs_mpmath_odefun"])
+        for row in case["methods"]:
+            assert math.isfinite(row["max_error_vs_mpmath_subsample"]), row
     summary = result["summary"]
     assert _finite_positive(summary["scipy_over_frbjax64_per_dense_sample_T10"])
     assert _finite_positive(summary["frbjax64_ns_per_dense_sample_T10"])
