@@ -177,37 +177,29 @@ def constants(inertia, unit_momentum, regime):
 
 
 def _series_constants(consts, regime):
-    """Per-body data of the nome series (``_series``) and which bodies they serve.
+    """Per-body data of the theta series (``_series``) and which bodies they serve.
 
     third_kind(u) = Pi(nu; am u|m) - u where nu >= -1 (``without_first_kind``), Pi(nu; am u|m) where
-    nu < -1, is expanded as sign (u tail(chi)/K + S_chi(v)) + head(u), with
-      nu >= -1: chi = nu, sign = +1, head = 0  (Pi - F = u (Pi(nu|m) - K)/K + S_nu);
-      nu < -1:  chi = omega = m/nu, sign = -1, and by DLMF 19.7.8
-                Pi_nu = head + F - Pi_omega, head = (j pi + atan2(sqrt(kappa) sn_r, cn_r dn))/sqrt(kappa),
-                kappa = (1 - nu)(1 - omega)  (see special._legendre.pi_without_first_kind);
-    tail(chi) = Pi(chi|m) - K(m), so |chi| <= 1 always and nothing cancels.
+    nu < -1, is u slope + A arg theta_4(v + i alpha') with slope = (Pi(nu|m) - K)/K or Pi(nu|m)/K.
+    Unlike a Fourier series, whose terms fall like rho^n (rho -> 1 as nu -> -infinity), the theta
+    series' terms fall like q^(n(n-1)) rho^n, so every characteristic nu < 0 is expanded directly.
     """
     elliptic = (regime == MAJOR) | (regime == MINOR)
     flag = consts["without_first_kind"]
     nu = jnp.where(elliptic, consts["nu"], -0.5)
     m = jnp.where(elliptic, consts["m"], 0.5)
     mc = jnp.where(elliptic, consts["mc"], 0.5)
-    nu_far = jnp.where(flag, -2.0, nu)
-    omega = m / nu_far
-    chi = jnp.where(flag, nu, omega)
     quarter = elliprf(jnp.zeros_like(mc), mc, jnp.ones_like(mc))
-    rows, amplitude, nome = _series.coefficients(m, mc, quarter, chi)
-    head, tail = _pi_reduced_terms(chi, jnp.ones_like(m), jnp.zeros_like(m), m, mc)
-    del head  # = K(m)
-    sign = jnp.where(flag, 1.0, -1.0).astype(m.dtype)
+    rows, amplitude, nome = _series.coefficients(m, mc, quarter, nu)
+    head, tail = _pi_reduced_terms(nu, jnp.ones_like(m), jnp.zeros_like(m), m, mc)
+    # Pi(nu|m) = head + tail, head = K(m) for nu >= -1 (see _pi_reduced_terms).
+    slope = jnp.where(flag, tail, head + tail) / quarter
     ok = (regime == UNIFORM) | (elliptic & (nome <= _series._largest_nome(m)))
     return dict(
         series=rows,
         series_amplitude=amplitude,
         series_quarter=quarter,
-        series_slope=tail / quarter,
-        series_sign=sign,
-        series_kappa=(1 - nu_far) * (1 - omega),
+        series_slope=slope,
         series_ok=ok,
     )
 
@@ -295,10 +287,7 @@ def _evaluate_series(consts, tau, attitude=True):
     if not attitude:
         return momentum, None
     l1, l2, l3 = momentum[..., 0], momentum[..., 1], momentum[..., 2]
-    root_kappa = jnp.sqrt(consts["series_kappa"])
-    head = (turns * jnp.pi + jnp.arctan2(root_kappa * sn_r, cn_r * dn)) / root_kappa
-    transformed = ~consts["without_first_kind"]
-    third_kind = consts["series_sign"] * (u * consts["series_slope"] + periodic) + jnp.where(transformed, head, 0)
+    third_kind = u * consts["series_slope"] + periodic
     orientation = jnp.where(minor, -1, 1)
     partner = jnp.where(minor, l1, l3)
     psi = consts["precession"] * tau + orientation * (jnp.arctan2(l2, partner) - consts["alpha"] * third_kind)
