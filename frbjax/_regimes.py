@@ -190,7 +190,7 @@ def _series_constants(consts, regime):
     m = jnp.where(elliptic, consts["m"], 0.5)
     mc = jnp.where(elliptic, consts["mc"], 0.5)
     quarter = elliprf(jnp.zeros_like(mc), mc, jnp.ones_like(mc))
-    rows, amplitude, nome = _series.coefficients(m, mc, quarter, nu)
+    rows, amplitude, origin, nome = _series.coefficients(m, mc, quarter, nu)
     head, tail = _pi_reduced_terms(nu, jnp.ones_like(m), jnp.zeros_like(m), m, mc)
     # Pi(nu|m) = head + tail, head = K(m) for nu >= -1 (see _pi_reduced_terms).
     slope = jnp.where(flag, tail, head + tail) / quarter
@@ -198,6 +198,7 @@ def _series_constants(consts, regime):
     return dict(
         series=rows,
         series_amplitude=amplitude,
+        series_origin=origin,
         series_quarter=quarter,
         series_slope=slope,
         series_ok=ok,
@@ -276,7 +277,8 @@ def _evaluate_series(consts, tau, attitude=True):
     """``_evaluate_landen`` through the per-body nome series (``_series``); valid where series_ok."""
     u = consts["u0"] + consts["rate"] * tau
     sn_r, cn_r, dn, periodic, turns = _series.evaluate_series(
-        consts["series"], consts["mc"], consts["series_amplitude"], consts["series_quarter"],
+        consts["series"], consts["mc"], consts["series_amplitude"], consts["series_origin"],
+        consts["series_quarter"],
         u, third_kind=attitude)
     parity = 1 - 2 * jnp.mod(turns, 2)
     sn, cn = parity * sn_r, parity * cn_r

@@ -90,11 +90,12 @@ def nome(m, mc):
 def coefficients(m, mc, quarter, characteristic):
     """Per-body series data.
 
-    Returns (rows, amplitude, q): rows (..., 4, terms) hold, for n = 0 .. terms - 1,
+    Returns (rows, amplitude, origin, q): rows (..., 4, terms) hold, for n = 0 .. terms - 1,
     2 (q/m)^(1/4) (-1)^n q^(n(n+1))          (sin((2n+1) v): sn times theta_4)
     2 (q/m)^(1/4) mc^(1/4) q^(n(n+1))        (cos((2n+1) v): cn times theta_4)
     2 (-1)^(n+1) q^((n+1)^2) cosh(2(n+1) alpha'),  2 (-1)^(n+1) q^((n+1)^2) sinh(2(n+1) alpha')
-                                             (theta_4(v + i alpha'), real and imaginary parts).
+                                             (theta_4(v + i alpha'), real and imaginary parts),
+    and origin = theta_4(i alpha') (see ``evaluate_series``) without cancellation.
     ``quarter`` is K(m); ``characteristic`` chi <= 0 is the one whose integral is expanded.
     """
     terms = _terms(m)
@@ -116,6 +117,12 @@ def coefficients(m, mc, quarter, characteristic):
     odd_scale = 2 * jnp.sqrt(jnp.sqrt(q_over_m))
     mc_fourth = jnp.sqrt(jnp.sqrt(mc))
     rows = [[] for _ in range(4)]
+    # theta_4(i alpha') -> 0 as chi -> -infinity (rho -> 1), where its series 1 - rho - q^2/rho + ...
+    # cancels.  With beta = pi b/(2K) = pi K'/(2K) - alpha' and theta_4(z + pi tau/2) = i q^(-1/4)
+    # exp(-iz) theta_1(z) (DLMF 20.2.13), theta_4(i alpha') = 2 exp(-beta) sum (-1)^n q^(n(n+1))
+    # sinh((2n+1) beta) = sum (-1)^n q^(n^2) (q/rho)^n (-expm1(-2 (2n+1) beta)): no cancellation.
+    two_beta = np.pi * distance / quarter
+    origin = -jnp.expm1(-two_beta)
     for j in range(terms):
         n = j + 1
         q_odd = q ** (j * (j + 1))
@@ -127,11 +134,13 @@ def coefficients(m, mc, quarter, characteristic):
         sign = (-1) ** n
         rows[2].append(sign * (growing + decaying))
         rows[3].append(jnp.where(moving, sign * growing * -jnp.expm1(-2 * np.pi * n * shift / quarter), 0))
+        if n < terms:
+            origin = origin + sign * decaying * -jnp.expm1(-(2 * n + 1) * two_beta)
     stacked = jnp.stack([jnp.stack(jnp.broadcast_arrays(*row), -1) for row in rows], -2)
-    return stacked, amplitude, q
+    return stacked, amplitude, origin, q
 
 
-def evaluate_series(rows, mc, amplitude, quarter, u, third_kind=True):
+def evaluate_series(rows, mc, amplitude, origin, quarter, u, third_kind=True):
     """(sn_r, cn_r, dn, third_kind_periodic, turns) at u from the per-body ``coefficients``.
 
     u = 2 turns K + u_r with |u_r| <= K; sn_r = sn(u_r), cn_r = cn(u_r) >= 0 (so sn(u) = (-1)^turns sn_r,
@@ -160,7 +169,9 @@ def evaluate_series(rows, mc, amplitude, quarter, u, third_kind=True):
     dn = jnp.sqrt(cn_reduced * cn_reduced + mc * (sn_reduced * sn_reduced))
     if not third_kind:
         return (*materialise((sn_reduced, cn_reduced, dn)), None, turns)
-    real = 1 + sum(third_cos[j] * cosines[2 * j + 1] for j in range(terms))
+    # Re theta_4(v + i alpha') = theta_4(i alpha') - 2 sum c_n sin^2(n v) (1 - cos 2nv = 2 sin^2 nv):
+    # the form 1 + sum c_n cos 2nv loses all digits where both are small (chi -> -infinity, v -> 0).
+    real = origin - 2 * sum(third_cos[j] * (sines[j] * sines[j]) for j in range(terms))
     imaginary = -sum(third_sin[j] * sines[2 * j + 1] for j in range(terms))
     periodic = amplitude * jnp.arctan2(imaginary, real)
     # Materialised: each output feeds several later fused loops, which would otherwise recompute it.

@@ -45,10 +45,10 @@ def test_series_against_mpmath(m, chi):
     m_, chi_ = jnp.float64(m), jnp.float64(chi)
     mc = jnp.float64(1 - m)  # exact for these m (and consistent with mpmath's 1 - m)
     quarter = ellipk(m_, mc=mc)
-    rows, amplitude, q = _series.coefficients(m_, mc, quarter, chi_)
+    rows, amplitude, origin, q = _series.coefficients(m_, mc, quarter, chi_)
     assert float(q) <= 0.45
     u = np.linspace(-3.3, 3.3, 23) * float(quarter)
-    sn_r, cn_r, dn, periodic, turns = _series.evaluate_series(rows, mc, amplitude, quarter, jnp.asarray(u))
+    sn_r, cn_r, dn, periodic, turns = _series.evaluate_series(rows, mc, amplitude, origin, quarter, jnp.asarray(u))
     parity = 1 - 2 * np.mod(np.asarray(turns), 2)
     # Pi(chi; am u|m) = u Pi(chi|m)/K + A arg theta_4(v + i alpha') (module note).
     complete = float(mpmath.ellippi(chi, m))
@@ -63,6 +63,29 @@ def test_series_against_mpmath(m, chi):
     # relative to max(1, |Pi|) (characteristics down to -1e4, where Pi is steep).
     assert jacobi <= 1e-15, jacobi
     assert third_kind <= 1e-15, third_kind
+
+
+@pytest.mark.parametrize("m", [0.0, 0.3, 0.9, 0.999])
+@pytest.mark.parametrize("chi", [-1e2, -1e4, -1.5e6, -1e8, -1e10])
+def test_third_kind_relative_to_its_scale_for_large_characteristics(m, chi):
+    """Pi(chi; am u|m) to an ulp of Pi(chi|m) ~ 1/sqrt(-chi) where -chi is large.
+
+    The body multiplies Pi by alpha ~ sqrt(-chi) (L next to the axis its orbit circles) and subtracts
+    an angle of the same size, so Pi is needed to an ulp of its own scale, not of max(1, |Pi|): near
+    u = 0 the real part of theta_4(v + i alpha') is a difference of two numbers near 1 - rho -> 0
+    unless it is formed as theta_4(i alpha') - 2 sum c_n sin^2(n v).  (The form 1 + sum c_n cos(2nv)
+    gave 2.4e-14 at chi = -1.5e6, a 20-ulp attitude error at t = 0 for a body with moments (1, 1, 2).)
+    """
+    m_, mc = jnp.float64(m), jnp.float64(1 - m)
+    quarter = ellipk(m_, mc=mc)
+    rows, amplitude, origin, q = _series.coefficients(m_, mc, quarter, jnp.float64(chi))
+    u = np.concatenate([[1e-12, 1e-8, 1e-5, 1e-3, -3e-4, 0.1], np.linspace(-1, 1, 9) * float(quarter)])
+    _, _, _, periodic, _ = _series.evaluate_series(rows, mc, amplitude, origin, quarter, jnp.asarray(u))
+    complete = mpmath.ellippi(chi, m)
+    ours = u * float(complete) / float(quarter) + np.asarray(periodic)
+    theirs = np.array([reference(m, chi, x)[3] for x in u])
+    # Measured over these cases: 2.2e-16 relative to |Pi(chi|m)|.
+    assert (np.abs(ours - theirs) / float(abs(complete))).max() <= 4e-16
 
 
 def test_nome_against_mpmath():
@@ -84,8 +107,8 @@ def test_coefficient_gradients_are_finite():
 
     def total(m, chi):
         mc = 1 - m
-        rows, amplitude, q = _series.coefficients(m, mc, ellipk(m), chi)
-        return jnp.sum(rows) + amplitude + q
+        rows, amplitude, origin, q = _series.coefficients(m, mc, ellipk(m), chi)
+        return jnp.sum(rows) + amplitude + origin + q
 
     for m, chi in [(0.0, -0.5), (0.3, -1e-12), (0.9, -1.0), (0.0, -30.0)]:
         grads = jax.grad(total, argnums=(0, 1))(jnp.float64(m), jnp.float64(chi))
