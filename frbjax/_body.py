@@ -10,7 +10,7 @@ from jax import lax
 from jaxtyping import Array, Float, Int
 
 from . import _quaternion as quaternion
-from ._fusion import materialise
+from ._fusion import materialise, sum_last
 from ._regimes import UNIFORM, classify, constants, evaluate
 from ._regimes import reference as regime_reference
 
@@ -37,8 +37,9 @@ def working_frame(inertia, momentum):
 
 
 def _apply(matrix, vector):
-    """matrix @ vector over broadcast leading dimensions: (..., 3, 3) and (..., 3) -> (..., 3)."""
-    return jnp.sum(matrix * vector[..., None, :], axis=-1)
+    """matrix @ vector over broadcast leading dimensions: (..., n, n) and (..., n) -> (..., n)."""
+    return sum_last(matrix * vector[..., None, :])
+
 
 
 def _permutation_sign(order):
@@ -151,13 +152,13 @@ class FreeRigidBody(eqx.Module):
         inertia = jnp.where(valid[..., None], inertia, jnp.nan)
         angular_momentum = jnp.where(valid[..., None], angular_momentum, jnp.nan)
         attitude = jnp.where(valid[..., None], attitude, jnp.nan)
-        attitude = attitude / jnp.linalg.norm(attitude, axis=-1, keepdims=True)
+        attitude = attitude / jnp.sqrt(sum_last(attitude * attitude))[..., None]
 
         # Normalised in the working frame (a signed permutation: exact), where the components come in
         # the order of the sorted moments: |L| then rounds the same way for the moments in any order,
         # and a body with its axes relabelled computes bit for bit the same motion.
         permutation, sorted_inertia, momentum_working = working_frame(inertia, angular_momentum)
-        norm_squared = jnp.sum(momentum_working**2, axis=-1)
+        norm_squared = sum_last(momentum_working**2)
         moving = norm_squared > 0
         norm = jnp.sqrt(jnp.where(moving, norm_squared, 1))
         unit_working = momentum_working / norm[..., None]
@@ -228,7 +229,7 @@ class FreeRigidBody(eqx.Module):
         # Three products and the chart leave |q| - 1 at up to ~20 ulp; renormalising costs little and
         # keeps |q| = 1 and rotation_matrix (which assumes it) at the ulp level.
         moving = materialise(moving)
-        moving = moving / jnp.sqrt(jnp.sum(moving * moving, axis=-1, keepdims=True))
+        moving = moving / jnp.sqrt(sum_last(moving * moving))[..., None]
         uniform = self._uniform()
 
         def with_uniform(moving):

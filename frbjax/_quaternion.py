@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import jax.numpy as jnp
 
+from ._fusion import sum_last
+
 
 def multiply(p, q):
     """Hamilton product p ⊗ q of (..., 4) arrays."""
@@ -75,7 +77,7 @@ def exp_pure(rotation_vector):
     Uses the safe-where pattern: the series 1 - θ²/8 and 1/2 - θ²/48 below θ² = 1e-8 keep the value
     and its gradient finite at v = 0.
     """
-    theta2 = jnp.sum(rotation_vector * rotation_vector, axis=-1)
+    theta2 = sum_last(rotation_vector * rotation_vector)
     small = theta2 < 1e-8
     theta = jnp.sqrt(jnp.where(small, 1, theta2))
     scalar = jnp.where(small, 1 - theta2 / 8, jnp.cos(theta / 2))
