@@ -1,0 +1,269 @@
+"""Derivatives of FreeRigidBody's outputs with respect to inertia, angular momentum, attitude and time.
+
+Reference: tests/data/gradient_references.json (tests/data/make_gradient_references.py), the Jacobian
+of y = (L(t), Omega(t), q(t), R(t)) with respect to x = (I, L, q0, t) from mpmath.odefun at 32 digits
+(central differences with h = 1e-10 for I and L, exact for q0 and t), at
+
+* "generic" points: both regimes, moments in any order, negative components and times, |L| != 1, a
+  long time, the asteroid of the fitting notebook, |d I2 - 1| = 1e-3 and 1e-6 next to the separatrix;
+* "smooth" points where some formula of frbjax degenerates but the motion and the formulas stay
+  smooth: I1 = I2, I2 = I3, a zero component of L, t = 0, L = 0;
+* "branch" points where frbjax switches to a limiting formula (see CONVENTION below).
+
+Error measure per point and input coordinate j (the issue's target is 1e-9; TOL below):
+
+    |J_ad[:, j] - J_ref[:, j]|_inf / |J_ref[:, j]|_inf
+
+(over the 19 outputs; a column that vanishes, e.g. d/dI at L = 0, is measured against |J_ref|_inf).
+
+CONVENTION at the branch points (documented here and checked: finite everywhere).  frbjax evaluates
+uniform rotation q0 ⊗ exp(Omega t / 2) whenever Omega is parallel to L (L = 0, L along a principal
+axis, a sphere) and the separatrix formulas when d I2 = 1 exactly.  The derivatives there are those of
+the formula taken, i.e. one-sided ones along the branch:
+
+* L = 0: exact (the motion is q0 ⊗ exp(t L/(2I)) + O(|L|^2)), checked with the smooth points;
+* L along a principal axis, a sphere: the derivatives along the branch (with respect to t, q0, the
+  component of L along the axis, and the moments keeping the body a sphere) are exact; those that
+  leave it (a transverse component of L, which starts the nutation; unequal moments of a sphere) are
+  those of the rigid spin, not of the motion (finite, wrong by O(1));
+* on the separatrix: derivatives that keep d I2 = 1 are exact, the others miss the (finite) change of
+  the elliptic parameter.
+The t and q0 columns keep the branch at every branch point and are checked there at TOL.
+
+Second derivatives: d^2 y/dt^2 (forward over forward) at every point against the equations of motion
+applied to the 32-digit values.  The full
+jax.hessian of the attitude with respect to x is NaN at present (a bug of the Carlson functions' JVP
+rules at a zero argument, checked as a strict xfail); it is measured in benchmarks/gradients.py (it
+compiles for minutes, too long for CI).
+
+Cost: compilation dominates (the attitude is a large program), so there are three programs, each
+jitted and vmapped over all the points at once and compiled once per session (the persistent cache of
+tests/conftest.py keeps them across runs): the values with the forward-mode Jacobian, the reverse-mode Jacobian, the second
+derivatives in t.  On CPU they are compiled with XLA:CPU's fusion emitters off (as frbjax.fit does), the
+reverse and second-order ones also at XLA backend optimisation level 0: 2-4x less compile time
+(reverse mode: 140 s -> 40 s under load), the same mathematics (the worst errors below are the same
+as with XLA's default options, benchmarks/gradients.py).  y contains R(t) as
+_quaternion.as_matrix(q(t)), which is what FreeRigidBody.rotation_matrix returns, so that the
+attitude is traced once per program.
+"""
+
+from __future__ import annotations
+
+import functools
+import json
+import pathlib
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+from frbjax import FreeRigidBody
+from frbjax import _quaternion as quaternion
+
+# Worst measured relative column errors (generic and smooth points): jacfwd 3.9e-13, jacrev 2.1e-13
+# (both at "separatrix +1e-03", d/dI2; the derivatives there are ill-conditioned), every other point
+# <= 4e-15.  The issue's target is 1e-9.
+TOL = 1e-12
+# d^2 y/dt^2 against the equations of motion: worst measured 1.1e-15.
+TOL_SECOND = 1e-14
+DATA = pathlib.Path(__file__).resolve().parent / "data" / "gradient_references.json"
+INPUTS = ["I1", "I2", "I3", "L1", "L2", "L3", "qw", "qx", "qy", "qz", "t"]
+BRANCH_COLUMNS = slice(6, 11)  # q0 and t: exact at the branch points too (CONVENTION)
+
+# Known wrong derivatives (a bug of frbjax, not of the test), checked as a strict xfail so that the fix
+# shows up.  Reproducer: jax.jacfwd(lambda L: FreeRigidBody([1., 2., 3.], L).angular_momentum(1.7))
+# at L = (0, 0.6, 0.8) gives a zero column d/dL1; the central difference gives (0.933, 0.923, -0.447).
+KNOWN_WRONG = {
+    "L1 = 0": "d/dL1 at L1 = 0 around the major axis: _regimes.constants takes the phase "
+              "u0 = sn0 R_F(cn0^2, ...) through cn0^2, whose derivative 2 cn0 dcn0 vanishes at cn0 = 0 "
+              "while dR_F/dx is infinite at x = 0: the (finite) derivative is lost",
+    "L3 = 0": "the same at L3 = 0 around the minor axis",
+    "L1 = 0 unsorted": "the same, moments unsorted",
+}
+
+# Compiler options on CPU (module docstring); other backends compile with their defaults.
+FORWARD_OPTIONS = {"xla_cpu_use_fusion_emitters": False}
+FAST_COMPILE_OPTIONS = {"xla_cpu_use_fusion_emitters": False, "xla_backend_optimization_level": 0}
+
+
+def outputs(x):
+    """y = (L, Omega, q, R row-major) at time t from x = (I (3), L (3), q0 (4), t)."""
+    body = FreeRigidBody(x[:3], x[3:6], x[6:10])
+    t = x[10]
+    q = body.quaternion(t)
+    return jnp.concatenate([body.angular_momentum(t), body.angular_velocity(t), q,
+                            quaternion.as_matrix(q).reshape(-1)])
+
+
+@functools.cache
+def references():
+    data = json.loads(DATA.read_text())
+    points = data["points"]
+    names = [p["name"] for p in points]
+    kinds = [p["kind"] for p in points]
+    x = np.array([p["x"] for p in points])
+    values = np.array([[float(v) for v in p["values"]] for p in points])
+    jacobian = np.array([[[float(v) for v in row] for row in p["jacobian"]] for p in points])
+    return names, kinds, x, values, jacobian
+
+
+def _compile(function, options, *args):
+    lowered = jax.jit(function).lower(*args)
+    return lowered.compile(compiler_options=options) if jax.default_backend() == "cpu" else lowered.compile()
+
+
+def _forward_one(x):
+    jacobian, values = jax.jacfwd(lambda y: (lambda out: (out, out))(outputs(y)), has_aux=True)(x)
+    return values, jacobian
+
+
+@functools.cache
+def forward_program():
+    """(values (P, 19), Jacobian (P, 19, 11)) of points x (P, 11), by forward mode."""
+    x = jnp.asarray(references()[2])
+    return _compile(jax.vmap(_forward_one), FORWARD_OPTIONS, x)
+
+
+@functools.cache
+def forward():
+    values, jacobian = forward_program()(jnp.asarray(references()[2]))
+    return np.asarray(values), np.asarray(jacobian)
+
+
+@functools.cache
+def reverse():
+    x = jnp.asarray(references()[2])
+    return np.asarray(_compile(jax.vmap(jax.jacrev(outputs)), FAST_COMPILE_OPTIONS, x)(x))
+
+
+def column_errors(automatic, reference):
+    """(P, 11) relative errors per point and input column (module docstring)."""
+    difference = np.max(np.abs(automatic - reference), axis=-2)
+    column = np.max(np.abs(reference), axis=-2)
+    whole = np.max(np.abs(reference), axis=(-2, -1))[:, None]
+    return difference / np.where(column > 0, column, whole)
+
+
+def _report(mode, names, kinds, errors):
+    print(f"\n{mode}: worst relative column error per point (branch points: the q0 and t columns)")
+    for name, kind, row in zip(names, kinds, errors):
+        if kind == "branch":
+            row = np.where(np.arange(11) >= 6, row, 0.0)
+        worst = int(np.argmax(row))
+        print(f"  {name:22s} {kind:8s} {row[worst]:.1e} ({INPUTS[worst]})")
+
+
+def _check(mode, automatic):
+    """Finite everywhere; TOL at the generic and smooth points (but KNOWN_WRONG), and in the q0 and t
+    columns at the branch points."""
+    names, kinds, _, _, reference = references()
+    assert automatic.shape == reference.shape
+    finite = np.all(np.isfinite(automatic), axis=(-2, -1))
+    assert finite.all(), f"{mode}: non-finite derivatives at {[n for n, f in zip(names, finite) if not f]}"
+    errors = column_errors(automatic, reference)
+    _report(mode, names, kinds, errors)
+    bad = {}
+    for k, (name, kind) in enumerate(zip(names, kinds)):
+        worst = errors[k, BRANCH_COLUMNS].max() if kind == "branch" else errors[k].max()
+        if worst > TOL and name not in KNOWN_WRONG:
+            bad[name] = float(worst)
+    assert not bad, f"{mode}: relative column errors above {TOL}: {bad}"
+
+
+def test_forward_mode_matches_mpmath():
+    """jax.jacfwd (and the values) at every point against the 32-digit references."""
+    _, _, _, values_reference, _ = references()
+    values, jacobian = forward()
+    error = np.max(np.abs(values - values_reference))
+    print(f"\nvalues: worst absolute error {error:.1e}")
+    assert error < 1e-14  # measured 2.1e-15
+    _check("jacfwd", jacobian)
+
+
+def test_reverse_mode_matches_mpmath():
+    """jax.jacrev: finite at every point (no NaN from untaken branches), right where smooth."""
+    _check("jacrev", reverse())
+
+
+@pytest.mark.xfail(strict=True, reason="; ".join(f"{k}: {v}" for k, v in KNOWN_WRONG.items()))
+@pytest.mark.parametrize("mode", ["jacfwd", "jacrev"])
+def test_derivative_at_a_zero_component(mode):
+    """d/dL1 at L1 = 0 (and d/dL3 at L3 = 0 around the minor axis): the motion is smooth there."""
+    names, _, _, _, reference = references()
+    automatic = forward()[1] if mode == "jacfwd" else reverse()
+    errors = column_errors(automatic, reference)
+    worst = {name: float(errors[k].max()) for k, name in enumerate(names) if name in KNOWN_WRONG}
+    assert max(worst.values()) <= TOL, worst
+
+
+# ------------------------------------------------------------------------------ second derivatives
+
+
+def _time_second_derivative(x):
+    """d^2 y/dt^2 by forward over forward in t."""
+    body = FreeRigidBody(x[:3], x[3:6], x[6:10])
+
+    def in_time(t):
+        q = body.quaternion(t)
+        return jnp.concatenate([body.angular_momentum(t), body.angular_velocity(t), q,
+                                quaternion.as_matrix(q).reshape(-1)])
+
+    one = jnp.ones_like(x[10])
+    return jax.jvp(lambda s: jax.jvp(in_time, (s,), (one,))[1], (x[10],), (one,))[1]
+
+
+def _time_second_derivative_reference(values, inertia):
+    """d^2 y/dt^2 from the 32-digit (L(t), q(t)) by the equations of motion: L' = L x Omega, Omega = L/I,
+    q' = q ⊗ (0, Omega)/2, so L'' = L' x Omega + L x Omega', q'' = (q' ⊗ (0, Omega) + q ⊗ (0, Omega'))/2,
+    and R'' = D^2R[q', q'] + DR[q''] (R quadratic in q)."""
+    momentum, q = values[:, :3], values[:, 6:10]
+    omega = momentum / inertia
+    d_momentum = np.cross(momentum, omega)
+    d_omega = d_momentum / inertia
+    dd_momentum = np.cross(d_momentum, omega) + np.cross(momentum, d_omega)
+    pure = lambda v: np.concatenate([np.zeros(v.shape[:-1] + (1,)), v], -1)  # noqa: E731
+    hamilton = lambda a, b: np.asarray(quaternion.multiply(jnp.asarray(a), jnp.asarray(b)))  # noqa: E731
+    dq = hamilton(q, pure(omega)) / 2
+    ddq = (hamilton(dq, pure(omega)) + hamilton(q, pure(d_omega))) / 2
+    matrix = quaternion.as_matrix
+    second = jax.jvp(lambda a: jax.jvp(matrix, (a,), (jnp.asarray(dq),))[1], (jnp.asarray(q),), (jnp.asarray(dq),))[1]
+    ddr = np.asarray(second + jax.jvp(matrix, (jnp.asarray(q),), (jnp.asarray(ddq),))[1]).reshape(-1, 9)
+    return np.concatenate([dd_momentum, dd_momentum / inertia, ddq, ddr], -1)
+
+
+def test_second_derivatives():
+    """d^2 y/dt^2 (forward over forward) at every point (the branch points' formulas are exact in t)
+    against the equations of motion applied to the 32-digit values.
+
+    Second derivatives with respect to I, L or q0 of the attitude are NaN at present: see
+    test_second_derivative_at_a_zero_carlson_argument (the cause) and benchmarks/gradients.py."""
+    names, kinds, x, values, _ = references()
+    program = _compile(jax.vmap(_time_second_derivative), FAST_COMPILE_OPTIONS, x)
+    second = np.asarray(program(jnp.asarray(x)))
+    assert np.all(np.isfinite(second))
+    reference = _time_second_derivative_reference(values, x[:, :3])
+    scale = np.max(np.abs(reference), -1)
+    errors = np.max(np.abs(second - reference), -1) / np.where(scale > 0, scale, 1)  # L = 0: absolute
+    print("\nd^2 y/dt^2: relative error against the equations of motion")
+    for name, error in zip(names, errors):
+        print(f"  {name:22s} {error:.1e}")
+    assert errors.max() < TOL_SECOND, dict(zip(names, errors))
+
+
+@pytest.mark.xfail(strict=True, reason="the JVP rule of R_J (special/_carlson.py: _masked and "
+                   "_jvp_from_partials take tangent * where(x > 0, partial, 0), partial infinite at x = 0) "
+                   "is not differentiable again at a zero argument: 0 * inf = NaN (no safe where); the "
+                   "constructor's complete Pi(nu|m) (R_J with x = cn^2 = 0) carries it into every second "
+                   "derivative of q(t) with respect to I, L or q0")
+def test_second_derivative_at_a_zero_carlson_argument():
+    """d^2/dy^2 R_J(0, y, 1, 0.7) at y = 0.5 (forward over forward) against mpmath.diff (30 digits)."""
+    from frbjax.special import elliprj
+
+    @jax.jit
+    def second(y):
+        zero, one = jnp.zeros_like(y), jnp.ones_like(y)
+        rj = lambda y: elliprj(zero, y, one, 0.7 * one)  # noqa: E731
+        return jax.jvp(lambda z: jax.jvp(rj, (z,), (one,))[1], (y,), (one,))[1]
+
+    assert float(second(jnp.float64(0.5))) == pytest.approx(6.8063002406807005996, rel=1e-12)
