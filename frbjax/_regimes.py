@@ -39,8 +39,8 @@ from jax import lax
 from . import _series
 from ._fusion import materialise
 from .special import elliprf
-from .special._jacobi import ellipj_given, parameter_data
-from .special._legendre import _LARGE_NEGATIVE_CHARACTERISTIC, _pi_reduced_terms, pi_without_first_kind
+from .special._jacobi import _agm_levels, ellipj_given
+from .special._legendre import _LARGE_NEGATIVE_CHARACTERISTIC, pi_without_first_kind
 
 MAJOR, MINOR, SEPARATRIX, UNIFORM = 0, 1, 2, 3
 
@@ -104,8 +104,8 @@ def constants(inertia, unit_momentum, regime):
         nu=-j1 * g3 / (j3 * g1),
         precession=1 / j1,
     )
-    major_phase = _phase(l[..., 1] * major["amplitude"][..., 0], l[..., 0] * major["amplitude"][..., 1],
-                         major["mc"])
+    # sn0 : cn0 = l2/A2 : l1/A1 (cn0 >= 0 in the working frame): ratios of the given components.
+    major_point = (l[..., 1] * major["amplitude"][..., 0], l[..., 0] * major["amplitude"][..., 1])
 
     # Around the minor axis.
     j, l = _substitute(is_minor, inertia, unit_momentum, _SAFE_MINOR)
@@ -121,8 +121,8 @@ def constants(inertia, unit_momentum, regime):
         nu=-j3 * g1 / (j1 * g3),
         precession=1 / j3,
     )
-    minor_phase = _phase(l[..., 1] * minor["amplitude"][..., 2], l[..., 2] * minor["amplitude"][..., 1],
-                         minor["mc"])
+    # sn0 : cn0 = l2/A2 : l3/A3.
+    minor_point = (l[..., 1] * minor["amplitude"][..., 2], l[..., 2] * minor["amplitude"][..., 1])
 
     # Separatrix: constants depend on the moments alone.
     j, l = _substitute(is_sep, inertia, unit_momentum, (0.0, 0.0, 1.0))
@@ -151,7 +151,6 @@ def constants(inertia, unit_momentum, regime):
         return jnp.where(separatrix_mask, separatrix[key], jnp.where(minor_mask, minor[key], major[key]))
 
     out = {key: pick(key) for key in major}
-    out["u0"] = jnp.where(is_sep, separatrix_u0, jnp.where(is_minor, minor_phase, major_phase))
     # alpha Pi(nu; am u|m) = alpha u + alpha (Pi - F)(nu; am u|m) for nu >= -1 (F(am u|m) = u).  The
     # constant alpha u0 drops out (only differences of psi matter) and alpha B = 1/J1 - 1/J3 turns the
     # precession rate 1/J1 (1/J3) into 1/J3 (1/J1).  This matters where alpha ~ 1/sqrt(J2 - J1) is huge
@@ -162,47 +161,52 @@ def constants(inertia, unit_momentum, regime):
     out["without_first_kind"] = (out["nu"] >= _LARGE_NEGATIVE_CHARACTERISTIC) & ~is_sep
     swapped_rate = jnp.where(is_minor, 1 / inertia[..., 0], 1 / inertia[..., 2])
     out["precession"] = jnp.where(out["without_first_kind"], swapped_rate, out["precession"])
-    # The complete integral of every whole half-period of the amplitude (Pi(nu|m), or Pi - K), once per
-    # body; the separatrix needs none (it is infinite there) and gets a harmless stand-in.
-    safe_nu = jnp.where(is_sep, 0, out["nu"])
-    safe_m = jnp.where(is_sep, 0.5, out["m"])
-    safe_mc = jnp.where(is_sep, 0.5, out["mc"])
-    head, tail = _pi_reduced_terms(safe_nu, jnp.ones_like(safe_m), jnp.zeros_like(safe_m), safe_m, safe_mc)
-    out["third_kind_complete"] = jnp.where(out["without_first_kind"], tail, head + tail)
-    # K(m) and the AGM levels of the Jacobi functions: per body, not per evaluation.
-    out["jacobi"] = parameter_data(out["mc"])
-    out["regime"] = regime
-    out.update(_series_constants(out, regime))
-    return out
 
-
-def _series_constants(consts, regime):
-    """Per-body data of the theta series (``_series``) and which bodies they serve.
-
-    third_kind(u) = Pi(nu; am u|m) - u where nu >= -1 (``without_first_kind``), Pi(nu; am u|m) where
-    nu < -1, is u slope + A arg theta_4(v + i alpha') with slope = (Pi(nu|m) - K)/K or Pi(nu|m)/K.
-    Unlike a Fourier series, whose terms fall like rho^n (rho -> 1 as nu -> -infinity), the theta
-    series' terms fall like q^(n(n-1)) rho^n, so every characteristic nu < 0 is expanded directly.
-    """
-    elliptic = (regime == MAJOR) | (regime == MINOR)
-    flag = consts["without_first_kind"]
-    nu = jnp.where(elliptic, consts["nu"], -0.5)
-    m = jnp.where(elliptic, consts["m"], 0.5)
-    mc = jnp.where(elliptic, consts["mc"], 0.5)
-    quarter = elliprf(jnp.zeros_like(mc), mc, jnp.ones_like(mc))
-    rows, amplitude, origin, nome = _series.coefficients(m, mc, quarter, nu)
-    head, tail = _pi_reduced_terms(nu, jnp.ones_like(m), jnp.zeros_like(m), m, mc)
-    # Pi(nu|m) = head + tail, head = K(m) for nu >= -1 (see _pi_reduced_terms).
-    slope = jnp.where(flag, tail, head + tail) / quarter
-    ok = (regime == UNIFORM) | (elliptic & (nome <= _series._largest_nome(m)))
-    return dict(
-        series=rows,
-        series_amplitude=amplitude,
-        series_origin=origin,
-        series_quarter=quarter,
-        series_slope=slope,
-        series_ok=ok,
+    # The elliptic integrals of the constructor, each kind in one call (one duplication loop each, and
+    # one for each JVP rule: compile time is dominated by these loops).  Bodies outside the elliptic
+    # regimes (separatrix, uniform rotation) get harmless stand-ins (their results are not used).
+    elliptic = is_major | is_minor
+    nu = jnp.where(elliptic, out["nu"], -0.5)
+    m = jnp.where(elliptic, out["m"], 0.5)
+    mc = jnp.where(elliptic, out["mc"], 0.5)
+    sn_scaled = jnp.where(is_minor, minor_point[0], major_point[0])
+    cn_scaled = jnp.where(is_minor, minor_point[1], major_point[1])
+    sn0, cn0 = _unit_point(jnp.where(elliptic, sn_scaled, 0.6), jnp.where(elliptic, cn_scaled, 0.8))
+    # Materialised: the integrals below and their derivatives would otherwise each recompute the
+    # regime formulas above inside their own fused loops (see _fusion), in the gradient most of all.
+    nu, m, mc, sn0, cn0 = materialise((nu, m, mc, sn0, cn0))
+    # R_F: the phase u0 = F(am0|m) = sn0 R_F(cn0^2, dn0^2, 1) (DLMF 19.25.5 from sn0, cn0 themselves:
+    # near the separatrix am0 is within 1e-13 of pi/2 and only cn0 carries the digits), and the
+    # series' K(m), a' and b (``_series.integral_arguments``).
+    cn0_squared = cn0 * cn0
+    series_x, series_y, series_z = _series.integral_arguments(m, mc, nu)
+    first_kind = elliprf(
+        jnp.concatenate([cn0_squared[None], series_x]),
+        jnp.concatenate([(cn0_squared + mc * sn0 * sn0)[None], series_y]),
+        jnp.concatenate([jnp.ones_like(sn0)[None], series_z]),
     )
+    first_kind = materialise(first_kind)
+    out["u0"] = jnp.where(is_sep, separatrix_u0, sn0 * first_kind[0])
+    # R_J: the complete Pi(nu|m) (- K for nu >= -1) of every whole half-period, and the same at the
+    # phase u0 (for the attitude at t = 0, see ``reference``): one call on the two, stacked.
+    stack = lambda complete, initial: jnp.stack(jnp.broadcast_arrays(complete, initial))  # noqa: E731
+    third_kind = pi_without_first_kind(
+        stack(nu, nu), stack(jnp.ones_like(sn0), sn0), stack(jnp.zeros_like(cn0), cn0), stack(m, m), stack(mc, mc))
+    out["third_kind_complete"] = third_kind[0]
+    out["reference_third_kind"] = third_kind[1]
+    out["regime"] = regime
+    # The theta series (``_series``) and which bodies it serves.  Pi(nu; am u|m) - u (nu >= -1) or
+    # Pi(nu; am u|m) (nu < -1) is u slope + A arg theta_4(v + i alpha') with slope = that at u = K,
+    # divided by K.  Unlike a Fourier series, whose terms fall like rho^n (rho -> 1 as nu -> -infinity),
+    # the theta series' terms fall like q^(n(n-1)) rho^n, so every nu < 0 is expanded directly.
+    series = _series.coefficients(m, mc, nu, first_kind[1:])
+    out["series"] = series
+    # K(m) (the series' own; a stand-in on the separatrix, where ellipj_given takes its m = 1 limit) and
+    # the AGM levels of the Jacobi functions of the Carlson/Landen path (special._jacobi.parameter_data).
+    out["jacobi"] = (series.quarter, _agm_levels(jnp.where(out["mc"] == 0, 0.5, out["mc"])))
+    out["series_slope"] = third_kind[0] / series.quarter
+    out["series_ok"] = (regime == UNIFORM) | (elliptic & (series.nome <= _series._largest_nome(m)))
+    return out
 
 
 def _unit_point(sn_scaled, cn_scaled):
@@ -213,18 +217,6 @@ def _unit_point(sn_scaled, cn_scaled):
     sn_scaled, cn_scaled = sn_scaled / largest, cn_scaled / largest
     norm = jnp.sqrt(sn_scaled * sn_scaled + cn_scaled * cn_scaled)
     return sn_scaled / norm, cn_scaled / norm
-
-
-def _phase(sn_scaled, cn_scaled, mc):
-    """u0 = F(am0|m) from (sn0, cn0) known up to a common positive factor, cn0 >= 0.
-
-    F = sn R_F(cn^2, dn^2, 1) with dn^2 = cn^2 + mc sn^2 (DLMF 19.25.5) takes cn itself rather than an
-    amplitude: near the separatrix am0 is within 1e-13 of pi/2 and only cn0 (a ratio of the given
-    angular momentum components) carries the digits that fix the phase.
-    """
-    sn, cn = _unit_point(sn_scaled, cn_scaled)
-    cn2 = cn * cn
-    return sn * elliprf(cn2, cn2 + mc * sn * sn, jnp.ones_like(sn))
 
 
 def _evaluate_landen(consts, tau, attitude=True):
@@ -247,7 +239,7 @@ def _evaluate_landen(consts, tau, attitude=True):
     l1, l2, l3 = momentum[..., 0], momentum[..., 1], momentum[..., 2]
 
     # Pi(nu; am|m) = 2j Pi(nu|m) + Pi(nu; am_r|m) (DLMF 19.2.10) from the reduced sn and cn themselves
-    # (their relative precision matters near the separatrix; see _phase).  Not needed on the separatrix.
+    # (their relative precision matters near the separatrix, as for the phase u0 in ``constants``).  Not needed on the separatrix.
     # The reduced amplitude am - turns pi must have cos = parity cn >= 0.  Rounding am/pi alone fails
     # where am is within rounding of an odd multiple of pi/2 (cn ~ 1e-22 next to the separatrix, where
     # am rounds to -pi/2 but cn still tells the side): Pi is steep there (scale sqrt(mc)), and the wrong
@@ -276,10 +268,7 @@ def _evaluate_landen(consts, tau, attitude=True):
 def _evaluate_series(consts, tau, attitude=True):
     """``_evaluate_landen`` through the per-body nome series (``_series``); valid where series_ok."""
     u = consts["u0"] + consts["rate"] * tau
-    sn_r, cn_r, dn, periodic, turns = _series.evaluate_series(
-        consts["series"], consts["mc"], consts["series_amplitude"], consts["series_origin"],
-        consts["series_quarter"],
-        u, third_kind=attitude)
+    sn_r, cn_r, dn, periodic, turns = _series.evaluate_series(consts["series"], consts["mc"], u, attitude)
     parity = 1 - 2 * jnp.mod(turns, 2)
     sn, cn = parity * sn_r, parity * cn_r
     minor = consts["regime"] == MINOR
@@ -328,29 +317,43 @@ def evaluate(consts, tau, attitude=True):
     (order,) = jnp.nonzero(hard, size=chunks * chunk, fill_value=size)
     body_of = jnp.broadcast_to(jnp.arange(bodies).reshape(batch), shape).reshape(size)
     tau_of = jnp.broadcast_to(tau, shape).reshape(size)
-    flat = tuple(None if out is None else out.reshape((size,) + out.shape[len(shape):]) for out in series)
 
-    def recompute(k, outputs):
-        index = lax.dynamic_slice(order, (k * chunk,), (chunk,))
+    def recompute(index):
         safe_index = jnp.minimum(index, size - 1)
         gathered = jax.tree_util.tree_map(
             lambda a: a.reshape((bodies,) + a.shape[len(batch):])[body_of[safe_index]], consts)
-        fixed = _evaluate_landen(gathered, tau_of[safe_index], attitude)
-        return tuple(None if out is None else out.at[index].set(part, mode="drop")
-                     for out, part in zip(outputs, fixed))
+        return _evaluate_landen(gathered, tau_of[safe_index], attitude)
 
-    def step(outputs, k):
-        return lax.cond(k * chunk < count, lambda o: recompute(k, o), lambda o: o, outputs), None
+    parts = jax.eval_shape(recompute, order[:chunk])
 
-    flat, _ = lax.scan(step, flat, jnp.arange(chunks))
-    return tuple(None if out is None else out.reshape(full.shape) for out, full in zip(flat, series))
+    def skip(index):
+        # A chunk past the last evaluation to recompute holds fillers only (dropped by the scatter).
+        return jax.tree_util.tree_map(lambda part: jnp.zeros(part.shape, part.dtype), parts)
+
+    def step(_, k):
+        index = order.reshape(chunks, chunk)[k]
+        return None, lax.cond(k * chunk < count, recompute, skip, index)
+
+    # The recomputed values are the scan's outputs, scattered once afterwards; carrying the whole
+    # output through the scan instead would make reverse mode save it at every step.
+    _, fixed = lax.scan(step, None, jnp.arange(chunks))
+    result = []
+    for out, part in zip(series, fixed):
+        if out is None:
+            result.append(None)
+            continue
+        trailing = out.shape[len(shape):]
+        flat = out.reshape((size,) + trailing).at[order].set(part.reshape((chunks * chunk,) + trailing), mode="drop")
+        result.append(flat.reshape(out.shape))
+    return tuple(result)
 
 
 def reference(consts, unit_momentum):
     """q̂ at tau = 0, from the given unit angular momentum itself (no series or Jacobi functions).
 
     At tau = 0 the phase u0 lies in [-K, K] (cn0 >= 0 in the working frame), so the third-kind
-    integral needs no whole periods, and sn0, cn0 are ratios of the given components.
+    integral needs no whole periods; ``constants`` computed it from sn0, cn0, ratios of the given
+    components (``reference_third_kind``).
     """
     regime = consts["regime"]
     minor, separatrix = regime == MINOR, regime == SEPARATRIX
@@ -359,18 +362,8 @@ def reference(consts, unit_momentum):
     uniform = (regime == UNIFORM)[..., None]
     unit_momentum = jnp.where(uniform, jnp.asarray(_SAFE_MAJOR, unit_momentum.dtype), unit_momentum)
     l1, l2, l3 = unit_momentum[..., 0], unit_momentum[..., 1], unit_momentum[..., 2]
-    amplitude = consts["amplitude"]
     partner = jnp.where(minor, l1, l3)
-    # sn0 : cn0 = l2/A2 : l1/A1 (major axis) or l2/A2 : l3/A3 (minor axis), cn0 >= 0, as in _phase.
-    cn_component = jnp.where(minor, l3, l1)
-    cn_amplitude = jnp.where(minor, amplitude[..., 2], amplitude[..., 0])
-    sn0, cn0 = _unit_point(l2 * cn_amplitude, cn_component * amplitude[..., 1])
-    nu = jnp.where(separatrix, 0, consts["nu"])
-    m = jnp.where(separatrix, 0.5, consts["m"])
-    mc = jnp.where(separatrix, 0.5, consts["mc"])
-    sn0 = jnp.where(separatrix, 0.5, sn0)
-    cn0 = jnp.where(separatrix, 0.5, cn0)
-    third_kind = pi_without_first_kind(nu, sn0, cn0, m, mc)
+    third_kind = consts["reference_third_kind"]
     orientation = jnp.where(minor, -1, 1)
     psi_elliptic = orientation * (jnp.arctan2(l2, partner) - consts["alpha"] * third_kind)
     psi_separatrix = 2 * jnp.arctan(consts["alpha"] * jnp.tanh(consts["u0"] / 2))

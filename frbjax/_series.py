@@ -42,8 +42,12 @@ the third kind.
 
 from __future__ import annotations
 
+from typing import NamedTuple
+
 import jax.numpy as jnp
 import numpy as np
+from jaxtyping import Array, Float
+
 from ._fusion import materialise
 from .special import elliprf
 from .special._common import is_double
@@ -87,31 +91,59 @@ def nome(m, mc):
     return q, jnp.where(small, q_over_m, q_reflected / jnp.where(small, 1, m))
 
 
-def coefficients(m, mc, quarter, characteristic):
-    """Per-body series data.
+class SeriesData(NamedTuple):
+    """Per-body data of the series (``coefficients``), the leading (body) shape first in every field."""
 
-    Returns (rows, amplitude, origin, q): rows (..., 4, terms) hold, for n = 0 .. terms - 1,
+    rows: Float[Array, "... 4 terms"]
+    amplitude: Float[Array, "..."]
+    origin: Float[Array, "..."]
+    quarter: Float[Array, "..."]
+    nome: Float[Array, "..."]
+
+
+def _characteristic_terms(m, characteristic):
+    # chi = 0 (no third-kind term) only through harmless stand-ins; the square roots of -chi are taken
+    # safely there so that no gradient is NaN.
+    moving = characteristic < 0
+    minus_chi = jnp.where(moving, -characteristic, 1)
+    return moving, minus_chi, m + minus_chi
+
+
+def integral_arguments(m, mc, characteristic):
+    """(x, y, z) of the three R_F(x, y, z) the series data need, stacked on a new leading axis.
+
+    K(m) = R_F(0, mc, 1) (DLMF 19.25.1), then a' and b by DLMF 19.25.5 with parameter mc: for a',
+    sin^2 = -chi/(m - chi), cos^2 = m/(m - chi), 1 - mc sin^2 = m (1 - chi)/(m - chi); for b,
+    sin^2 = 1/(1 - chi), cos^2 = -chi/(1 - chi), 1 - mc sin^2 = (m - chi)/(1 - chi).  A caller passes
+    elliprf of these to ``coefficients``, possibly computed in one call with other R_F of its own.
+    """
+    _, minus_chi, gap = _characteristic_terms(m, characteristic)
+    zero, one = jnp.zeros_like(gap), jnp.ones_like(gap)
+    x = jnp.stack(jnp.broadcast_arrays(zero, m / gap, minus_chi / (1 + minus_chi)))
+    y = jnp.stack(jnp.broadcast_arrays(mc, m * (1 + minus_chi) / gap, gap / (1 + minus_chi)))
+    return x, y, jnp.stack(jnp.broadcast_arrays(one, one, one))
+
+
+def coefficients(m, mc, characteristic, integrals=None) -> SeriesData:
+    """Per-body series data (``SeriesData``).
+
+    ``rows`` (..., 4, terms) hold, for n = 0 .. terms - 1,
     2 (q/m)^(1/4) (-1)^n q^(n(n+1))          (sin((2n+1) v): sn times theta_4)
     2 (q/m)^(1/4) mc^(1/4) q^(n(n+1))        (cos((2n+1) v): cn times theta_4)
     2 (-1)^(n+1) q^((n+1)^2) cosh(2(n+1) alpha'),  2 (-1)^(n+1) q^((n+1)^2) sinh(2(n+1) alpha')
-                                             (theta_4(v + i alpha'), real and imaginary parts),
-    and origin = theta_4(i alpha') (see ``evaluate_series``) without cancellation.
-    ``quarter`` is K(m); ``characteristic`` chi <= 0 is the one whose integral is expanded.
+                                             (theta_4(v + i alpha'), real and imaginary parts);
+    ``origin`` = theta_4(i alpha') (see ``evaluate_series``) without cancellation, ``amplitude`` = A,
+    ``quarter`` = K(m), ``nome`` = q.  ``characteristic`` chi <= 0 is the one whose integral is
+    expanded; ``integrals`` = elliprf(*integral_arguments(m, mc, chi)) (computed here if None).
     """
+    if integrals is None:
+        integrals = elliprf(*integral_arguments(m, mc, characteristic))
+    quarter, shift_integral, distance_integral = integrals[0], integrals[1], integrals[2]
     terms = _terms(m)
     q, q_over_m = nome(m, mc)
-    one = jnp.ones_like(m)
-    chi = characteristic
-    # chi = 0 (no third-kind term) only through harmless stand-ins; the square roots of -chi are taken
-    # safely there so that no gradient is NaN.
-    moving = chi < 0
-    minus_chi = jnp.where(moving, -chi, 1)
-    gap = m + minus_chi
-    # a' and b by DLMF 19.25.5 with parameter mc: for a', sin^2 = -chi/(m - chi), cos^2 = m/(m - chi),
-    # 1 - mc sin^2 = m (1 - chi)/(m - chi); for b, sin^2 = 1/(1 - chi), cos^2 = -chi/(1 - chi),
-    # 1 - mc sin^2 = (m - chi)/(1 - chi).
-    shift = jnp.sqrt(minus_chi / gap) * elliprf(m / gap, m * (1 + minus_chi) / gap, one)
-    distance = elliprf(minus_chi / (1 + minus_chi), gap / (1 + minus_chi), one) / jnp.sqrt(1 + minus_chi)
+    moving, minus_chi, gap = _characteristic_terms(m, characteristic)
+    shift = jnp.sqrt(minus_chi / gap) * shift_integral
+    distance = distance_integral / jnp.sqrt(1 + minus_chi)
     rho = jnp.exp(-np.pi * distance / quarter)
     amplitude = jnp.where(moving, jnp.sqrt(minus_chi) / jnp.sqrt((1 + minus_chi) * gap), 0)
     odd_scale = 2 * jnp.sqrt(jnp.sqrt(q_over_m))
@@ -137,15 +169,16 @@ def coefficients(m, mc, quarter, characteristic):
         if n < terms:
             origin = origin + sign * decaying * -jnp.expm1(-(2 * n + 1) * two_beta)
     stacked = jnp.stack([jnp.stack(jnp.broadcast_arrays(*row), -1) for row in rows], -2)
-    return stacked, amplitude, origin, q
+    return SeriesData(stacked, amplitude, origin, quarter, q)
 
 
-def evaluate_series(rows, mc, amplitude, origin, quarter, u, third_kind=True):
+def evaluate_series(data: SeriesData, mc, u, third_kind=True):
     """(sn_r, cn_r, dn, third_kind_periodic, turns) at u from the per-body ``coefficients``.
 
     u = 2 turns K + u_r with |u_r| <= K; sn_r = sn(u_r), cn_r = cn(u_r) >= 0 (so sn(u) = (-1)^turns sn_r,
     cn(u) = (-1)^turns cn_r), dn = dn(u), and A arg theta_4(v + i alpha') (period 2K in u).
     """
+    rows, amplitude, origin, quarter = data.rows, data.amplitude, data.origin, data.quarter
     terms = rows.shape[-1]
     turns = jnp.round(u / (2 * quarter))
     half_angle = (u - 2 * quarter * turns) * (np.pi / 2) / quarter

@@ -177,18 +177,27 @@ def test_invalid_bodies_give_nan_under_jit(index):
     assert not rows, f"{name}: not all NaN for invalid rows {[INVALID_ROWS[i] for i in rows]}"
 
 
-# jit compiles the same operations, fused differently: measured differences from the eager values
-# (|L| <= 3) 1.8e-15 (L), 1.0e-15 (Omega), 3.6e-15 (q), 7.4e-15 (R), 0 (|L|); tolerances ~2x.
-JIT_ATOL = dict(angular_momentum=4e-15, angular_velocity=2e-15, quaternion=7e-15, rotation_matrix=1.5e-14,
-                momentum_norm=0.0)
+# jit compiles the same operations, fused differently, so the two differ by rounding, which grows with
+# the phase: compared with eps (1 + |L| |t| / min I) (times max(1, |L|) for L, max(1, |L|) / min I
+# for Omega), the measured worst ratios are 1.0 (L), 0.75 (Omega), 1.0 (q), 2.0 (R); tolerances ~2x.
+JIT_RATIO = dict(angular_momentum=2.0, angular_velocity=1.5, quaternion=2.0, rotation_matrix=4.0)
 
 
 def test_valid_bodies_unaffected_under_jit():
-    """The valid bodies of the batch are finite and equal to their eager values (up to JIT_ATOL)."""
+    """The valid bodies of the batch are finite and equal to their eager values (up to JIT_RATIO)."""
     jitted, eager, count = traced_outputs()
-    for name, got, want in zip(OUTPUTS + ("momentum_norm",), jitted, eager):
+    inertia = np.array([r[0] for r in VALID_ROWS], float)
+    norm = np.linalg.norm(np.array([r[1] for r in VALID_ROWS], float), axis=-1)[:, None]
+    phase = np.finfo(float).eps * (1 + norm * np.abs(TIMES)[None] / inertia.min(-1)[:, None])
+    magnitude = dict(angular_momentum=np.maximum(1, norm),
+                     angular_velocity=np.maximum(1, norm) / inertia.min(-1)[:, None])
+    for name, got, want in zip(OUTPUTS, jitted, eager):
         assert np.isfinite(got[:count]).all(), name
-        np.testing.assert_allclose(got[:count], want, rtol=0, atol=JIT_ATOL[name], err_msg=name)
+        difference = np.abs(got[:count] - want).reshape(count, len(TIMES), -1).max(-1)
+        ratio = difference / (phase * magnitude.get(name, 1.0))
+        assert ratio.max() <= JIT_RATIO[name], (name, ratio.max())
+    # |L| is computed once per body, the same way: bit for bit equal.
+    np.testing.assert_array_equal(jitted[-1][:count], eager[-1])
 
 
 def test_invalid_bodies_give_nan_under_vmap():
