@@ -26,7 +26,7 @@ velocities add (Omega_model(t_k) - Omega_k) / angular_velocity_sigma (attitude r
 by attitude_sigma).  A robust loss (``"huber"`` or ``"cauchy"``) replaces each sample's residual vector
 r by r sqrt(rho(|r|^2 / c^2) / (|r|^2 / c^2)), so that the sum of squares is c^2 sum rho(|r|^2/c^2):
 the Levenberg-Marquardt solver then minimises the robust cost (scale c = ``loss_scale``, by default
-2.5 times the median residual norm of the least-squares fit).
+2.5 times the median residual norm of the least-squares fit on the previous continuation window).
 
 Optimisation
 ------------
@@ -36,12 +36,26 @@ from finite differences of the data around t_ref, and several inertia ratios (pe
 triaxial shapes, then random ones from ``seed``), since the regimes (rotation around the largest or the
 smallest axis) and the orderings of the moments are separate basins.  Each start is solved on growing
 time windows around t_ref (continuation: the phase of a wrong model drifts with time, so a long record
-alone has many local minima), then on all samples, then (robust losses only) with the robust loss.
-The start with the lowest cost wins.
+alone has many local minima) with the squared loss, the last window (all samples) with the chosen
+loss.  The start with the lowest cost wins.
+
+Compilation
+-----------
+Compiling the solver dominates the first call (the Jacobian of the attitude with respect to the
+moments is a large program: about a minute of CPU); later calls with the same number of samples,
+number of starts, dtype, solver settings (``rtol``, ``atol``, ``max_steps``) and compiler options
+reuse it, whatever the data, loss, weights, gyro data or seed.  The compiled program holds one copy of
+the motion's forward-mode derivative (a custom JVP hands the solver the Jacobian from one pass, and
+the same pass gives the model at the solution, so the motion is not compiled again to report it), and
+the continuation windows are one ``lax.scan`` rather than unrolled solves.  On CPU the solver is
+compiled with ``DEFAULT_COMPILER_OPTIONS`` (XLA:CPU's fusion emitters off: about 25% less compile
+time, the same run time).  JAX's persistent compilation cache (``jax_compilation_cache_dir``) keeps
+the program across processes.
 """
 
 from __future__ import annotations
 
+import functools
 import itertools
 import math
 
@@ -129,122 +143,170 @@ def _robust_factor(squared, loss):
 
 
 def _residuals(theta, args):
+    """(weighted, robustified residuals (M, 6), (q_model (M, 4), Omega_model (M, 3))) at every row."""
     data, mask, loss, scale = args
-    times, q_obs, w_obs, reference, time_scale, gyro_weight, attitude_weight, _ = data
+    times, q_obs, w_obs, reference, time_scale, gyro_weight, attitude_weight = data
     q_model, w_model = _model(theta, reference, times, time_scale)
     r_att = _attitude_residual(q_model, q_obs) * attitude_weight
     r_gyro = (w_model - w_obs) * gyro_weight
-    r = jnp.concatenate([r_att, r_gyro], -1)  # (N, 6): one sample's residual vector
+    r = jnp.concatenate([r_att, r_gyro], -1)  # (M, 6): one sample's residual vector
     squared = jnp.sum(r * r, -1) / scale**2
     factor = _robust_factor(squared, loss) * mask
-    return r * factor[:, None]
+    return r * factor[:, None], (q_model, w_model)
 
 
 # ------------------------------------------------------------------------------------ the solver
 
 
 def _flat_residuals_and_jacobian(theta, args):
-    """(r, dr/dtheta), r flattened, by forward mode (8 tangents in one vmapped pass)."""
-    flat = lambda p: (lambda r: (r, r))(_residuals(p, args).reshape(-1))  # noqa: E731
-    jacobian, residual = jax.jacfwd(flat, has_aux=True)(theta)
-    return residual, jacobian
+    """(r, dr/dtheta, model), r flattened, by forward mode (8 tangents in one vmapped pass)."""
+
+    def flat(p):
+        r, model = _residuals(p, args)
+        r = r.reshape(-1)
+        return r, (r, model)
+
+    jacobian, (residual, model) = jax.jacfwd(flat, has_aux=True)(theta)
+    return residual, jacobian, model
 
 
 @jax.custom_jvp
-def _residuals_with_jacobian(theta, args):
-    """(r, (r, J)): the residuals and, as an auxiliary output, themselves and their Jacobian.
+def _least_squares_fn(theta, args):
+    """(r, aux) for optimistix, aux = (r, J, q_model, Omega_model): the model at every row with its
+    residuals and Jacobian.
 
     The JVP rule is J @ dtheta with J from one forward-mode pass: the compiled solver then holds one
     copy of the body's derivative code (jax.linearize of the plain residuals inside the solver loop
-    holds a linearisation and its transpose, and compiles several times slower).
+    holds a linearisation and its transpose, and compiles several times slower), and the model values
+    at the solution come with it (no separate evaluation of the motion to compile).
     """
-    residual, jacobian = _flat_residuals_and_jacobian(theta, args)
-    return residual, jacobian
+    residual, jacobian, model = _flat_residuals_and_jacobian(theta, args)
+    return residual, (residual, jacobian) + model
 
 
-@_residuals_with_jacobian.defjvp
-def _residuals_with_jacobian_jvp(primals, tangents):
+@_least_squares_fn.defjvp
+def _least_squares_fn_jvp(primals, tangents):
     theta, args = primals
     dtheta = tangents[0]
-    residual, jacobian = _flat_residuals_and_jacobian(theta, args)
-    return (residual, jacobian), (jacobian @ dtheta, jnp.zeros_like(jacobian))
-
-
-def _least_squares_fn(theta, args):
-    residual, jacobian = _residuals_with_jacobian(theta, args)
-    return residual, (residual, jacobian)
+    residual, jacobian, model = _flat_residuals_and_jacobian(theta, args)
+    aux = (residual, jacobian) + model
+    return (residual, aux), (jacobian @ dtheta, jax.tree.map(jnp.zeros_like, aux))
 
 
 def _solve_start(theta0, reference, data, masks, losses, final_loss, loss_scale, rtol, atol, max_steps):
-    """Continuation over the windows ``masks`` (all but the last stage use the squared loss)."""
+    """Continuation over the windows ``masks`` (all but the last stage use the squared loss).
+
+    Returns theta, cost, success, the robust scale, and the aux of the last stage at theta (residuals,
+    Jacobian, model quaternions and angular velocities at every row).
+    """
     solver = optx.LevenbergMarquardt(rtol=rtol, atol=atol)
     data = (data[0], data[1], data[2], reference) + data[3:]
-    n_out = masks.shape[1] * 6
+    rows = masks.shape[1]
 
     def stage(carry, stage_args):
-        theta, previous = carry
+        theta, previous, previous_mask = carry
         mask, loss = stage_args
-        # The scale of the robust loss: given, or 2.5 median residual norm of the previous stage.
-        norms = jnp.sqrt(jnp.sum(previous.reshape(-1, 6) ** 2, -1))
-        scale = jnp.where(loss_scale > 0, loss_scale, 2.5 * jnp.median(norms) + 1e-12)
+        # The scale of the robust loss: given, or 2.5 times the median residual norm of the previous
+        # stage over the samples it fitted.
+        norms = jnp.sqrt(jnp.sum(previous.reshape(rows, 6) ** 2, -1))
+        median = jnp.nanmedian(jnp.where(previous_mask > 0, norms, jnp.nan))
+        median = jnp.where(jnp.isfinite(median), median, 1.0)
+        scale = jnp.where(loss_scale > 0, loss_scale, 2.5 * median + 1e-12)
         solution = optx.least_squares(
             _least_squares_fn, solver, theta, args=(data, mask, loss, scale), has_aux=True,
             max_steps=max_steps, throw=False)
-        residual, jacobian = solution.aux
+        # The aux of the solver state belongs to the returned (last accepted) value; solution.aux is
+        # that of the step before.
+        aux = solution.state.aux
         ok = solution.result == optx.RESULTS.successful
-        finite = jnp.all(jnp.isfinite(solution.value)) & jnp.all(jnp.isfinite(residual))
+        finite = jnp.all(jnp.isfinite(solution.value)) & jnp.all(jnp.isfinite(aux[0]))
         theta_new = jnp.where(finite, solution.value, theta)
-        residual = jnp.where(finite, residual, previous)
-        return (theta_new, residual), (ok & finite, scale, jacobian)
+        residual = jnp.where(finite, aux[0], previous)
+        return (theta_new, residual, mask), (ok & finite, scale, aux)
 
     stage_losses = losses.at[-1].set(final_loss)
-    initial = (theta0, jnp.zeros(n_out, theta0.dtype))
-    (theta, residual), (ok, scales, jacobians) = jax.lax.scan(stage, initial, (masks, stage_losses))
+    initial = (theta0, jnp.zeros(rows * 6, theta0.dtype), jnp.zeros(rows, theta0.dtype))
+    (theta, residual, _), (ok, scales, aux) = jax.lax.scan(stage, initial, (masks, stage_losses))
     cost = 0.5 * jnp.sum(residual * residual)
     cost = jnp.where(jnp.isfinite(cost) & ok[-1], cost, jnp.inf)
-    return theta, cost, ok[-1], scales[-1], residual, jacobians[-1]
+    return theta, cost, ok[-1], scales[-1], jax.tree.map(lambda a: a[-1], aux)
 
 
-@eqx.filter_jit
 def _fit(thetas0, references, data, masks, final_loss, loss_scale, rtol, atol, max_steps):
     losses = jnp.zeros(masks.shape[0], jnp.int32)
     solve = lambda theta0, reference: _solve_start(  # noqa: E731
         theta0, reference, data, masks, losses, final_loss, loss_scale, rtol, atol, max_steps)
-    thetas, costs, oks, scales, residuals, jacobians = jax.vmap(solve)(thetas0, references)
+    thetas, costs, oks, scales, aux = jax.vmap(solve)(thetas0, references)
     # The best start: lowest cost among converged ones (any start if none converged).
     finite_costs = jnp.where(jnp.isfinite(costs), costs, jnp.inf)
     best = jnp.argmin(finite_costs)
-    theta, scale, reference = thetas[best], scales[best], references[best]
-    r, jac = residuals[best], jacobians[best]
+    theta, scale = thetas[best], scales[best]
+    r, jac, q_model, w_model = (a[best] for a in aux)
     # Residuals that count: 3 per sample, 6 with gyro data (the gyro ones are zeros without).
     m = 3 * jnp.sum(masks[-1] != 0) * jnp.where(data[4] != 0, 2, 1)
     variance = jnp.sum(r * r) / jnp.maximum(m - theta.size, 1)
     covariance = jnp.linalg.pinv(jac.T @ jac) * variance
-    # The motion at the sample times and at t = 0 (times are relative to t_ref), unweighted.
-    times, q_obs, w_obs, time_scale, _, _, t_ref = data
-    q_model, w_model = _model(theta, reference, jnp.append(times, -t_ref), time_scale)
-    return dict(theta=theta, reference=reference, costs=costs, oks=oks, best=best,
-                covariance=covariance, scale=scale,
+    # The model at the samples and, in the last row, at t = 0 (unweighted).
+    q_obs, w_obs = data[1][:-1], data[2][:-1]
+    return dict(theta=theta, costs=costs, oks=oks, best=best, covariance=covariance, scale=scale,
                 residuals=_attitude_residual(q_model[:-1], q_obs), gyro_residuals=w_model[:-1] - w_obs,
                 attitude0=q_model[-1], omega0=w_model[-1])
 
 
-@jax.jit
 def _normalised_inertia(p):
-    moments = jnp.exp(jnp.concatenate([jnp.zeros(1, p.dtype), p[:2]]))
-    return moments / jnp.max(moments)
+    """Moments scaled to a largest of 1 from theta[:2] = (log I2/I1, log I3/I1), and their Jacobian."""
+    logs = np.concatenate([[0.0], np.asarray(p[:2], float)])
+    largest = int(np.argmax(logs))
+    moments = np.exp(logs - logs[largest])
+    # d log(moment_i) / d theta_j = [i == j + 1] - [largest == j + 1]
+    jacobian = np.zeros((3, 8))
+    for j in range(2):
+        jacobian[:, j] = moments * ((np.arange(3) == j + 1).astype(float) - float(largest == j + 1))
+    return moments, jacobian
 
 
 _make_body = eqx.filter_jit(FreeRigidBody)
 
 
-def _hamilton_log(q):
-    """Rotation vector of a unit quaternion (either sign)."""
-    q = jnp.where(q[..., :1] < 0, -q, q)
-    vector_norm = jnp.linalg.norm(q[..., 1:], axis=-1)
-    angle = 2 * jnp.arctan2(vector_norm, q[..., 0])
-    scale = jnp.where(vector_norm > 1e-12, angle / jnp.where(vector_norm > 1e-12, vector_norm, 1), 2.0)
+# XLA:CPU compiles the solver about a quarter faster, and runs it as fast, with the fusion emitters
+# off (measured in benchmarks/fit_success.py); ignored on other backends.
+DEFAULT_COMPILER_OPTIONS = {"xla_cpu_use_fusion_emitters": False}
+
+
+@functools.cache
+def _compiled_fit(options):
+    """The jitted solver for XLA compiler options ``options`` (a sorted tuple of items)."""
+    return jax.jit(_fit, static_argnames=("rtol", "atol", "max_steps"),
+                   compiler_options=dict(options) or None)
+
+
+def _solve(options, *args, **static):
+    if options is None:
+        options = DEFAULT_COMPILER_OPTIONS if jax.default_backend() == "cpu" else {}
+        try:
+            return _compiled_fit(tuple(sorted(options.items())))(*args, **static)
+        except jax.errors.JaxRuntimeError as error:  # an XLA without these options: compile without
+            if "compile option" not in str(error):
+                raise
+            options = {}
+    return _compiled_fit(tuple(sorted(options.items())))(*args, **static)
+
+
+def _rotation_vector(q):
+    """Rotation vector of unit quaternions (..., 4) of either sign (numpy)."""
+    q = np.where(q[..., :1] < 0, -q, q)
+    vector_norm = np.linalg.norm(q[..., 1:], axis=-1)
+    angle = 2 * np.arctan2(vector_norm, q[..., 0])
+    safe = np.where(vector_norm > 1e-12, vector_norm, 1.0)
+    scale = np.where(vector_norm > 1e-12, angle / safe, 2.0)
     return q[..., 1:] * scale[..., None]
+
+
+def _hamilton(p, q):
+    """Hamilton product of (..., 4) numpy arrays."""
+    pw, pv, qw, qv = p[..., :1], p[..., 1:], q[..., :1], q[..., 1:]
+    w = pw * qw - np.sum(pv * qv, -1, keepdims=True)
+    return np.concatenate([w, pw * qv + qw * pv + np.cross(pv, qv)], -1)
 
 
 def _finite_difference_rate(times, q, index, span):
@@ -254,12 +316,9 @@ def _finite_difference_rate(times, q, index, span):
     if a == b:
         return np.zeros(3)
     # Chain the steps: the rotation per step is below pi for reasonably sampled data.
-    total = np.zeros(3)
-    for k in range(a, b):
-        step = np.asarray(_hamilton_log(quaternion.multiply(quaternion.conjugate(jnp.asarray(q[k])),
-                                                            jnp.asarray(q[k + 1]))))
-        total = total + step
-    return total / (times[b] - times[a])
+    conjugate = q[a:b] * np.array([1.0, -1.0, -1.0, -1.0])
+    steps = _rotation_vector(_hamilton(conjugate, q[a + 1 : b + 1]))
+    return np.sum(steps, 0) / (times[b] - times[a])
 
 
 def _start_shapes(n_starts, rng):
@@ -291,6 +350,7 @@ def fit_attitude(
     rtol: float = 1e-10,
     atol: float = 1e-10,
     max_steps: int = 200,
+    compiler_options: dict | None = None,
 ) -> AttitudeFit:
     """Fit moments of inertia (ratios), angular velocity and attitude to observed attitudes.
 
@@ -298,14 +358,20 @@ def fit_attitude(
     the sign of each is irrelevant); ``angular_velocity_data`` (N, 3): observed body angular velocities
     at the same times (optional, e.g. a gyroscope); ``loss``: "squared", "huber" or "cauchy";
     ``loss_scale``: c of the robust loss (in units of the weighted residuals; default: 2.5 times the
-    median residual norm of the least-squares solution); ``attitude_sigma``, ``angular_velocity_sigma``:
-    the residuals are divided by them (their ratio weighs gyro against attitude data);
+    median residual norm of the least-squares fit on the previous continuation window);
+    ``attitude_sigma``, ``angular_velocity_sigma``: the residuals are divided by them (their ratio
+    weighs gyro against attitude data);
     ``n_starts``: starting points (solved together under ``jax.vmap``); ``seed`` or ``key`` (a
     ``jax.random`` key): randomises the starts beyond the deterministic ones and their inertia guesses.
 
+    ``rtol``, ``atol``, ``max_steps``: of each Levenberg-Marquardt solve; ``compiler_options``: XLA
+    compiler options of the solver (default ``DEFAULT_COMPILER_OPTIONS`` on CPU; ``{}`` for XLA's
+    defaults; e.g. ``{"xla_backend_optimization_level": 0}`` compiles faster and runs slower).
+
     Only the ratios of the moments are identifiable (I -> c I, L -> c L give the same motion): see the
     module docstring for the 8 fitted parameters.  Runs in the dtype of the inputs (use float64).
-    All starts share one compilation for a given (N, n_starts) and dtype.
+    All starts share one compilation for a given (N, n_starts), dtype, solver settings and compiler
+    options (module docstring, "Compilation").
     """
     if loss not in _LOSSES:
         raise ValueError(f"loss must be one of {sorted(_LOSSES)}, got {loss!r}")
@@ -345,13 +411,14 @@ def fit_attitude(
         thetas0[s, 2:5] = rates[(s // 6) % len(rates)] * time_scale
     references = np.broadcast_to(reference, (n_starts, 4))
 
-    # Continuation windows: the samples nearest t_ref.
+    # Continuation windows: the samples nearest t_ref.  One more row (mask 0) holds t = 0, where the
+    # solver's model gives the reported attitude and angular velocity.
     distance = np.abs(times_sorted - t_ref)
     ranked = np.sort(distance)
-    masks = np.zeros((len(_WINDOWS), n))
+    masks = np.zeros((len(_WINDOWS), n + 1))
     for k, fraction in enumerate(_WINDOWS):
         count = n if fraction >= 1 else min(n, max(math.ceil(fraction * n), _MIN_WINDOW))
-        masks[k] = distance <= ranked[count - 1]
+        masks[k, :n] = distance <= ranked[count - 1]
 
     if angular_velocity_data is None:
         gyro = np.zeros((n, 3))
@@ -359,29 +426,30 @@ def fit_attitude(
     else:
         gyro_weight = 1.0 / angular_velocity_sigma
     data = (
-        jnp.asarray(times_sorted - t_ref, dtype),
-        jnp.asarray(q_sorted, dtype),
-        jnp.asarray(gyro, dtype),
+        jnp.asarray(np.append(times_sorted - t_ref, -t_ref), dtype),
+        jnp.asarray(np.concatenate([q_sorted, [[1.0, 0.0, 0.0, 0.0]]]), dtype),
+        jnp.asarray(np.concatenate([gyro, np.zeros((1, 3))]), dtype),
         jnp.asarray(time_scale, dtype),
         jnp.asarray(gyro_weight, dtype),
         jnp.asarray(1.0 / attitude_sigma, dtype),
-        jnp.asarray(t_ref, dtype),
     )
     scale_in = jnp.asarray(-1.0 if loss_scale is None else loss_scale, dtype)
-    out = _fit(
-        jnp.asarray(thetas0, dtype), jnp.asarray(references, dtype), data, jnp.asarray(masks, dtype),
-        jnp.asarray(_LOSSES[loss], jnp.int32), scale_in, rtol, atol, max_steps)
+    out = _solve(
+        compiler_options, jnp.asarray(thetas0, dtype), jnp.asarray(references, dtype), data,
+        jnp.asarray(masks, dtype), jnp.asarray(_LOSSES[loss], jnp.int32), scale_in, rtol=float(rtol),
+        atol=float(atol), max_steps=int(max_steps))
 
     # Back to physical parameters (Omega in 1/time).
-    unscale = jnp.ones(8, dtype).at[2:5].set(1.0 / time_scale)
-    theta_physical = out["theta"] * unscale
-    covariance = out["covariance"] * unscale[:, None] * unscale[None, :]
-    inertia = _normalised_inertia(theta_physical)
-    d_inertia = jax.jacfwd(_normalised_inertia)(theta_physical)
+    unscale = np.ones(8)
+    unscale[2:5] = 1.0 / time_scale
+    theta_physical = np.asarray(out["theta"], float) * unscale
+    covariance = np.asarray(out["covariance"], float) * unscale[:, None] * unscale[None, :]
+    inertia, d_inertia = _normalised_inertia(theta_physical)
     inertia_covariance = d_inertia @ covariance @ d_inertia.T
     omega0 = out["omega0"]
     attitude0 = out["attitude0"]
     attitude0 = jnp.where(attitude0[0] < 0, -attitude0, attitude0)
+    inertia = jnp.asarray(inertia, dtype)
     body = _make_body(inertia, inertia * omega0, attitude0)
     unsort = np.argsort(order)
     residuals = out["residuals"][unsort]
@@ -395,9 +463,9 @@ def fit_attitude(
         angular_velocity=omega0,
         attitude=attitude0,
         body=body,
-        parameters=theta_physical,
-        covariance=covariance,
-        inertia_covariance=inertia_covariance,
+        parameters=jnp.asarray(theta_physical, dtype),
+        covariance=jnp.asarray(covariance, dtype),
+        inertia_covariance=jnp.asarray(inertia_covariance, dtype),
         residuals=residuals,
         angular_velocity_residuals=w_residuals,
         cost=costs[best],

@@ -1,0 +1,227 @@
+"""frbjax.fit_attitude on synthetic data: recovery of the normalised moments and the angular velocity.
+
+Problems: random triaxial bodies (moments in random order in the data's body axes), some next to the
+separatrix, samples at uneven times over several rotation periods, 1e-3 rad attitude noise, random
+signs on the observed quaternions.
+
+Compiling the fit dominates (see frbjax.fit, "Compilation"): every fit here has the same number of
+samples (CI_SAMPLES) and starts (N_STARTS), so the whole module compiles the solver once; the first
+fit of a process holds a file lock (tests/_compile_lock.py) so that the other xdist worker, and the
+notebook notebooks/fit_inertia.ipynb (the same sizes; it shows the Huber loss with outliers), wait for
+it and then load the compiled program from JAX's persistent cache (tests/conftest.py) instead of
+compiling it again.  The true motions are evaluated by one jitted program (``motion``): evaluating
+FreeRigidBody eagerly costs ~10 s per body.  The acceptance runs (100 problems of 200 samples, and
+sparse asteroid-like observations) are in benchmarks/fit_success.py, which imports
+``synthetic_problem`` from here.
+"""
+
+from __future__ import annotations
+
+import functools
+
+import _compile_lock
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+from frbjax import AttitudeFit, FreeRigidBody, fit_attitude
+from frbjax import _quaternion as quaternion
+from frbjax.fit import _attitude_residual
+
+N_SAMPLES = 200  # the acceptance problems (benchmarks/fit_success.py)
+NOISE = 1e-3
+CI_SAMPLES = 64  # every fit in this module (and in the notebook): one compilation
+N_STARTS = 6
+
+
+@jax.jit
+def motion(inertia, momentum, attitude, times):
+    """(q(t), Omega(t)) of FreeRigidBody(inertia, momentum, attitude): one program per shape of times."""
+    body = FreeRigidBody(inertia, momentum, attitude)
+    return body.quaternion(times), body.angular_velocity(times)
+
+
+def synthetic_problem(seed, n=N_SAMPLES, noise=NOISE, periods=5.0, separatrix=False, inertia=None):
+    """(times, observed quaternions, true normalised moments, true Omega(0), true q(0))."""
+    rng = np.random.default_rng(seed)
+    if inertia is None:
+        inertia = np.sort(rng.uniform(0.3, 1.0, 3))
+        while np.min(np.diff(inertia)) < 0.05:  # clearly triaxial
+            inertia = np.sort(rng.uniform(0.3, 1.0, 3))
+    inertia = np.sort(np.asarray(inertia, float)) / np.max(inertia)
+    if separatrix:
+        # d = |L|^2-normalised energy 1/I2 (1 +- 1e-3), L2 = 0 at t = 0, either side.
+        d = (1 + rng.choice([-1, 1]) * 1e-3) / inertia[1]
+        i1, _, i3 = inertia
+        l1 = np.sqrt((d - 1 / i3) / (1 / i1 - 1 / i3))
+        momentum = np.array([l1, 0.0, np.sqrt(1 - l1**2)]) * rng.choice([-1, 1], 3)
+    else:
+        momentum = rng.normal(size=3)
+        momentum /= np.linalg.norm(momentum)
+    order = rng.permutation(3)  # the data's body axes: the moments in any order
+    inertia, momentum = inertia[order], momentum[order]
+    attitude = rng.normal(size=4)
+    attitude /= np.linalg.norm(attitude)
+    attitude *= np.sign(attitude[0])
+    omega = momentum / inertia
+    period = 2 * np.pi / np.linalg.norm(omega)
+    times = np.sort(rng.uniform(0, periods * period, n))
+    times[0] = 0.0
+    q = np.asarray(motion(inertia, momentum, attitude, times)[0])
+    perturbation = np.asarray(quaternion.exp_pure(jnp.asarray(rng.normal(scale=noise, size=(n, 3)))))
+    q = np.asarray(quaternion.multiply(jnp.asarray(q), jnp.asarray(perturbation)))
+    q = q * rng.choice([-1.0, 1.0], size=(n, 1))
+    return times, q, inertia, omega, attitude
+
+
+def errors(fit, inertia, omega):
+    inertia_error = np.max(np.abs(np.asarray(fit.inertia) - inertia) / inertia)
+    omega_error = np.linalg.norm(np.asarray(fit.angular_velocity) - omega) / np.linalg.norm(omega)
+    return inertia_error, omega_error
+
+
+# ----------------------------------------------------------------------------------- one compilation
+
+_compiled_here = False
+
+
+@pytest.fixture(scope="session")
+def _lock_path(tmp_path_factory):
+    return _compile_lock.path(tmp_path_factory)
+
+
+@pytest.fixture
+def fit(_lock_path):
+    def run(times, q, **options):
+        global _compiled_here
+        assert len(times) == CI_SAMPLES  # one compiled program for the module
+        options.setdefault("n_starts", N_STARTS)
+        if _compiled_here:
+            return fit_attitude(times, q, **options)
+        with _compile_lock.held(_lock_path):
+            result = fit_attitude(times, q, **options)
+        _compiled_here = True
+        return result
+
+    return run
+
+
+@functools.cache
+def problem(seed, separatrix=False):
+    return synthetic_problem(seed, n=CI_SAMPLES, separatrix=separatrix)
+
+
+# ------------------------------------------------------------------------------------------ tests
+
+PROBLEMS = [(0, False), (101, True)]  # a generic body; one next to the separatrix
+
+
+@pytest.mark.parametrize("seed, separatrix", PROBLEMS)
+def test_recovers_moments_and_angular_velocity(fit, seed, separatrix):
+    times, q, inertia, omega, attitude = problem(seed, separatrix)
+    result = fit(times, q, seed=seed)
+    assert isinstance(result, AttitudeFit)
+    inertia_error, omega_error = errors(result, inertia, omega)
+    assert bool(result.success)
+    assert inertia_error < 0.01 and omega_error < 0.01, (inertia_error, omega_error)
+    # The attitude at t = 0 (either sign) and the residuals at the noise level.
+    assert min(np.abs(np.asarray(result.attitude) - attitude).max(),
+               np.abs(np.asarray(result.attitude) + attitude).max()) < 0.01
+    rms = np.sqrt(np.mean(np.sum(np.asarray(result.residuals) ** 2, -1)))
+    assert rms < 3 * NOISE * np.sqrt(3)
+    assert np.max(np.asarray(result.inertia)) == pytest.approx(1.0)
+    # The fitted body holds the reported state at t = 0, and its motion gives the residuals.
+    body = result.body
+    assert np.allclose(np.asarray(body.initial_angular_momentum / body.inertia),
+                       np.asarray(result.angular_velocity), rtol=1e-14, atol=0)
+    model = motion(body.inertia, body.initial_angular_momentum, body.initial_attitude, times)[0]
+    expected = np.asarray(_attitude_residual(model, jnp.asarray(q)))
+    assert np.allclose(np.asarray(result.residuals), expected, rtol=0, atol=1e-8)
+    # The covariance: symmetric positive definite, and the errors within a few standard deviations.
+    assert result.covariance.shape == (8, 8) and result.inertia_covariance.shape == (3, 3)
+    assert result.residuals.shape == (CI_SAMPLES, 3) and result.start_costs.shape == (N_STARTS,)
+    covariance = np.asarray(result.covariance)
+    assert np.allclose(covariance, covariance.T) and np.all(np.linalg.eigvalsh(covariance) > 0)
+    sigma = np.sqrt(np.diag(np.asarray(result.inertia_covariance)))
+    assert np.all(np.abs(np.asarray(result.inertia) - inertia) <= 5 * sigma + 1e-12)
+
+
+def test_time_origin_and_order_do_not_matter(fit):
+    """The same data shifted in time (no sample at t = 0) and shuffled: the same motion at t = 0."""
+    times, q, inertia, omega, attitude = problem(0)
+    shift = 0.37 * (times[1] - times[0])
+    # Observations of the same motion, at times counted from a new origin: t' = t - shift.
+    shuffled = np.random.default_rng(3).permutation(CI_SAMPLES)
+    result = fit(times[shuffled] - shift, q[shuffled], seed=0)
+    at_shift = motion(inertia, inertia * omega, attitude, np.full(CI_SAMPLES, shift))
+    expected_attitude, expected_omega = (np.asarray(a[0]) for a in at_shift)
+    assert np.linalg.norm(np.asarray(result.angular_velocity) - expected_omega) < 0.01 * np.linalg.norm(omega)
+    assert min(np.abs(np.asarray(result.attitude) - expected_attitude).max(),
+               np.abs(np.asarray(result.attitude) + expected_attitude).max()) < 0.01
+    assert float(result.reference_time) == pytest.approx(-shift)  # the sample nearest t' = 0
+    # Residuals come back in the caller's order: those of the fitted body against the data.
+    body = result.body
+    model = motion(body.inertia, body.initial_angular_momentum, body.initial_attitude, times[shuffled] - shift)[0]
+    expected = np.asarray(_attitude_residual(model, jnp.asarray(q[shuffled])))
+    assert np.allclose(np.asarray(result.residuals), expected, rtol=0, atol=1e-8)
+
+
+@pytest.mark.parametrize("loss", ["cauchy"])
+def test_robust_losses_with_outliers(fit, loss):
+    """6 grossly wrong attitudes (random rotations): the robust loss still recovers the body (the Huber
+    loss: notebooks/fit_inertia.ipynb, also run in CI)."""
+    times, q, inertia, omega, _ = problem(5)
+    rng = np.random.default_rng(0)
+    bad = rng.choice(np.arange(1, CI_SAMPLES), 6, replace=False)
+    q = q.copy()
+    random = rng.normal(size=(6, 4))
+    q[bad] = random / np.linalg.norm(random, axis=-1, keepdims=True)
+    result = fit(times, q, loss=loss)
+    inertia_error, omega_error = errors(result, inertia, omega)
+    assert inertia_error < 0.01 and omega_error < 0.01, (loss, inertia_error, omega_error)
+    residual = np.linalg.norm(np.asarray(result.residuals), axis=-1)
+    assert np.all(residual[bad] > 10 * np.median(residual))  # the outliers stand out
+
+
+def test_gyro_data(fit):
+    times, q, inertia, omega, attitude = problem(6)
+    rng = np.random.default_rng(1)
+    gyro = np.asarray(motion(inertia, inertia * omega, attitude, times)[1])
+    gyro = gyro + rng.normal(scale=1e-3, size=(CI_SAMPLES, 3))
+    result = fit(times, q, angular_velocity_data=gyro, attitude_sigma=1e-3, angular_velocity_sigma=1e-3)
+    inertia_error, omega_error = errors(result, inertia, omega)
+    assert inertia_error < 0.01 and omega_error < 0.01
+    assert np.sqrt(np.mean(np.asarray(result.angular_velocity_residuals) ** 2)) < 3e-3
+
+
+def test_asteroid_sparse_noisy(fit):
+    """A tumbling asteroid: moments 0.64 : 0.97 : 1, uneven, noisy (3e-3 rad) observations over six
+    rotation periods (about ten per period)."""
+    times, q, inertia, omega, _ = synthetic_problem(
+        2024, n=CI_SAMPLES, noise=3e-3, periods=6.0, inertia=[0.64, 0.97, 1.0])
+    result = fit(times, q, seed=1)
+    inertia_error, omega_error = errors(result, inertia, omega)
+    assert inertia_error < 0.01 and omega_error < 0.01, (inertia_error, omega_error)
+
+
+def test_rejects_bad_input():
+    with pytest.raises(ValueError):
+        fit_attitude(np.zeros(5), np.zeros((5, 3)))
+    with pytest.raises(ValueError):
+        fit_attitude(np.arange(5.0), np.ones((5, 4)), loss="l1")
+    with pytest.raises(ValueError):
+        fit_attitude(np.arange(3.0), np.ones((3, 4)))
+
+
+def test_attitude_residual_ignores_quaternion_sign():
+    rng = np.random.default_rng(0)
+    q_model = rng.normal(size=(5, 4))
+    q_model /= np.linalg.norm(q_model, axis=-1, keepdims=True)
+    q_obs = rng.normal(size=(5, 4))
+    q_obs /= np.linalg.norm(q_obs, axis=-1, keepdims=True)
+    plus = np.asarray(_attitude_residual(jnp.asarray(q_model), jnp.asarray(q_obs)))
+    minus = np.asarray(_attitude_residual(jnp.asarray(q_model), jnp.asarray(-q_obs)))
+    flipped = np.asarray(_attitude_residual(jnp.asarray(-q_model), jnp.asarray(q_obs)))
+    assert np.array_equal(plus, minus) and np.array_equal(plus, flipped)
+
