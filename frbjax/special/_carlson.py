@@ -1,14 +1,23 @@
 """Carlson's symmetric elliptic integrals R_F, R_D, R_J, R_C for real arguments (DLMF 19.16).
 
-Evaluation is Carlson's duplication algorithm (B. C. Carlson, "Numerical computation of real or complex
-elliptic integrals", Numer. Algorithms 10 (1995) 13-26; DLMF 19.36.1-19.36.2) with a *fixed* number of
-duplication steps chosen per dtype, followed by the Taylor series of DLMF 19.36.1 and 19.36.2 up to
-seventh order.  A fixed count keeps everything a straight-line XLA program (jit, vmap, reverse mode).
+R_F, R_D and R_J: Carlson's duplication algorithm (B. C. Carlson, "Numerical computation of real or
+complex elliptic integrals", Numer. Algorithms 10 (1995) 13-26; DLMF 19.36.1-19.36.2), followed by the
+Taylor series of DLMF 19.36.1 and 19.36.2 up to seventh order.
 
-Each duplication step shrinks the relative spread of the arguments by a factor 4 and the series error
-is the eighth power of that spread, so ``_steps`` steps give full precision whenever the arguments
-differ by less than about 4**(_steps - 5) relative to their mean limit; the counts below cover
-ratios down to 1e-300 (checked against mpmath in tests/special/test_carlson.py).
+Each duplication step is an exact identity that shrinks the relative spread of the arguments by a
+factor 4, and the seventh-order series errs by about the eighth power of that spread.  A *fixed* number
+of steps per dtype (``_plan``: 12 in float64, enough for argument ratios down to 1e-300) keeps each
+function a straight-line XLA program.  The steps are unrolled, so that XLA fuses the whole evaluation
+into one vectorized pass over the points; the derivative rules use a rolled loop instead (one
+compiled step: compile time).  R_F and R_J of the same x, y, z share one loop (``_rf_rj``).  In R_J's
+step, R_C(1, 1 + e_k) (Carlson 1995, eq. (2.19)) costs a square root and a polynomial; a logarithm
+only serves the points with 1 + e_k < 1/2.
+
+R_C has closed forms (DLMF 19.2.18-19.2.19): an arctangent for x < y, a logarithm for x > y, and its
+Maclaurin series in (y - x)/x near x = y.
+
+Nowhere a quotient by a square root: XLA turns it into rsqrt, whose float64 CPU code is scalar and
+de-vectorizes the fused loop around it (``_common.over_sqrt``).
 
 Derivatives (custom JVP rules):
 - R_F: DLMF 19.18.1, dR_F/dz = -R_D(x, y, z)/6 (and symmetrically).
@@ -24,18 +33,43 @@ Derivatives (custom JVP rules):
 
 from __future__ import annotations
 
+import functools
+
 import jax
 import jax.numpy as jnp
 from jax import lax
 
-from .._fusion import materialise
-from ._common import is_double, promote
+from ._common import is_double, over_sqrt, promote
 
 
-def _steps(x) -> int:
-    # 12 steps: spread 2 * 4**-12 / (A_N/A_0) <= 1e-2 even when A_N/A_0 is 1e-5 (the worst case, two
-    # arguments 1e-300 below the third); the 7th-order series then leaves < 1e-16.
-    return 12 if is_double(x) else 7
+def _plan(x):
+    """(steps, spread threshold) of the duplication, per dtype (see the module note).
+
+    float64: 12 steps bring the spread below 2^-8 for argument ratios down to 1e-300, where the
+    seventh-order series errs by about 0.1 spread^8 < 1e-17.  float32: 7 steps (spread 2^-5, 1e-13).
+    """
+    return (12, 2.0**-8) if is_double(x) else (7, 2.0**-5)
+
+
+def _duplicate(step, state, x, rolled=False):
+    """Apply duplication ``step(state, q)`` (q = 4^-k at step k) ``_plan`` times; returns (state, 4^-N).
+
+    Unrolled by default: XLA fuses the steps and the series into one vectorized pass over the points
+    (a rolled loop writes the state to memory and back every step, several times slower).  The
+    derivative rules use ``rolled=True``: one compiled step instead of twelve (compile time).
+    """
+    steps, _ = _plan(x)
+    if rolled:
+        def body(_, carry):
+            quarter, state = carry
+            return quarter / 4, step(state, quarter)
+
+        return lax.fori_loop(0, steps, body, (jnp.asarray(1.0, x.dtype), state))[::-1]
+    quarter = 1.0
+    for _ in range(steps):
+        state = step(state, quarter)
+        quarter = quarter / 4
+    return state, quarter
 
 
 def _sqrt_for_tangents(x):
@@ -56,28 +90,12 @@ def _safe_sqrt_jvp(primals, tangents):
     return root, dx * inverse_twice_root
 
 
-# ---------------------------------------------------------------------------------------------- R_F
-
-
-def _rf_series(x, y, z, steps):
-    mean0 = (x + y + z) / 3
-    dx0, dy0 = mean0 - x, mean0 - y
-
-    def duplicate(_, state):
-        x, y, z, mean = state
-        sx, sy, sz = _sqrt_for_tangents(x), _sqrt_for_tangents(y), _sqrt_for_tangents(z)
-        lam = sx * (sy + sz) + sy * sz
-        return (x + lam) / 4, (y + lam) / 4, (z + lam) / 4, (mean + lam) / 4
-
-    # A rolled loop: XLA compiles one duplication step instead of `steps` copies (compile time).
-    x, y, z, mean = lax.fori_loop(0, steps, duplicate, (x, y, z, mean0))
-    # DLMF 19.36.1 with X = 1 - x_N/A_N computed without cancellation as (A_0 - x_0) / (4^N A_N).
-    scale = 0.25**steps / mean
-    big_x, big_y = dx0 * scale, dy0 * scale
+def _rf_polynomial(big_x, big_y):
+    """DLMF 19.36.1 through seventh order, X + Y + Z = 0."""
     big_z = -(big_x + big_y)
     e2 = big_x * big_y - big_z * big_z
     e3 = big_x * big_y * big_z
-    series = (
+    return (
         1
         - e2 / 10
         + e3 / 14
@@ -87,25 +105,65 @@ def _rf_series(x, y, z, steps):
         + 3 * e3 * e3 / 104
         + e2 * e2 * e3 / 16
     )
-    return series / jnp.sqrt(mean)
+
+
+def _rj_polynomial(e2, e3, e4, e5):
+    """DLMF 19.36.2 (Carlson 1995, eq. (2.7)), terms through seventh order."""
+    return (
+        1
+        - 3 * e2 / 14
+        + e3 / 6
+        + 9 * e2 * e2 / 88
+        - 3 * e4 / 22
+        - 9 * e2 * e3 / 52
+        + 3 * e5 / 26
+        - e2**3 / 16
+        + 3 * e3 * e3 / 40
+        + 3 * e2 * e4 / 20
+        + 45 * e2 * e2 * e3 / 272
+        - 9 * (e3 * e4 + e2 * e5) / 68
+    )
+
+
+def _lambda(x, y, z):
+    sx, sy, sz = _sqrt_for_tangents(x), _sqrt_for_tangents(y), _sqrt_for_tangents(z)
+    return sx * (sy + sz) + sy * sz, (sx, sy, sz)
+
+
+# ---------------------------------------------------------------------------------------------- R_F
+
+
+def _rf_series(x, y, z, rolled=False):
+    mean0 = (x + y + z) / 3
+    dx0, dy0 = mean0 - x, mean0 - y
+
+    def step(state, _):
+        x, y, z, mean = state
+        lam, _ = _lambda(x, y, z)
+        return (x + lam) / 4, (y + lam) / 4, (z + lam) / 4, (mean + lam) / 4
+
+    (x, y, z, mean), quarter = _duplicate(step, (x, y, z, mean0), x, rolled)
+    # DLMF 19.36.1 with X = 1 - x_N/A_N computed without cancellation as (A_0 - x_0) / (4^N A_N).
+    scale = quarter / mean
+    return over_sqrt(_rf_polynomial(dx0 * scale, dy0 * scale), mean)
 
 
 @jax.custom_jvp
 def _rf(x, y, z):
-    return _rf_series(x, y, z, _steps(x))
+    return _rf_series(x, y, z)
+
+
+def _rf_tangent(x, y, z, dx, dy, dz):
+    # DLMF 19.18.1: dR_F/dz = -R_D(x, y, z)/6, and by symmetry for x and y.  The three R_D go through
+    # one duplication loop, stacked on a new leading axis (a third of the compiled code).
+    x, y, z = jnp.broadcast_arrays(x, y, z)
+    rd_x, rd_y, rd_z = _rd(jnp.stack([y, z, x]), jnp.stack([z, x, y]), jnp.stack([x, y, z]), True)
+    return -(_masked(dx, x, rd_x) + _masked(dy, y, rd_y) + _masked(dz, z, rd_z)) / 6
 
 
 @_rf.defjvp
 def _rf_jvp(primals, tangents):
-    x, y, z = primals
-    dx, dy, dz = tangents
-    value = _rf(x, y, z)
-    # DLMF 19.18.1: dR_F/dz = -R_D(x, y, z)/6, and by symmetry for x and y.  The three R_D go through
-    # one duplication loop, stacked on a new leading axis (a third of the compiled code).
-    x, y, z = jnp.broadcast_arrays(x, y, z)
-    rd_x, rd_y, rd_z = _rd(jnp.stack([y, z, x]), jnp.stack([z, x, y]), jnp.stack([x, y, z]))
-    tangent = -(_masked(dx, x, rd_x) + _masked(dy, y, rd_y) + _masked(dz, z, rd_z)) / 6
-    return value, tangent
+    return _rf(*primals), _rf_tangent(*primals, *tangents)
 
 
 def _masked(tangent, argument, partial):
@@ -115,72 +173,122 @@ def _masked(tangent, argument, partial):
 
 # ---------------------------------------------------------------------------------------------- R_J
 
+# R_C(1, 1 + e) = 2F1(1/2, 1; 3/2; -e) for |e| <= 0.1716: the degree-15 Chebyshev interpolant on that
+# interval (mpmath), error 7e-19; highest degree first.
+_RC_POLYNOMIAL = (
+    -0.035845454157110504, 0.0382860515301367, -0.036861807914879065, 0.03981424818905601,
+    -0.043482670645682224, 0.04762372192420984, -0.052631517733447486, 0.05882346452803347,
+    -0.0666666671270696, 0.07692307741107116, -0.09090909090739277, 0.11111111110931124,
+    -0.14285714285714524, 0.20000000000000254, -0.3333333333333333, 1.0,
+)
 
-def _rc_one_plus(e, w):
-    """R_C(1, w) with w = 1 + e > 0, both given accurately (DLMF 19.2.18-19.2.20).
 
-    arctan(sqrt e)/sqrt e for e > 0; artanh(sqrt -e)/sqrt -e for e < 0, with artanh(r) written as
-    log1p(2r(1 + r)/w)/2 so that w -> 0 (e -> -1) loses nothing; the Maclaurin series near e = 0.
+def _horner(coefficients, x):
+    result = coefficients[0]
+    for c in coefficients[1:]:
+        result = result * x + c
+    return result
+
+
+def _rc_one_plus(w, logarithm=True):
+    """R_C(1, w) for 0 < w <= 2 (DLMF 19.2.18-19.2.20), w given accurately (w = 1 + e_k in R_J).
+
+    For w >= 1/2 one duplication step of R_C itself: with a = sqrt(w),
+    R_C(1, w) = 2/(1 + a) R_C(1, 1 + e') with e' = (w - 1)/(1 + a)^2 = (a - 1)/(a + 1) in
+    [-0.1716, 0.1716], where a polynomial takes over (no arctangent; an absolute error of e' of an ulp
+    moves R_C by a third of that).  For w < 1/2 (only when ``logarithm``): artanh(r)/r with
+    r = sqrt(1 - w), written as log1p(2r(1 + r)/w)/2 so that w -> 0 loses nothing.
+    Everything is a function of w alone: XLA then fuses it into the surrounding duplication.
     """
-    small = jnp.abs(e) < 2.0**-10
-    # Series sum_k (-e)^k / (2k + 1), truncated where |e|^8/17 is below float64 precision.
-    series = 1 + e * (
-        -1 / 3 + e * (1 / 5 + e * (-1 / 7 + e * (1 / 9 + e * (-1 / 11 + e * (1 / 13 + e * (-1 / 15))))))
-    )
-    root = jnp.sqrt(jnp.abs(jnp.where(small, 1, e)))
-    safe_w = jnp.where(small, 1, w)
-    atanh = 0.5 * jnp.log1p(2 * root * (1 + root) / safe_w)
-    closed = jnp.where(e > 0, jnp.arctan(root), atanh) / root
-    return jnp.where(small, series, closed)
+    a = jnp.sqrt(w)
+    inverse = 1 / (1 + a)
+    value = 2 * _horner(_RC_POLYNOMIAL, (a - 1) * inverse) * inverse
+    if not logarithm:
+        return value
+    near = w < 0.5
+    minus_e = jnp.where(near, 1 - w, 1)
+    # artanh(r)/r = log((1 + r)^2/w)/(2r) with r = sqrt(1 - w); the second square root of 1 - w is
+    # written sqrt(4(1 - w))/2 (exact) so that XLA keeps it apart: a value of an expensive operation
+    # used twice is not fused, and materializing it every step costs more than a square root.
+    root = jnp.sqrt(minus_e)
+    argument = (1 + root) * (1 + root) / jnp.where(near, w, 1)  # >= 5.8: no cancellation in the log
+    value_near = _log_above_one(argument) * (jnp.sqrt(4 * minus_e) / 4) / minus_e
+    return jnp.where(near, value_near, value)
 
 
-def _rc_one_plus_nonnegative(e):
-    """R_C(1, 1 + e) = arctan(sqrt e)/sqrt e for e >= 0 (DLMF 19.2.18), the series near e = 0."""
-    small = e < 2.0**-10
-    series = 1 + e * (
-        -1 / 3 + e * (1 / 5 + e * (-1 / 7 + e * (1 / 9 + e * (-1 / 11 + e * (1 / 13 + e * (-1 / 15))))))
-    )
-    root = jnp.sqrt(jnp.where(small, 1, e))
-    return jnp.where(small, series, jnp.arctan(root) / root)
+# log(f) = 2 artanh(u) = 2u sum_k u^(2k)/(2k + 1), u = (f - 1)/(f + 1), |u| <= 0.1716 for
+# f in [sqrt(1/2), sqrt(2)): terms through u^22 (error 0.1716^24/25 < 1e-19); highest degree first.
+_ARTANH_SERIES = tuple(1 / (2 * k + 1) for k in range(11, -1, -1))
+_LOG2_HIGH = 0.693145751953125  # ln 2 to 17 bits: k * _LOG2_HIGH is exact for |k| < 2^36
+_LOG2_LOW = 1.4286068203094172e-06
 
 
-def _rj_series(x, y, z, p, steps, parameter_largest=False):
+@jax.custom_jvp
+def _log_above_one(x):
+    """log(x) for finite x >= 1, to about an ulp, in vectorizable arithmetic (derivative 1/x).
+
+    XLA's float64 logarithm costs as much as six square roots on CPU; here x = 2^k f with f in
+    [sqrt(1/2), sqrt(2)) from the bits of x (the exponent read as a float through 2^52 + k, no
+    integer-to-float conversion), then log f by the artanh series.  float32 uses jnp.log.
+    """
+    if not is_double(x):
+        return jnp.log(x)
+    bits = lax.bitcast_convert_type(x, jnp.int64)
+    exponent = lax.bitcast_convert_type((bits >> 52) | 0x4330000000000000, jnp.float64) - (2.0**52 + 1023)
+    fraction = lax.bitcast_convert_type((bits & 0x000FFFFFFFFFFFFF) | 0x3FF0000000000000, jnp.float64)
+    high = fraction > 1.4142135623730951
+    fraction = jnp.where(high, 0.5 * fraction, fraction)
+    exponent = jnp.where(high, exponent + 1, exponent)
+    u = (fraction - 1) * (1 / (fraction + 1))
+    return exponent * _LOG2_HIGH + (exponent * _LOG2_LOW + 2 * u * _horner(_ARTANH_SERIES, u * u))
+
+
+@_log_above_one.defjvp
+def _log_above_one_jvp(primals, tangents):
+    (x,), (dx,) = primals, tangents
+    return _log_above_one(x), dx / x
+
+
+def _rf_rj_series(x, y, z, p, parameter_largest=False, rolled=False):
+    """(R_F(x, y, z), R_J(x, y, z, p)) from one duplication of x, y, z (the same for both)."""
     mean0 = (x + y + z + 2 * p) / 5
     dx0, dy0, dz0 = mean0 - x, mean0 - y, mean0 - z
     px0, py0, pz0 = p - x, p - y, p - z
+    # e_k < 0 (an odd number of arguments above p) is decided by the inputs alone.
+    negative = (px0 < 0) ^ (py0 < 0) ^ (pz0 < 0)
+    mean_f0 = (x + y + z) / 3
+    fx0, fy0 = mean_f0 - x, mean_f0 - y
 
-    def duplicate(_, state):
-        x, y, z, p, mean, correction, quarter_power = state
-        sx, sy, sz = _sqrt_for_tangents(x), _sqrt_for_tangents(y), _sqrt_for_tangents(z)
+    def step(state, quarter):
+        x, y, z, p, mean, mean_f, correction = state
+        lam, (sx, sy, sz) = _lambda(x, y, z)
         sp = _sqrt_for_tangents(p)
-        lam = sx * (sy + sz) + sy * sz
-        d = (sp + sx) * (sp + sy) * (sp + sz)
-        # e_k = 4^{-3k} (p-x)(p-y)(p-z) / d_k^2 (Carlson 1995, eq. (2.19)), written as a product of three
-        # ratios in (-1, 1) so that nothing overflows; it shrinks about 64-fold per step.
-        ratio_x = quarter_power * px0 / ((sp + sx) * (sp + sx))
-        ratio_y = quarter_power * py0 / ((sp + sy) * (sp + sy))
-        ratio_z = quarter_power * pz0 / ((sp + sz) * (sp + sz))
+        ix, iy, iz = 1 / (sp + sx), 1 / (sp + sy), 1 / (sp + sz)
+        # e_k = 4^{-3k} (p-x)(p-y)(p-z) / d_k^2 (Carlson 1995, eq. (2.19)), d_k = (sp+sx)(sp+sy)(sp+sz),
+        # as a product of three ratios (sp - sx)/(sp + sx) in (-1, 1), each from the exact difference
+        # 4^-k (p_0 - x_0) = p_k - x_k, so that nothing overflows or cancels.
+        ratio_x = quarter * px0 * ix * ix
+        ratio_y = quarter * py0 * iy * iy
+        ratio_z = quarter * pz0 * iz * iz
         e = ratio_x * ratio_y * ratio_z
-        # 1 + e without cancellation when e -> -1: write each ratio as sign * (1 - t) with
-        # t = 1 - |ratio| = 2 min(sqrt p, sqrt x_j)/(sqrt p + sqrt x_j), computed without subtraction.
-        if not parameter_largest:
-            tx = 2 * jnp.minimum(sp, sx) / (sp + sx)
-            ty = 2 * jnp.minimum(sp, sy) / (sp + sy)
-            tz = 2 * jnp.minimum(sp, sz) / (sp + sz)
         if parameter_largest:
             # p >= x, y, z: every ratio and e are >= 0, and R_C(1, 1 + e) is an arctangent.
-            correction = correction + quarter_power * _rc_one_plus_nonnegative(e) / d
+            rc = _rc_one_plus(1 + e, logarithm=False)
         else:
+            # 1 + e without cancellation when e -> -1: each ratio is sign * (1 - t) with
+            # t = 1 - |ratio| = 2 min(sqrt p, sqrt x_j)/(sqrt p + sqrt x_j), computed without subtraction.
+            tx = 2 * jnp.minimum(sp, sx) * ix
+            ty = 2 * jnp.minimum(sp, sy) * iy
+            tz = 2 * jnp.minimum(sp, sz) * iz
             one_minus_product = tx + ty + tz - (tx * ty + tx * tz + ty * tz) + tx * ty * tz
-            one_plus_e = jnp.where(e < 0, one_minus_product, 1 + e)
-            correction = correction + quarter_power * _rc_one_plus(e, one_plus_e) / d
+            rc = _rc_one_plus(jnp.where(negative, one_minus_product, 1 + e))
+        correction = correction + (quarter * rc) * (ix * iy * iz)
         x, y, z, p = (x + lam) / 4, (y + lam) / 4, (z + lam) / 4, (p + lam) / 4
-        return x, y, z, p, (mean + lam) / 4, correction, quarter_power / 4
+        return x, y, z, p, (mean + lam) / 4, (mean_f + lam) / 4, correction
 
-    zero = jnp.zeros_like(mean0)
-    state = (x, y, z, p, mean0, zero, jnp.ones_like(mean0))
-    x, y, z, p, mean, correction, _ = lax.fori_loop(0, steps, duplicate, state)
-    scale = 0.25**steps / mean
+    state = (x, y, z, p, mean0, mean_f0, jnp.zeros_like(mean0))
+    (x, y, z, p, mean, mean_f, correction), quarter = _duplicate(step, state, x, rolled)
+    scale = quarter / mean
     big_x, big_y, big_z = dx0 * scale, dy0 * scale, dz0 * scale
     big_p = -(big_x + big_y + big_z) / 2
     p2 = big_p * big_p
@@ -188,39 +296,29 @@ def _rj_series(x, y, z, p, steps, parameter_largest=False):
     e3 = big_x * big_y * big_z + 2 * e2 * big_p + 4 * p2 * big_p
     e4 = (2 * big_x * big_y * big_z + e2 * big_p + 3 * p2 * big_p) * big_p
     e5 = big_x * big_y * big_z * p2
-    # DLMF 19.36.2 (Carlson 1995, eq. (2.7)), terms through seventh order.
-    series = (
-        1
-        - 3 * e2 / 14
-        + e3 / 6
-        + 9 * e2 * e2 / 88
-        - 3 * e4 / 22
-        - 9 * e2 * e3 / 52
-        + 3 * e5 / 26
-        - e2**3 / 16
-        + 3 * e3 * e3 / 40
-        + 3 * e2 * e4 / 20
-        + 45 * e2 * e2 * e3 / 272
-        - 9 * (e3 * e4 + e2 * e5) / 68
-    )
-    return (0.25**steps) * series / (mean * jnp.sqrt(mean)) + 6 * correction
+    rj = quarter * _rj_polynomial(e2, e3, e4, e5) / (mean * jnp.sqrt(mean)) + 6 * correction
+    scale_f = quarter / mean_f
+    rf = over_sqrt(_rf_polynomial(fx0 * scale_f, fy0 * scale_f), mean_f)
+    return rf, rj
 
 
-def _rd_series(x, y, z, steps):
+def _rj_series(x, y, z, p, parameter_largest=False, rolled=False):
+    return _rf_rj_series(x, y, z, p, parameter_largest, rolled)[1]
+
+
+def _rd_series(x, y, z, rolled=False):
     mean0 = (x + y + 3 * z) / 5
     dx0, dy0 = mean0 - x, mean0 - y
 
-    def duplicate(_, state):
-        x, y, z, mean, correction, quarter_power = state
-        sx, sy, sz = _sqrt_for_tangents(x), _sqrt_for_tangents(y), _sqrt_for_tangents(z)
-        lam = sx * (sy + sz) + sy * sz
-        correction = correction + quarter_power / (sz * (z + lam))
-        x, y, z = (x + lam) / 4, (y + lam) / 4, (z + lam) / 4
-        return x, y, z, (mean + lam) / 4, correction, quarter_power / 4
+    def step(state, quarter):
+        x, y, z, mean, correction = state
+        lam, (_, _, sz) = _lambda(x, y, z)
+        correction = correction + quarter / (sz * (z + lam))
+        return (x + lam) / 4, (y + lam) / 4, (z + lam) / 4, (mean + lam) / 4, correction
 
-    state = (x, y, z, mean0, jnp.zeros_like(mean0), jnp.ones_like(mean0))
-    x, y, z, mean, correction, _ = lax.fori_loop(0, steps, duplicate, state)
-    scale = 0.25**steps / mean
+    state = (x, y, z, mean0, jnp.zeros_like(mean0))
+    (x, y, z, mean, correction), quarter = _duplicate(step, state, x, rolled)
+    scale = quarter / mean
     big_x, big_y = dx0 * scale, dy0 * scale
     big_z = -(big_x + big_y) / 3
     # R_D = R_J(x, y, z, z): the R_J series with P = Z (DLMF 19.36.2).
@@ -229,26 +327,14 @@ def _rd_series(x, y, z, steps):
     e3 = (3 * xy - 8 * z2) * big_z
     e4 = 3 * (xy - z2) * z2
     e5 = xy * z2 * big_z
-    series = (
-        1
-        - 3 * e2 / 14
-        + e3 / 6
-        + 9 * e2 * e2 / 88
-        - 3 * e4 / 22
-        - 9 * e2 * e3 / 52
-        + 3 * e5 / 26
-        - e2**3 / 16
-        + 3 * e3 * e3 / 40
-        + 3 * e2 * e4 / 20
-        + 45 * e2 * e2 * e3 / 272
-        - 9 * (e3 * e4 + e2 * e5) / 68
-    )
-    return (0.25**steps) * series / (mean * jnp.sqrt(mean)) + 3 * correction
+    series = _rj_polynomial(e2, e3, e4, e5)
+    return quarter * series / (mean * jnp.sqrt(mean)) + 3 * correction
 
 
-@jax.custom_jvp
-def _rd(x, y, z):
-    return _rd_series(x, y, z, _steps(x))
+@functools.partial(jax.custom_jvp, nondiff_argnums=(3,))
+def _rd(x, y, z, rolled=False):
+    """R_D; ``rolled`` (for derivative rules) compiles one duplication step instead of all."""
+    return _rd_series(x, y, z, rolled)
 
 
 def _value_and_partials(function, primals):
@@ -266,9 +352,7 @@ def _value_and_partials(function, primals):
         return jax.jvp(function, tuple(primals), tangents)
 
     values, partials = jax.vmap(directional)(basis)
-    # Materialised: each partial feeds its own product with a tangent (and, in reverse mode, with a
-    # cotangent), and XLA would otherwise recompute the whole series in each of those fused loops.
-    return materialise((values[0], partials))
+    return jax.tree.map(lambda v: v[0], values), partials
 
 
 def _jvp_from_partials(function, primals, tangents):
@@ -277,58 +361,84 @@ def _jvp_from_partials(function, primals, tangents):
 
 
 @_rd.defjvp
-def _rd_jvp(primals, tangents):
-    steps = _steps(primals[0])
-    return _jvp_from_partials(lambda a, b, c: _rd_series(a, b, c, steps), primals, tangents)
+def _rd_jvp(rolled, primals, tangents):
+    return _jvp_from_partials(lambda a, b, c: _rd_series(a, b, c, True), primals, tangents)
+
+
+def _rj_rolled(x, y, z, p, parameter_largest=False):
+    return _rj_series(x, y, z, p, parameter_largest, True)
 
 
 @jax.custom_jvp
 def _rj(x, y, z, p):
-    return _rj_series(x, y, z, p, _steps(x))
+    return _rj_series(x, y, z, p)
 
 
 @_rj.defjvp
 def _rj_jvp(primals, tangents):
-    steps = _steps(primals[0])
-    return _jvp_from_partials(lambda a, b, c, d: _rj_series(a, b, c, d, steps), primals, tangents)
+    return _jvp_from_partials(_rj_rolled, primals, tangents)
+
+
+@jax.custom_jvp
+def _rf_rj(x, y, z, p):
+    """(R_F(x, y, z), R_J(x, y, z, p)) from one duplication loop."""
+    return _rf_rj_series(x, y, z, p)
+
+
+@_rf_rj.defjvp
+def _rf_rj_jvp(primals, tangents):
+    # Both partial derivatives from one rolled duplication loop (its tangent, as for R_J alone); the
+    # tangent of an argument that is exactly zero is ignored for R_F (module note).
+    (rf, rj), (rf_partials, rj_partials) = _value_and_partials(
+        lambda a, b, c, d: _rf_rj_series(a, b, c, d, rolled=True), primals)
+    rf_tangent = sum(_masked(tangent, argument, rf_partials[i])
+                     for i, (argument, tangent) in enumerate(zip(primals[:3], tangents[:3])))
+    rj_tangent = sum(rj_partials[i] * tangent for i, tangent in enumerate(tangents))
+    return (rf, rj), (rf_tangent, rj_tangent)
 
 
 @jax.custom_jvp
 def _rj_parameter_largest(x, y, z, p):
-    """R_J(x, y, z, p) for p >= max(x, y, z) (no logarithmic branch: see ``_rj_series``)."""
-    return _rj_series(x, y, z, p, _steps(x), parameter_largest=True)
+    """R_J(x, y, z, p) for p >= max(x, y, z) (no logarithmic branch: see ``_rf_rj_series``)."""
+    return _rj_series(x, y, z, p, True)
 
 
 @_rj_parameter_largest.defjvp
 def _rj_parameter_largest_jvp(primals, tangents):
-    steps = _steps(primals[0])
-    return _jvp_from_partials(lambda a, b, c, d: _rj_series(a, b, c, d, steps, True), primals, tangents)
+    return _jvp_from_partials(lambda a, b, c, d: _rj_rolled(a, b, c, d, True), primals, tangents)
 
 
 # ---------------------------------------------------------------------------------------------- R_C
 
 
-def _rc_series(x, y, steps):
-    mean0 = (x + 2 * y) / 3
-    dy0 = y - mean0
+def _rc_closed(x, y):
+    """R_C(x, y) for x >= 0, y > 0 in closed form (DLMF 19.2.18-19.2.19), the series near x = y.
 
-    def duplicate(_, state):
-        x, y, mean = state
-        lam = 2 * jnp.sqrt(x) * jnp.sqrt(y) + y
-        return (x + lam) / 4, (y + lam) / 4, (mean + lam) / 4
-
-    x, y, mean = lax.fori_loop(0, steps, duplicate, (x, y, mean0))
-    s = dy0 * (0.25**steps) / mean
-    # DLMF 19.36.8 (Carlson 1995, eq. (2.13)).
-    series = 1 + s * s * (
-        3 / 10 + s * (1 / 7 + s * (3 / 8 + s * (9 / 22 + s * (159 / 208 + s * (9 / 8)))))
+    x < y:  arctan(sqrt((y - x)/x)) / sqrt(y - x)  (x = 0 gives pi/(2 sqrt y));
+    x > y:  log1p((sqrt(x - y) + (x - y)/(sqrt x + sqrt y)) / sqrt y) / sqrt(x - y), the argument of
+            log1p being (sqrt x + sqrt(x - y))/sqrt y - 1 written without cancellation;
+    |y - x| < 2^-10 x:  x^(-1/2) sum_k (-e)^k/(2k + 1), e = (y - x)/x (DLMF 19.2.18 as a series).
+    y - x is exact where the series is not used and x, y are within a factor 2 (Sterbenz).
+    """
+    difference = y - x
+    e = difference / jnp.where(x > 0, x, 1)
+    small = (jnp.abs(e) < 2.0**-10) & (x > 0)
+    magnitude = jnp.abs(jnp.where(small, 1, difference))
+    root = jnp.sqrt(magnitude)
+    sx, sy = jnp.sqrt(x), jnp.sqrt(y)
+    above = jnp.arctan(jnp.sqrt(magnitude / jnp.where(x > 0, x, 0)))
+    below = jnp.log1p((root + magnitude / (sx + sy)) / sy)
+    series = 1 + e * (
+        -1 / 3 + e * (1 / 5 + e * (-1 / 7 + e * (1 / 9 + e * (-1 / 11 + e * (1 / 13 + e * (-1 / 15))))))
     )
-    return series / jnp.sqrt(mean)
+    # Divisions by square roots as products (see ``over_sqrt``).
+    closed = jnp.where(difference > 0, above, below) * root / magnitude
+    return jnp.where(small, series * sx / jnp.where(small, x, 1), closed)
 
 
 @jax.custom_jvp
 def _rc_positive(x, y):
-    return _rc_series(x, y, _steps(x))
+    return _rc_closed(x, y)
 
 
 @_rc_positive.defjvp
@@ -338,7 +448,7 @@ def _rc_positive_jvp(primals, tangents):
     value = _rc_positive(x, y)
     # R_C(x, y) = R_F(x, y, y) and DLMF 19.18.1; both R_D in one loop.
     x, y = jnp.broadcast_arrays(x, y)
-    rd_x, rd_y = _rd(jnp.stack([y, x]), jnp.stack([y, y]), jnp.stack([x, y]))
+    rd_x, rd_y = _rd(jnp.stack([y, x]), jnp.stack([y, y]), jnp.stack([x, y]), True)
     tangent = -_masked(dx, x, rd_x) / 6 - dy * rd_y / 3
     return value, tangent
 
@@ -375,25 +485,47 @@ def elliprd(x, y, z):
 _LARGE_PARAMETER_RATIO = 16.0
 
 
-def _rj_any_parameter(x, y, z, p):
+def _rj_transform(x, y, z, p):
+    """The arguments of DLMF 19.21.12: (low, middle, high, large, p_large, q_minus_high, q)."""
     low = jnp.minimum(jnp.minimum(x, y), z)
     high = jnp.maximum(jnp.maximum(x, y), z)
     middle = jnp.maximum(jnp.minimum(x, y), jnp.minimum(jnp.maximum(x, y), z))
     large = p > _LARGE_PARAMETER_RATIO * high
+    p_large = jnp.where(large, p, 2 * high)
+    q_minus_high = (low - high) / (p_large - high) * (middle - high)  # no overflow
+    return low, middle, high, large, p_large, q_minus_high, high + q_minus_high
+
+
+def _rj_any_parameter(x, y, z, p):
+    low, middle, high, large, p_large, q_minus_high, q = _rj_transform(x, y, z, p)
     direct = _rj(x, y, z, jnp.where(large, high, p))
     # DLMF 19.21.12 with the largest argument as pivot z:
     #   (p - z) R_J(x, y, z, p) + (q - z) R_J(x, y, z, q) = 3 R_F(x, y, z) - 3 R_C(xy/z, pq/z),
     #   (p - z)(q - z) = (x - z)(y - z);  every term is positive, so nothing cancels.
-    p_large = jnp.where(large, p, 2 * high)
-    q_minus_high = (low - high) / (p_large - high) * (middle - high)  # no overflow
-    q = high + q_minus_high
     transformed = (
         3 * _rf(low, middle, high)
         # R_C is homogeneous of degree -1/2: scale by the largest argument so that p q cannot overflow.
-        - 3 * _rc_positive((low / high) * (middle / high), (p_large / high) * (q / high)) / jnp.sqrt(high)
+        - 3 * over_sqrt(_rc_positive((low / high) * (middle / high), (p_large / high) * (q / high)), high)
         - q_minus_high * _rj(low, middle, high, q)
     ) / (p_large - high)
     return jnp.where(large, transformed, direct)
+
+
+@jax.custom_jvp
+def _rj_general(x, y, z, p):
+    """R_J for every p > 0: one duplication loop gives the R_F and R_J of both cases of DLMF 19.21.12."""
+    low, middle, high, large, p_large, q_minus_high, q = _rj_transform(x, y, z, p)
+    rf, rj = _rf_rj(low, middle, high, jnp.where(large, q, p))
+    # R_C(a, b) with b > a here (p q > x y): the arctangent form, no series needed.
+    a, b = (low / high) * (middle / high), (p_large / high) * (q / high)
+    rc = over_sqrt(jnp.arctan(jnp.sqrt((b - a) / a)), (b - a) * high)
+    transformed = (3 * rf - 3 * rc - q_minus_high * rj) / (p_large - high)
+    return jnp.where(large, transformed, rj)
+
+
+@_rj_general.defjvp
+def _rj_general_jvp(primals, tangents):
+    return jax.jvp(_rj_any_parameter, primals, tangents)
 
 
 def elliprj(x, y, z, p):
@@ -407,7 +539,7 @@ def elliprj(x, y, z, p):
     """
     x, y, z, p = promote(x, y, z, p)
     valid = p > 0
-    result = _rj_any_parameter(x, y, z, jnp.where(valid, p, 1))
+    result = _rj_general(x, y, z, jnp.where(valid, p, 1))
     return jnp.where(valid, result, jnp.nan)
 
 
@@ -419,10 +551,6 @@ def elliprc(x, y):
     """
     x, y = promote(x, y)
     positive = y > 0
-    # Safe-where: each branch is evaluated at arguments that are valid for it.
-    x_pos = jnp.where(positive, x, 1)
-    y_pos = jnp.where(positive, y, 1)
-    x_neg = jnp.where(positive, 1, x - y)
-    y_neg = jnp.where(positive, 1, -y)
-    principal = jnp.sqrt(jnp.where(positive, 1, x) / x_neg) * _rc_positive(x_neg, y_neg)
-    return jnp.where(positive, _rc_positive(x_pos, y_pos), principal)
+    # One evaluation, its arguments chosen per point.
+    factor = jnp.where(positive, 1, jnp.sqrt(x / jnp.where(positive, 1, x - y)))
+    return factor * _rc_positive(jnp.where(positive, x, x - y), jnp.where(positive, y, -y))

@@ -25,8 +25,9 @@ import jax
 import jax.numpy as jnp
 from jax import lax
 
-from ._carlson import _rd, _rf
-from ._common import complement, is_double, promote
+from ._carlson import _rd
+from ._common import complement, is_double, over_sqrt, promote
+from ._legendre import _complete_first
 
 
 def _agm_steps(x) -> int:
@@ -54,8 +55,9 @@ def _agm_levels(mc):
         a, b = state
         return ((a + b) / 2, jnp.sqrt(a * b)), (a, b)
 
+    # Unrolled: one fused pass over the points instead of a loop that stores every level's state.
     (mean, _), (a_levels, b_levels) = lax.scan(descend, (jnp.ones_like(mc), jnp.sqrt(mc)), None,
-                                               length=_agm_steps(mc))
+                                               length=_agm_steps(mc), unroll=True)
     return jnp.moveaxis(a_levels, 0, -1), jnp.moveaxis(b_levels, 0, -1), mean
 
 
@@ -86,16 +88,15 @@ def _jacobi_to_half_quarter(w, levels):
     # level's state to memory and back, several times slower).
     levels = (jnp.moveaxis(a_levels, -1, 0), jnp.moveaxis(b_levels, -1, 0))
     (_, cot_ratio, dn), _ = lax.scan(ascend, start, levels, reverse=True, unroll=True)
-    sn = 1 / jnp.sqrt(cot_ratio * cot_ratio + 1)
+    sn = over_sqrt(1, cot_ratio * cot_ratio + 1)
     cn = cot_ratio * sn
     one = jnp.ones_like(cn)
     return jnp.where(tiny, w, sn), jnp.where(tiny, one, cn), jnp.where(tiny, one, dn)
 
 
 def _quarter_period(mc):
-    """K(m) = R_F(0, mc, 1), with a finite stand-in K = 1 where mc = 0 (K infinite there)."""
-    limit = mc == 0
-    return _rf(jnp.zeros_like(mc), jnp.where(limit, 1, mc), jnp.ones_like(mc))
+    """K(m) from mc (``_legendre._complete_first``), with a finite stand-in K = 1 where mc = 0."""
+    return _complete_first(jnp.where(mc == 0, 1, mc))
 
 
 def parameter_data(mc):
@@ -127,19 +128,26 @@ def _ellipj_primal(u, m, mc, quarter, levels):
     sn_w, cn_w, dn_w = _jacobi_to_half_quarter(w, levels)
     root_mc = jnp.sqrt(safe_mc)
     # cd^2 + mc sd^2 = 1 holds to a few ulp; dividing by the rounded norm makes sn^2 + cn^2 = 1 to one.
-    norm = jnp.sqrt(cn_w * cn_w + (root_mc * sn_w) ** 2)
-    sn_abs = jnp.where(upper, cn_w / norm, sn_w)
-    cn_reduced = jnp.where(upper, root_mc * sn_w / norm, cn_w)
+    norm_squared = cn_w * cn_w + (root_mc * sn_w) ** 2
+    sn_abs = jnp.where(upper, over_sqrt(cn_w, norm_squared), sn_w)
+    cn_reduced = jnp.where(upper, over_sqrt(root_mc * sn_w, norm_squared), cn_w)
     dn_generic = jnp.where(upper, root_mc / dn_w, dn_w)
     sn_reduced = jnp.where(u_reduced < 0, -sn_abs, sn_abs)
     sign = 1 - 2 * jnp.mod(turns, 2)
-    am_generic = turns * jnp.pi + jnp.arctan2(sn_reduced, cn_reduced)
-    # m = 1: sn = tanh u, cn = dn = sech u, am = gd(u) = 2 arctan(tanh(u/2)).
-    sech = 1 / jnp.cosh(u)
-    sn = jnp.where(limit, jnp.tanh(u), sign * sn_reduced)
-    cn = jnp.where(limit, sech, sign * cn_reduced)
+    # m = 1: sn = tanh u, cn = dn = sech u = 2 e/(1 + e^2) with e = exp(-|u|) (no overflow),
+    # am = gd(u) = atan2(tanh u, sech u).
+    decay = jnp.exp(-jnp.abs(jnp.where(limit, u, 0)))
+    sech = 2 * decay / (1 + decay * decay)
+    sn_reduced = jnp.where(limit, jnp.tanh(jnp.where(limit, u, 0)), sn_reduced)
+    cn_reduced = jnp.where(limit, sech, cn_reduced)
+    # am = j pi + atan2(sn_r, cn_r) with cn_r >= 0 (|u_r| <= K): an arctangent of the quotient.
+    positive = cn_reduced > 0
+    angle = jnp.where(positive, jnp.arctan(sn_reduced / jnp.where(positive, cn_reduced, 1)),
+                      jnp.copysign(jnp.pi / 2, sn_reduced))
+    am = turns * jnp.pi + angle
+    sn = jnp.where(limit, sn_reduced, sign * sn_reduced)
+    cn = jnp.where(limit, cn_reduced, sign * cn_reduced)
     dn = jnp.where(limit, sech, dn_generic)
-    am = jnp.where(limit, 2 * jnp.arctan(jnp.tanh(u / 2)), am_generic)
     return sn, cn, dn, am
 
 
@@ -155,12 +163,12 @@ def _ellipj_tangents(u, m, mc, quarter, values, tangents):
     # dK/dm = R_D(0, 1, mc)/6 depends on the parameter alone (m and mc may have fewer dimensions
     # than u); a stand-in where m = 1 (no period there).
     safe_mc = jnp.where(limit, 0.5, mc)
-    dk_dm = _rd(jnp.zeros_like(safe_mc), jnp.ones_like(safe_mc), safe_mc) / 6
+    dk_dm = _rd(jnp.zeros_like(safe_mc), jnp.ones_like(safe_mc), safe_mc, True) / 6
     sn_reduced = jnp.abs(sn) * jnp.sign(jnp.sin(am - turns * jnp.pi))
     cn_reduced = jnp.abs(cn)
     safe_dn = jnp.where(limit, 1, dn)
     df_dm = jnp.where(turns == 0, 0, 2 * turns * dk_dm) + sn_reduced**3 * _rd(
-        cn_reduced * cn_reduced, jnp.ones_like(cn_reduced), safe_dn * safe_dn
+        cn_reduced * cn_reduced, jnp.ones_like(cn_reduced), safe_dn * safe_dn, True
     ) / 6
     dam_dm_generic = -safe_dn * df_dm
     # m = 1 (DLMF 22.10.ii): d am/dm = -(sinh u - u sech u)/4.
