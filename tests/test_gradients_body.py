@@ -41,8 +41,8 @@ jitted and vmapped over all the points at once and compiled once per session (th
 tests/conftest.py keeps them across runs): the values with the forward-mode Jacobian, the reverse-mode Jacobian, the second
 derivatives in t.  On CPU they are compiled with XLA:CPU's fusion emitters off (as frbjax.fit does), the
 reverse and second-order ones also at XLA backend optimisation level 0: 2-4x less compile time
-(reverse mode: 140 s -> 40 s under load), the same mathematics (the worst errors below are the same
-as with XLA's default options, benchmarks/gradients.py).  y contains R(t) as
+(reverse mode: 140 s -> 40 s under load), the same mathematics: with XLA's default options the worst
+errors are of the same size (jacfwd 3.9e-13, jacrev 5.0e-13, same point; benchmarks/gradients.py).  y contains R(t) as
 _quaternion.as_matrix(q(t)), which is what FreeRigidBody.rotation_matrix returns, so that the
 attitude is traced once per program.
 """
