@@ -1,0 +1,187 @@
+"""Derivatives of FreeRigidBody with XLA's default compiler options, and the full jax.hessian (too slow for CI).
+
+1. jax.jacfwd and jax.jacrev of y = (L, Omega, q, R) at time t with respect to x = (I, L, q0, t) at
+   every point of tests/data/gradient_references.json (32-digit mpmath Jacobians), compiled with
+   XLA's default options (tests/test_gradients_body.py compiles them with faster-compiling options):
+   worst relative column error per kind of point (the measure of the test; target 1e-9), and
+   finiteness at every point.
+2. jax.hessian (forward over reverse) of the scalar s(x) = sum_k w_k y_k(x)^2 + sum_k sin(y_k(x)) at
+   the generic points: compile time (wall and CPU), the process's peak resident memory, finiteness,
+   symmetry, and (where finite) agreement with 4th-order central differences (Richardson over h and
+   h/2) of jax.grad(s), itself checked by part 1.
+
+Prints and writes benchmarks/results/gradients.json.
+
+Last measured (frbjax at 5554ab5 plus the other session's uncommitted compile-time edits, 2 shared
+CPU cores at load ~6, 23 GB machine): part 1 with default options gives jacfwd 3.9e-13 and jacrev
+5.0e-13 (at "separatrix +1e-03", d/dI2), finite everywhere; part 2 did not finish: the compilation of
+jax.vmap(jax.hessian(s)) was stopped after 511 s wall with the process at 14.2 GB resident and
+growing (the machine had 2 GB left).  It would give NaN anyway: the JVP rule of R_J is not
+differentiable at a zero argument (tests/test_gradients_body.py,
+test_second_derivative_at_a_zero_carlson_argument).
+
+    .venv/bin/python benchmarks/gradients.py [--parts first,hessian]
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import pathlib
+import platform
+import resource
+import time
+
+import jax
+
+jax.config.update("jax_enable_x64", True)
+
+import jax.numpy as jnp  # noqa: E402
+import numpy as np  # noqa: E402
+
+from frbjax import FreeRigidBody  # noqa: E402
+
+ROOT = pathlib.Path(__file__).resolve().parents[1]
+OUTPUT = ROOT / "benchmarks" / "results" / "gradients.json"
+REFERENCES = ROOT / "tests" / "data" / "gradient_references.json"
+STEP = 1e-3
+INPUTS = ["I1", "I2", "I3", "L1", "L2", "L3", "qw", "qx", "qy", "qz", "t"]
+
+
+def outputs(x):
+    body = FreeRigidBody(x[:3], x[3:6], x[6:10])
+    t = x[10]
+    return jnp.concatenate([body.angular_momentum(t), body.angular_velocity(t), body.quaternion(t),
+                            body.rotation_matrix(t).reshape(-1)])
+
+
+def scalar(x):
+    y = outputs(x)
+    return jnp.sum(jnp.linspace(0.3, 1.7, y.size, dtype=x.dtype) * y**2) + jnp.sum(jnp.sin(y))
+
+
+def _cpu():
+    usage = resource.getrusage(resource.RUSAGE_SELF)
+    return usage.ru_utime + usage.ru_stime
+
+
+def _peak_rss_gib():
+    return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 2**20  # Linux: KiB
+
+
+def compiled(function, *args):
+    start_wall, start_cpu = time.perf_counter(), _cpu()
+    program = jax.jit(function).lower(*args).compile()
+    return program, dict(wall_s=time.perf_counter() - start_wall, cpu_s=_cpu() - start_cpu,
+                         peak_rss_gib_after=_peak_rss_gib())
+
+
+def load():
+    data = json.loads(REFERENCES.read_text())
+    points = data["points"]
+    names = [p["name"] for p in points]
+    kinds = [p["kind"] for p in points]
+    x = np.array([p["x"] for p in points])
+    jacobian = np.array([[[float(v) for v in row] for row in p["jacobian"]] for p in points])
+    return names, kinds, x, jacobian
+
+
+def column_errors(automatic, reference):
+    difference = np.max(np.abs(automatic - reference), axis=-2)
+    column = np.max(np.abs(reference), axis=-2)
+    whole = np.max(np.abs(reference), axis=(-2, -1))[:, None]
+    return difference / np.where(column > 0, column, whole)
+
+
+def first_derivatives():
+    names, kinds, x, reference = load()
+    summary = {}
+    for mode, transform in (("jacfwd", jax.jacfwd), ("jacrev", jax.jacrev)):
+        program, timing = compiled(jax.vmap(transform(outputs)), jnp.asarray(x))
+        jacobian = np.asarray(program(jnp.asarray(x)))
+        errors = column_errors(jacobian, reference)
+        finite = np.all(np.isfinite(jacobian), axis=(-2, -1))
+        per_point = []
+        for k, name in enumerate(names):
+            row = errors[k] if kinds[k] != "branch" else np.where(np.arange(11) >= 6, errors[k], 0)
+            worst = int(np.argmax(row))
+            per_point.append(dict(name=name, kind=kinds[k], finite=bool(finite[k]),
+                                  worst_relative_error=float(row[worst]), input=INPUTS[worst]))
+        near = [p for p in per_point if p["name"].startswith("separatrix ")]
+        away = [p for p in per_point if p["kind"] in ("generic", "smooth") and not p["name"].startswith("separatrix ")]
+        summary[mode] = dict(
+            compile=timing, all_finite=bool(finite.all()),
+            worst_generic_and_smooth=max(p["worst_relative_error"] for p in away),
+            worst_generic_and_smooth_excluding_zero_component=max(
+                p["worst_relative_error"] for p in away if "= 0" not in p["name"] or p["name"] in ("L2 = 0", "t = 0", "L = 0")),
+            worst_near_separatrix=max(p["worst_relative_error"] for p in near),
+            worst_branch_q0_t_columns=max(p["worst_relative_error"] for p in per_point if p["kind"] == "branch"),
+            points=per_point)
+        print(f"{mode}: compile {timing['wall_s']:.0f} s; finite everywhere {finite.all()}; worst relative "
+              f"error: generic/smooth {summary[mode]['worst_generic_and_smooth']:.1e} (without the zero "
+              f"components L1/L3 = 0: {summary[mode]['worst_generic_and_smooth_excluding_zero_component']:.1e}), "
+              f"near the separatrix {summary[mode]['worst_near_separatrix']:.1e}, branch points (q0, t) "
+              f"{summary[mode]['worst_branch_q0_t_columns']:.1e}", flush=True)
+    return summary
+
+
+def hessian():
+    names, kinds, x, _ = load()
+    generic = [k for k, kind in enumerate(kinds) if kind == "generic"]
+    names = [names[k] for k in generic]
+    x = jnp.asarray(x[generic])
+    n = x.shape[1]
+    rss_before = _peak_rss_gib()
+    program, timing = compiled(jax.vmap(jax.hessian(scalar)), x)
+    print(f"jax.hessian: compile {timing['wall_s']:.0f} s wall, {timing['cpu_s']:.0f} s CPU, peak RSS "
+          f"{timing['peak_rss_gib_after']:.1f} GiB (before: {rss_before:.1f} GiB)", flush=True)
+    start = time.perf_counter()
+    h = np.asarray(program(x))
+    run_seconds = time.perf_counter() - start
+    gradient, gradient_time = compiled(jax.vmap(jax.grad(scalar)), x)
+
+    def central(step):
+        columns = []
+        for j in range(n):
+            shift = np.zeros(n)
+            shift[j] = step
+            plus, minus = np.asarray(gradient(x + shift)), np.asarray(gradient(x - shift))
+            plus2, minus2 = np.asarray(gradient(x + 2 * shift)), np.asarray(gradient(x - 2 * shift))
+            columns.append((8 * (plus - minus) - (plus2 - minus2)) / (12 * step))
+        return np.stack(columns, -1)
+
+    coarse, fine = central(STEP), central(STEP / 2)
+    reference = (16 * fine - coarse) / 15
+    records = []
+    for k, name in enumerate(names):
+        finite = bool(np.all(np.isfinite(h[k])))
+        error = float(np.max(np.abs(h[k] - reference[k])) / np.max(np.abs(reference[k]))) if finite else None
+        asymmetry = float(np.max(np.abs(h[k] - h[k].T)) / np.max(np.abs(h[k]))) if finite else None
+        records.append(dict(name=name, finite=finite, relative_error=error, asymmetry=asymmetry,
+                            non_finite_entries=int(np.sum(~np.isfinite(h[k])))))
+        print(f"  {name:22s} finite {finite}  |H - H_fd| / |H| = {error}  asymmetry {asymmetry}")
+    errors = [r["relative_error"] for r in records if r["relative_error"] is not None]
+    return dict(compile=timing, run_s=run_seconds, grad_compile=gradient_time, points=records,
+                all_finite=all(r["finite"] for r in records),
+                worst_relative_error=max(errors) if errors else None)
+
+
+def main():
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--parts", default="first,hessian")
+    parts = parser.parse_args().parts.split(",")
+    summary = json.loads(OUTPUT.read_text()) if OUTPUT.exists() else {}
+    summary.update(machine=f"{platform.machine()} {platform.processor()}".strip(), jax=jax.__version__,
+                   cpu_count=__import__("os").cpu_count())
+    if "first" in parts:
+        summary["first_derivatives"] = first_derivatives()
+        OUTPUT.parent.mkdir(parents=True, exist_ok=True)
+        OUTPUT.write_text(json.dumps(summary, indent=1))
+    if "hessian" in parts:
+        summary["hessian"] = hessian()
+        OUTPUT.write_text(json.dumps(summary, indent=1))
+    print(f"written to {OUTPUT}")
+
+
+if __name__ == "__main__":
+    main()
