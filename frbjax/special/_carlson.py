@@ -39,6 +39,7 @@ import jax
 import jax.numpy as jnp
 from jax import lax
 
+from .._fusion import materialise
 from ._common import is_double, over_sqrt, promote
 
 
@@ -352,7 +353,9 @@ def _value_and_partials(function, primals):
         return jax.jvp(function, tuple(primals), tangents)
 
     values, partials = jax.vmap(directional)(basis)
-    return jax.tree.map(lambda v: v[0], values), partials
+    # Materialised: each partial feeds its own product with a tangent (and, in reverse mode, with a
+    # cotangent), and XLA would otherwise recompute the whole series in each of those fused loops.
+    return materialise((jax.tree.map(lambda v: v[0], values), partials))
 
 
 def _jvp_from_partials(function, primals, tangents):
