@@ -26,6 +26,7 @@ test_second_derivative_at_a_zero_carlson_argument).
 from __future__ import annotations
 
 import argparse
+import importlib.util
 import json
 import pathlib
 import platform
@@ -43,7 +44,9 @@ from frbjax import FreeRigidBody  # noqa: E402
 
 ROOT = pathlib.Path(__file__).resolve().parents[1]
 OUTPUT = ROOT / "benchmarks" / "results" / "gradients.json"
-REFERENCES = ROOT / "tests" / "data" / "gradient_references.json"
+_spec = importlib.util.spec_from_file_location("_gradient_tests", ROOT / "tests" / "test_gradients_body.py")
+_tests = importlib.util.module_from_spec(_spec)
+_spec.loader.exec_module(_tests)
 STEP = 1e-3
 INPUTS = ["I1", "I2", "I3", "L1", "L2", "L3", "qw", "qx", "qy", "qz", "t"]
 
@@ -77,20 +80,13 @@ def compiled(function, *args):
 
 
 def load():
-    data = json.loads(REFERENCES.read_text())
-    points = data["points"]
-    names = [p["name"] for p in points]
-    kinds = [p["kind"] for p in points]
-    x = np.array([p["x"] for p in points])
-    jacobian = np.array([[[float(v) for v in row] for row in p["jacobian"]] for p in points])
+    """(names, kinds, x, jacobian) of the mpmath references, read as the tests read them."""
+    names, kinds, x, _, jacobian = _tests.references()
     return names, kinds, x, jacobian
 
 
-def column_errors(automatic, reference):
-    difference = np.max(np.abs(automatic - reference), axis=-2)
-    column = np.max(np.abs(reference), axis=-2)
-    whole = np.max(np.abs(reference), axis=(-2, -1))[:, None]
-    return difference / np.where(column > 0, column, whole)
+# The tests' error measure per input column (see tests/test_gradients_body.py).
+column_errors = _tests.column_errors
 
 
 def first_derivatives():
