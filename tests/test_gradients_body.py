@@ -71,17 +71,6 @@ DATA = pathlib.Path(__file__).resolve().parent / "data" / "gradient_references.j
 INPUTS = ["I1", "I2", "I3", "L1", "L2", "L3", "qw", "qx", "qy", "qz", "t"]
 BRANCH_COLUMNS = slice(6, 11)  # q0 and t: exact at the branch points too (CONVENTION)
 
-# Known wrong derivatives (a bug of frbjax, not of the test), checked as a strict xfail so that the fix
-# shows up.  Reproducer: jax.jacfwd(lambda L: FreeRigidBody([1., 2., 3.], L).angular_momentum(1.7))
-# at L = (0, 0.6, 0.8) gives a zero column d/dL1; the central difference gives (0.933, 0.923, -0.447).
-KNOWN_WRONG = {
-    "L1 = 0": "d/dL1 at L1 = 0 around the major axis: _regimes.constants takes the phase "
-              "u0 = sn0 R_F(cn0^2, ...) through cn0^2, whose derivative 2 cn0 dcn0 vanishes at cn0 = 0 "
-              "while dR_F/dx is infinite at x = 0: the (finite) derivative is lost",
-    "L3 = 0": "the same at L3 = 0 around the minor axis",
-    "L1 = 0 unsorted": "the same, moments unsorted",
-}
-
 # Compiler options on CPU (module docstring); other backends compile with their defaults.
 FORWARD_OPTIONS = {"xla_cpu_use_fusion_emitters": False}
 FAST_COMPILE_OPTIONS = {"xla_cpu_use_fusion_emitters": False, "xla_backend_optimization_level": 0}
@@ -155,8 +144,8 @@ def _report(mode, names, kinds, errors):
 
 
 def _check(mode, automatic):
-    """Finite everywhere; TOL at the generic and smooth points (but KNOWN_WRONG), and in the q0 and t
-    columns at the branch points."""
+    """Finite everywhere; TOL at the generic and smooth points, and in the q0 and t columns at the
+    branch points."""
     names, kinds, _, _, reference = references()
     assert automatic.shape == reference.shape
     finite = np.all(np.isfinite(automatic), axis=(-2, -1))
@@ -166,7 +155,7 @@ def _check(mode, automatic):
     bad = {}
     for k, (name, kind) in enumerate(zip(names, kinds)):
         worst = errors[k, BRANCH_COLUMNS].max() if kind == "branch" else errors[k].max()
-        if worst > TOL and name not in KNOWN_WRONG:
+        if worst > TOL:
             bad[name] = float(worst)
     assert not bad, f"{mode}: relative column errors above {TOL}: {bad}"
 
@@ -184,17 +173,6 @@ def test_forward_mode_matches_mpmath():
 def test_reverse_mode_matches_mpmath():
     """jax.jacrev: finite at every point (no NaN from untaken branches), right where smooth."""
     _check("jacrev", reverse())
-
-
-@pytest.mark.xfail(strict=True, reason="; ".join(f"{k}: {v}" for k, v in KNOWN_WRONG.items()))
-@pytest.mark.parametrize("mode", ["jacfwd", "jacrev"])
-def test_derivative_at_a_zero_component(mode):
-    """d/dL1 at L1 = 0 (and d/dL3 at L3 = 0 around the minor axis): the motion is smooth there."""
-    names, _, _, _, reference = references()
-    automatic = forward()[1] if mode == "jacfwd" else reverse()
-    errors = column_errors(automatic, reference)
-    worst = {name: float(errors[k].max()) for k, name in enumerate(names) if name in KNOWN_WRONG}
-    assert max(worst.values()) <= TOL, worst
 
 
 # ------------------------------------------------------------------------------ second derivatives
