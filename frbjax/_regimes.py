@@ -30,16 +30,11 @@ next to the separatrix.
 
 from __future__ import annotations
 
-import math
-
-import jax
 import jax.numpy as jnp
-from jax import lax
 
 from . import _series
 from ._fusion import materialise
-from .special import elliprf, elliprj
-from .special._jacobi import _agm_levels, ellipj_given
+from .special import elliprf
 from .special._legendre import _LARGE_NEGATIVE_CHARACTERISTIC, pi_without_first_kind
 
 MAJOR, MINOR, SEPARATRIX, UNIFORM = 0, 1, 2, 3
@@ -177,84 +172,43 @@ def constants(inertia, unit_momentum, regime):
     nu, m, mc, sn0, cn0 = materialise((nu, m, mc, sn0, cn0))
     # R_F: the phase u0 = F(am0|m) = sn0 R_F(cn0^2, dn0^2, 1) (DLMF 19.25.5 from sn0, cn0 themselves:
     # near the separatrix am0 is within 1e-13 of pi/2 and only cn0 carries the digits), and the
-    # series' K(m), a' and b (``_series.integral_arguments``).  Where cn0^2 < mc sn0^2 (cn0 = 0 included)
-    # the phase is taken from the quarter period instead, |u0| = K - cn0 R_F(mc sn0^2, mc, dn0^2) (the
-    # integral from am0 to pi/2 with theta -> pi/2 - theta: DLMF 19.25.5 with parameter -m/mc, scaled
-    # by mc since R_F is homogeneous of degree -1/2).  Through cn0^2 the derivative in cn0 would be lost
-    # at cn0 = 0 (0 times the infinite dR_F/dx); the reflected arguments all lie between mc sn0^2 and
-    # 2 mc.  Not wider: where cn0^2 >> mc, K and the reflected integral have large derivatives in mc
-    # (~ 1/mc next to the separatrix) that cancel in u0.
-    mc_sn0_squared = mc * (sn0 * sn0)
-    reflected = cn0 * cn0 < mc_sn0_squared
-    dn0_squared = cn0 * cn0 + mc_sn0_squared
-    phase_x = jnp.where(reflected, mc_sn0_squared, cn0 * cn0)
-    phase_y = jnp.where(reflected, mc, dn0_squared)
-    phase_z = jnp.where(reflected, dn0_squared, jnp.ones_like(sn0))
+    # series' K(m), a' and b (``_series.integral_arguments``).
+    cn0_squared = cn0 * cn0
     series_x, series_y, series_z = _series.integral_arguments(m, mc, nu)
     first_kind = elliprf(
-        jnp.concatenate([phase_x[None], series_x]),
-        jnp.concatenate([phase_y[None], series_y]),
-        jnp.concatenate([phase_z[None], series_z]),
+        jnp.concatenate([cn0_squared[None], series_x]),
+        jnp.concatenate([(cn0_squared + mc * sn0 * sn0)[None], series_y]),
+        jnp.concatenate([jnp.ones_like(sn0)[None], series_z]),
     )
     first_kind = materialise(first_kind)
-    quarter, phase_integral = first_kind[1], first_kind[0]
-    sign = jnp.where(sn0 < 0, -1.0, 1.0).astype(sn0.dtype)
-    remaining_phase = cn0 * phase_integral  # K - |u0| where reflected
-    elliptic_u0 = jnp.where(reflected, sign * (quarter - remaining_phase), sn0 * phase_integral)
-    out["u0"] = jnp.where(is_sep, separatrix_u0, elliptic_u0)
+    out["u0"] = jnp.where(is_sep, separatrix_u0, sn0 * first_kind[0])
     # R_J: the complete Pi(nu|m) (- K for nu >= -1) of every whole half-period, and the same at the
-    # phase u0 (for the attitude at t = 0, see ``reference``): one call on the two, stacked.  Where
-    # the phase is reflected, the direct form gets a stand-in amplitude (pi/4) and Pi at the phase is
-    # the complete one less the integral from |am0| to pi/2 (``_reflected_third_kind``).
-    direct_sn0 = jnp.where(reflected, jnp.sqrt(0.5).astype(sn0.dtype), sn0)
-    direct_cn0 = jnp.where(reflected, jnp.sqrt(0.5).astype(cn0.dtype), cn0)
+    # phase u0 (for the attitude at t = 0, see ``reference``): one call on the two, stacked.
     stack = lambda complete, initial: jnp.stack(jnp.broadcast_arrays(complete, initial))  # noqa: E731
     third_kind = pi_without_first_kind(
-        stack(nu, nu), stack(jnp.ones_like(sn0), direct_sn0), stack(jnp.zeros_like(cn0), direct_cn0),
-        stack(m, m), stack(mc, mc))
+        stack(nu, nu), stack(jnp.ones_like(sn0), sn0), stack(jnp.zeros_like(cn0), cn0), stack(m, m), stack(mc, mc))
     out["third_kind_complete"] = third_kind[0]
-    remaining_third_kind = _remaining_third_kind(
-        nu, jnp.where(reflected, sn0, 1), jnp.where(reflected, cn0, 0), mc,
-        jnp.where(reflected, phase_integral, 1), out["without_first_kind"])
-    out["reference_third_kind"] = jnp.where(
-        reflected, sign * (third_kind[0] - remaining_third_kind), third_kind[1])
+    out["reference_third_kind"] = third_kind[1]
     out["regime"] = regime
-    # The theta series (``_series``) and which bodies it serves.  Pi(nu; am u|m) - u (nu >= -1) or
-    # Pi(nu; am u|m) (nu < -1) is u slope + A arg theta_4(v + i alpha') with slope = that at u = K,
-    # divided by K.  Unlike a Fourier series, whose terms fall like rho^n (rho -> 1 as nu -> -infinity),
+    # The theta series (``_series``) of every body: Pi(nu; am u|m) - u (nu >= -1) or Pi(nu; am u|m)
+    # (nu < -1) on a reduced argument, in the nome q or (next to the separatrix) in the complementary
+    # nome q'.  Unlike a Fourier series, whose terms fall like rho^n (rho -> 1 as nu -> -infinity),
     # the theta series' terms fall like q^(n(n-1)) rho^n, so every nu < 0 is expanded directly.
-    series = _series.coefficients(m, mc, nu, first_kind[1:])
-    out["series"] = series
-    # K(m) (the series' own; a stand-in on the separatrix, where ellipj_given takes its m = 1 limit) and
-    # the AGM levels of the Jacobi functions of the Carlson/Landen path (special._jacobi.parameter_data).
-    out["jacobi"] = (series.quarter, _agm_levels(jnp.where(out["mc"] == 0, 0.5, out["mc"])))
-    out["series_slope"] = third_kind[0] / series.quarter
-    out["series_ok"] = (regime == UNIFORM) | (elliptic & (series.nome <= _series._largest_nome(m)))
+    series = _series.coefficients(m, mc, nu, first_kind[1:], third_kind[0])
+    # The separatrix is the limit m = 1 of the major regime (q' = 0): its L is (A1 cn, sn, A3 dn) with
+    # cn = dn = sech, sn = tanh, and its psi = u/(J2 B) + 2 arctan(delta tanh(u/2)) (formulas.md) equals
+    # t/J2 + atan2(L2, L3) - arctan((A1/A3) tanh u): the major regime's alpha Pi(nu; gd u|1), with
+    # nu = -J1 b/(J3 a), is alpha (u + sqrt(-nu) arctan(sqrt(-nu) tanh u))/(1 - nu), whose linear part
+    # turns t/J1 into t/J2 (alpha B/(1 - nu) = 1/J1 - 1/J2) and whose bounded part has
+    # alpha sqrt(-nu)/(1 - nu) = 1 and sqrt(-nu) = A1/A3 (A1^2 + A3^2 = 1).  So the series' third kind
+    # there is A arctan(tan beta' tanh u) with sin beta' = A1, cos beta' = A3, no slope, and
+    # A = 1/delta = (1 + A1)/A3 (alpha = delta on the separatrix).
+    first_amplitude = jnp.where(is_sep, out["amplitude"][..., 0], 0.5)
+    third_amplitude = jnp.where(is_sep, out["amplitude"][..., 2], 0.5)
+    out["series"] = _series.at_separatrix(
+        series, is_sep, first_amplitude, third_amplitude, (1 + first_amplitude) / third_amplitude,
+        jnp.zeros_like(first_amplitude))
     return out
-
-
-def _remaining_third_kind(nu, sn0, cn0, mc, phase_integral, without_first_kind):
-    """The integral from |am0| to pi/2 of Pi's integrand (less F's where ``without_first_kind``).
-
-    With theta -> pi/2 - theta the integrand 1/((1 - nu sin^2) Delta) becomes
-    1/((1 - nu + nu sin^2) sqrt(mc + m sin^2)), an integral of DLMF 19.25.14's form up to sin = cn0
-    with characteristic nu' = -nu/(1 - nu) and parameter -m/mc; scaled by mc (homogeneity, DLMF
-    19.16.2) it is, with dn0^2 = cn0^2 + mc sn0^2 and R = R_F(mc sn0^2, mc, dn0^2) (``phase_integral``),
-
-        cn0 R / (1 - nu) - nu mc cn0^3 R_J(mc sn0^2, mc, dn0^2, mc (1 - nu sn0^2)/(1 - nu)) / (3 (1 - nu)^2),
-
-    and the same less cn0 R (F's part) is nu/(1 - nu) cn0 R - (the same R_J term): both terms have the
-    sign of nu, so nothing cancels.  Where this is used (cn0^2 < mc sn0^2) every argument lies between
-    mc/2 and 2 mc, so the derivative in cn0 at cn0 = 0 is kept.
-    """
-    sn0_squared, cn0_squared = sn0 * sn0, cn0 * cn0
-    dn0_squared = cn0_squared + mc * sn0_squared
-    gap = 1 - nu
-    parameter = mc * (1 - nu * sn0_squared) / gap
-    third = elliprj(mc * sn0_squared, mc, dn0_squared, parameter)
-    correction = nu * mc * cn0 * cn0_squared * third / (3 * gap * gap)
-    first_part = jnp.where(without_first_kind, nu / gap, 1 / gap) * cn0 * phase_integral
-    return first_part - correction
 
 
 def _unit_point(sn_scaled, cn_scaled):
@@ -267,56 +221,20 @@ def _unit_point(sn_scaled, cn_scaled):
     return sn_scaled / norm, cn_scaled / norm
 
 
-def _evaluate_landen(consts, tau, attitude=True):
+def evaluate(consts, tau, attitude=True):
     """Unit angular momentum and (if ``attitude``) the particular quaternion q̂ at unit-|L| time tau.
 
     q̂ is the solution of formulas.md at phase u = u0 + B tau, except that the precession angle psi
     counts from tau = 0 (psi = precession * tau + the bounded terms at u): only differences of psi
     enter the motion (q̂ is a rotation about the fixed spatial axis by psi times a function of L), and
     the phase time t0 = u0/B of formulas.md is unbounded for nearly spherical bodies (B -> 0).
+
+    Every body goes through its theta series (``_series``: in the nome q, or next to the separatrix
+    and on it in the complementary nome q'), elementwise: the third-kind integral is 2 turns times the
+    complete one plus the series' integral over the reduced argument (DLMF 19.2.10).
     """
     u = consts["u0"] + consts["rate"] * tau
-    sn, cn, dn, am = ellipj_given(u, consts["m"], consts["mc"], *consts["jacobi"])
-    regime = consts["regime"]
-    minor, separatrix = regime == MINOR, regime == SEPARATRIX
-    first = jnp.where(minor, dn, cn)
-    third = jnp.where(minor, cn, dn)
-    momentum = consts["amplitude"] * jnp.stack([first, sn, third], -1)
-    if not attitude:
-        return momentum, None
-    l1, l2, l3 = momentum[..., 0], momentum[..., 1], momentum[..., 2]
-
-    # Pi(nu; am|m) = 2j Pi(nu|m) + Pi(nu; am_r|m) (DLMF 19.2.10) from the reduced sn and cn themselves
-    # (their relative precision matters near the separatrix, as for the phase u0 in ``constants``).  Not needed on the separatrix.
-    # The reduced amplitude am - turns pi must have cos = parity cn >= 0.  Rounding am/pi alone fails
-    # where am is within rounding of an odd multiple of pi/2 (cn ~ 1e-22 next to the separatrix, where
-    # am rounds to -pi/2 but cn still tells the side): Pi is steep there (scale sqrt(mc)), and the wrong
-    # side costs O(1).  So the side is taken from the sign of cn.
-    turns = jnp.round(am / jnp.pi)
-    parity = 1 - 2 * jnp.mod(turns, 2)
-    wrong_side = parity * cn < 0
-    turns = turns + jnp.where(wrong_side, jnp.where(am < turns * jnp.pi, -1, 1), 0)
-    parity = jnp.where(wrong_side, -parity, parity)
-    nu = jnp.where(separatrix, 0, consts["nu"])
-    m = jnp.where(separatrix, 0.5, consts["m"])
-    mc = jnp.where(separatrix, 0.5, consts["mc"])
-    sn_reduced = jnp.where(separatrix, 0.5, parity * sn)
-    cn_reduced = jnp.where(separatrix, 0.5, jnp.abs(cn))
-    # Pi - F where nu >= -1 (F = u_r is known), Pi itself where nu < -1: one R_J, no R_F.
-    reduced = pi_without_first_kind(nu, sn_reduced, cn_reduced, m, mc)
-    third_kind = 2 * turns * consts["third_kind_complete"] + reduced
-    orientation = jnp.where(minor, -1, 1)
-    partner = jnp.where(minor, l1, l3)
-    psi_elliptic = orientation * (jnp.arctan2(l2, partner) - consts["alpha"] * third_kind)
-    psi_separatrix = 2 * jnp.arctan(consts["alpha"] * jnp.tanh(u / 2))
-    psi = consts["precession"] * tau + jnp.where(separatrix, psi_separatrix, psi_elliptic)
-    return _chart(psi, l1, l2, l3, minor), momentum
-
-
-def _evaluate_series(consts, tau, attitude=True):
-    """``_evaluate_landen`` through the per-body nome series (``_series``); valid where series_ok."""
-    u = consts["u0"] + consts["rate"] * tau
-    sn_r, cn_r, dn, periodic, turns = _series.evaluate_series(consts["series"], consts["mc"], u, attitude)
+    sn_r, cn_r, dn, reduced_third_kind, turns = _series.evaluate_series(consts["series"], consts["mc"], u, attitude)
     parity = 1 - 2 * jnp.mod(turns, 2)
     sn, cn = parity * sn_r, parity * cn_r
     minor = consts["regime"] == MINOR
@@ -326,74 +244,11 @@ def _evaluate_series(consts, tau, attitude=True):
     if not attitude:
         return momentum, None
     l1, l2, l3 = momentum[..., 0], momentum[..., 1], momentum[..., 2]
-    third_kind = u * consts["series_slope"] + periodic
+    third_kind = 2 * turns * consts["third_kind_complete"] + reduced_third_kind
     orientation = jnp.where(minor, -1, 1)
     partner = jnp.where(minor, l1, l3)
     psi = consts["precession"] * tau + orientation * (jnp.arctan2(l2, partner) - consts["alpha"] * third_kind)
     return _chart(psi, l1, l2, l3, minor), momentum
-
-
-def _chunk_size(size: int) -> int:
-    # Evaluations outside the series' reach (next to the separatrix; about 1 in 20,000 random bodies)
-    # are recomputed by the Landen path in chunks of this many; only the chunks that hold some are run.
-    return min(size, 256)
-
-
-def evaluate(consts, tau, attitude=True):
-    """Unit angular momentum and (if ``attitude``) the particular quaternion q̂ at unit-|L| time tau.
-
-    Every evaluation goes through the theta series of its body (``_evaluate_series``); those of the
-    bodies outside the series' reach (``series_ok`` false: next to the separatrix, or on it) are
-    gathered, a chunk at a time, and recomputed by the Carlson/Landen path (``_evaluate_landen``); a
-    chunk with none to recompute is skipped.  Both paths compute the same functions.  Under
-    ``jax.vmap`` the skipping becomes a select and every chunk is computed (correct, but slower:
-    batch the bodies and the times in the arrays instead).
-    """
-    ok = consts["series_ok"]
-    shape = jnp.broadcast_shapes(jnp.shape(tau), ok.shape)
-    size = math.prod(shape)
-    series = _evaluate_series(consts, tau, attitude)
-    if size == 0:
-        return series
-    batch = ok.shape
-    bodies = math.prod(batch)
-    chunk = _chunk_size(size)
-    chunks = -(-size // chunk)
-    hard = ~jnp.broadcast_to(ok, shape).reshape(size)
-    count = jnp.sum(hard)
-    # The positions to recompute first, then fillers (= size, dropped by the scatter).
-    (order,) = jnp.nonzero(hard, size=chunks * chunk, fill_value=size)
-    body_of = jnp.broadcast_to(jnp.arange(bodies).reshape(batch), shape).reshape(size)
-    tau_of = jnp.broadcast_to(tau, shape).reshape(size)
-
-    def recompute(index):
-        safe_index = jnp.minimum(index, size - 1)
-        gathered = jax.tree_util.tree_map(
-            lambda a: a.reshape((bodies,) + a.shape[len(batch):])[body_of[safe_index]], consts)
-        return _evaluate_landen(gathered, tau_of[safe_index], attitude)
-
-    parts = jax.eval_shape(recompute, order[:chunk])
-
-    def skip(index):
-        # A chunk past the last evaluation to recompute holds fillers only (dropped by the scatter).
-        return jax.tree_util.tree_map(lambda part: jnp.zeros(part.shape, part.dtype), parts)
-
-    def step(_, k):
-        index = order.reshape(chunks, chunk)[k]
-        return None, lax.cond(k * chunk < count, recompute, skip, index)
-
-    # The recomputed values are the scan's outputs, scattered once afterwards; carrying the whole
-    # output through the scan instead would make reverse mode save it at every step.
-    _, fixed = lax.scan(step, None, jnp.arange(chunks))
-    result = []
-    for out, part in zip(series, fixed):
-        if out is None:
-            result.append(None)
-            continue
-        trailing = out.shape[len(shape):]
-        flat = out.reshape((size,) + trailing).at[order].set(part.reshape((chunks * chunk,) + trailing), mode="drop")
-        result.append(flat.reshape(out.shape))
-    return tuple(result)
 
 
 def reference(consts, unit_momentum):

@@ -1,9 +1,14 @@
-"""The theta-function series of frbjax._series against mpmath at 40 digits.
+"""The theta-function series of frbjax._series against mpmath at 40 to 60 digits.
 
 Checks the nome, sn/cn/dn and the third-kind integral along the orbit, as the body evaluates them
-(coefficients once per parameter, then ``evaluate_series``), for parameters up to the largest nome the
-series serves (q = 0.45, m ~ 0.9995), characteristics from -1e-12 to -1, m = 0 exactly, and arguments
-over several half-periods (the quasi-periodic continuation).
+(coefficients once per parameter, then ``evaluate_series``): the direct series (nome q) for
+parameters up to the largest nome it serves (q = 0.45, m ~ 0.99993), characteristics from -1e-12 to
+-1e10, m = 0 exactly, and arguments over several half-periods (the quasi-periodic continuation); the
+complementary series (nome q') from m = 0.999 to m = 1 - 1e-30, and its separatrix limit m = 1.
+
+The expanded integral is Pi(chi; am u|m) - u for chi >= -1 and Pi(chi; am u|m) for chi < -1 (the
+convention of ``special._legendre.pi_without_first_kind``); the body adds 2 turns times the complete
+one to the series' integral over the reduced argument.
 """
 
 from __future__ import annotations
@@ -19,49 +24,80 @@ from frbjax import _series
 jax.config.update("jax_enable_x64", True)
 mpmath.mp.dps = 40
 
-# (m, chi): both ends of the range of m the series serves, a symmetric body (m = 0), tiny and
+# (m, chi): both ends of the range of m the direct series serves, a symmetric body (m = 0), tiny and
 # extreme characteristics.
 CASES = [(0.5, -0.3), (0.2, -1.0), (0.9, -1.0), (0.9995, -1.0), (0.9995, -0.01), (0.3, -1e-8),
          (0.0, -0.5), (1e-12, -0.7), (0.7, -1e-12), (0.5, -50.0), (0.9, -1e4), (0.0, -30.0)]
 
+# Next to the separatrix: mc = 1 - m (exact in binary64) and characteristics over the whole range.
+COMPLEMENTS = [1e-3, 1e-4, 7e-5, 1e-5, 1e-8, 1e-12, 1e-16, 1e-30]
+CHARACTERISTICS = [-1e-12, -1e-6, -0.3, -1.0, -1.5, -30.0, -1e4, -1e10]
 
-def reference(m, chi, u):
-    """(sn, cn, dn, Pi(chi; am u|m)) at 40 digits; am continued through whole half-periods."""
-    m, chi, u = mpmath.mpf(m), mpmath.mpf(chi), mpmath.mpf(u)
+
+def expanded(chi, value, u):
+    return value - u if chi >= -1 else value
+
+
+def reference(mc, chi, u):
+    """(sn, cn, dn, the expanded integral) for m = 1 - mc; am continued through whole half-periods."""
+    mc, chi, u = mpmath.mpf(mc), mpmath.mpf(chi), mpmath.mpf(u)
+    m = 1 - mc
     quarter = mpmath.ellipk(m)
     turns = mpmath.nint(u / (2 * quarter))
     reduced = u - 2 * quarter * turns
     sn = mpmath.ellipfun("sn", u, m=m)
     cn = mpmath.ellipfun("cn", u, m=m)
     dn = mpmath.ellipfun("dn", u, m=m)
-    amplitude = mpmath.asin(mpmath.ellipfun("sn", reduced, m=m))
+    # From sn and cn (>= 0) of the reduced argument: asin(sn) would lose half the digits where sn ~ 1.
+    amplitude = mpmath.atan2(mpmath.ellipfun("sn", reduced, m=m), mpmath.ellipfun("cn", reduced, m=m))
     third = mpmath.ellippi(chi, amplitude, m) + 2 * turns * mpmath.ellippi(chi, m)
-    return [float(v) for v in (sn, cn, dn, third)]
+    return [float(v) for v in (sn, cn, dn, expanded(chi, third, u))]
+
+
+def complete(mc, chi):
+    """The expanded integral at u = K."""
+    m = 1 - mpmath.mpf(mc)
+    return float(expanded(chi, mpmath.ellippi(chi, m), mpmath.ellipk(m)))
+
+
+def evaluate(data, mc, chi, u):
+    """(sn, cn, dn, expanded integral) from the series, continued as the body continues them."""
+    sn_r, cn_r, dn, reduced, turns = _series.evaluate_series(data, jnp.float64(mc), jnp.asarray(u))
+    turns = np.asarray(turns)
+    parity = 1 - 2 * np.mod(turns, 2)
+    whole = np.where(turns == 0, 0, 2 * turns * complete(mc, chi)) if np.any(turns) else 0
+    third = whole + np.asarray(reduced)
+    return np.stack([parity * np.asarray(sn_r), parity * np.asarray(cn_r), np.asarray(dn), third], -1)
+
+
+def errors(mc, chi, data, u, theirs):
+    ours = evaluate(data, mc, chi, u)
+    quarter = float(data.quarter)
+    # Errors relative to the argument's size in half-periods (the reduction u - 2jK rounds like u),
+    # the integral's relative to its scale (its value at u = K).
+    scale = 1 + np.abs(u) / quarter
+    jacobi = (np.abs(ours[:, :3] - theirs[:, :3]) / scale[:, None]).max()
+    third = (np.abs(ours[:, 3] - theirs[:, 3]) / scale / abs(complete(mc, chi))).max()
+    return jacobi, third
 
 
 @pytest.mark.parametrize("m, chi", CASES)
 def test_series_against_mpmath(m, chi):
-    m_, chi_ = jnp.float64(m), jnp.float64(chi)
-    mc = jnp.float64(1 - m)  # exact for these m (and consistent with mpmath's 1 - m)
-    data = _series.coefficients(m_, mc, chi_)
+    mc = 1 - m  # exact for these m (and consistent with mpmath's 1 - m)
+    data = _series.coefficients(jnp.float64(m), jnp.float64(mc), jnp.float64(chi))
     quarter = data.quarter
     # K(m) = R_F(0, mc, 1): measured two ulp (4.4e-16) at worst over these cases.
     assert abs(float(quarter) / float(mpmath.ellipk(m)) - 1) <= 6.7e-16
-    assert float(data.nome) <= 0.45
+    assert float(data.nome) <= 0.45 and not bool(data.complementary)
     u = np.linspace(-3.3, 3.3, 23) * float(quarter)
-    sn_r, cn_r, dn, periodic, turns = _series.evaluate_series(data, mc, jnp.asarray(u))
-    parity = 1 - 2 * np.mod(np.asarray(turns), 2)
-    # Pi(chi; am u|m) = u Pi(chi|m)/K + A arg theta_4(v + i alpha') (module note).
-    complete = float(mpmath.ellippi(chi, m))
-    third = u * complete / float(quarter) + np.asarray(periodic)
-    ours = np.stack([parity * np.asarray(sn_r), parity * np.asarray(cn_r), np.asarray(dn), third], -1)
-    theirs = np.array([reference(m, chi, x) for x in u])
-    # Errors relative to the argument's size in half-periods (the reduction u - 2jK rounds like u).
+    theirs = np.array([reference(mc, chi, x) for x in u])
+    ours = evaluate(data, mc, chi, u)
     scale = 1 + np.abs(u) / float(quarter)
     jacobi = (np.abs(ours[:, :3] - theirs[:, :3]) / scale[:, None]).max()
-    third_kind = (np.abs(ours[:, 3] - theirs[:, 3]) / np.maximum(1, np.abs(theirs[:, 3]))).max()
-    # Measured over these cases: Jacobi functions 5.5e-16 times (1 + |u|/K), third kind 6.5e-16
-    # relative to max(1, |Pi|) (characteristics down to -1e4, where Pi is steep).
+    # Relative to max(1, |Pi|) of the whole integral (characteristics down to -1e4, where Pi is steep).
+    whole = theirs[:, 3] + np.where(chi >= -1, u, 0)
+    third_kind = (np.abs(ours[:, 3] - theirs[:, 3]) / np.maximum(1, np.abs(whole))).max()
+    # Measured over these cases: Jacobi functions 5.5e-16 times (1 + |u|/K), third kind 6.5e-16.
     assert jacobi <= 1e-15, jacobi
     assert third_kind <= 1e-15, third_kind
 
@@ -77,16 +113,80 @@ def test_third_kind_relative_to_its_scale_for_large_characteristics(m, chi):
     unless it is formed as theta_4(i alpha') - 2 sum c_n sin^2(n v).  (The form 1 + sum c_n cos(2nv)
     gave 2.4e-14 at chi = -1.5e6, a 20-ulp attitude error at t = 0 for a body with moments (1, 1, 2).)
     """
-    m_, mc = jnp.float64(m), jnp.float64(1 - m)
-    data = _series.coefficients(m_, mc, jnp.float64(chi))
+    mc = 1 - m
+    data = _series.coefficients(jnp.float64(m), jnp.float64(mc), jnp.float64(chi))
     quarter = data.quarter
     u = np.concatenate([[1e-12, 1e-8, 1e-5, 1e-3, -3e-4, 0.1], np.linspace(-1, 1, 9) * float(quarter)])
-    _, _, _, periodic, _ = _series.evaluate_series(data, mc, jnp.asarray(u))
-    complete = mpmath.ellippi(chi, m)
-    ours = u * float(complete) / float(quarter) + np.asarray(periodic)
-    theirs = np.array([reference(m, chi, x)[3] for x in u])
+    ours = evaluate(data, mc, chi, u)[:, 3]
+    theirs = np.array([reference(mc, chi, x)[3] for x in u])
     # Measured over these cases: 2.2e-16 relative to |Pi(chi|m)|.
-    assert (np.abs(ours - theirs) / float(abs(complete))).max() <= 4e-16
+    assert (np.abs(ours - theirs) / abs(complete(mc, chi))).max() <= 4e-16
+
+
+@pytest.mark.parametrize("mc, forced", [(mc, False) for mc in COMPLEMENTS] + [(1e-3, True), (1e-4, True)])
+def test_complementary_series_against_mpmath(mc, forced, monkeypatch):
+    """sn, cn, dn and the third kind next to the separatrix, chi from -1e-12 to -1e10.
+
+    ``forced``: every body with m > 1/2 takes the complementary series (down to m = 0.999, q' = 6e-5,
+    beyond the range it serves in float64), otherwise each takes the series chosen for it (the
+    complementary one from m = 0.99993).  Points include u within 1e-9 of 0 and of K (the zeros of
+    sn and cn, formed by expm1) and several half-periods.
+    """
+    if forced:
+        monkeypatch.setattr(_series, "_largest_nome", lambda x: 0.0)
+    m = 1 - mc
+    with mpmath.workdps(60):  # ellippi next to the separatrix, and Pi - u for chi -> 0
+        worst = [0.0, 0.0]
+        for chi in CHARACTERISTICS:
+            data = _series.coefficients(jnp.float64(m), jnp.float64(mc), jnp.float64(chi))
+            assert bool(data.complementary) == (forced or mc < 7e-5)
+            quarter = float(data.quarter)
+            u = np.concatenate([np.linspace(-2.6, 2.6, 13) * quarter,
+                                [1e-9, -3e-4, 0.3, quarter - 1e-9, quarter * (1 - 1e-5), -0.7 * quarter]])
+            theirs = np.array([reference(mc, chi, x) for x in u])
+            for k, error in enumerate(errors(mc, chi, data, u, theirs)):
+                worst[k] = max(worst[k], error)
+    # Measured over these cases: Jacobi functions 6.3e-16 times (1 + |u|/K) (mc = 1e-8), third kind
+    # 4.7e-16 of the integral at u = K, times (1 + |u|/K) (mc = 1e-12).
+    assert worst[0] <= 9e-16, worst
+    assert worst[1] <= 7e-16, worst
+
+
+@pytest.mark.parametrize("chi", CHARACTERISTICS)
+def test_separatrix_limit_against_mpmath(chi):
+    """m = 1: sn = tanh, cn = dn = sech, Pi(chi; gd u|1) = (u + sqrt(-chi) arctan(sqrt(-chi) tanh u))/(1 - chi).
+
+    The separatrix data are the stand-in body's (m = 1/2) with ``at_separatrix``; no reduction, and
+    arguments up to 800 (where exp(-2u) underflows).
+    """
+    minus_chi = mpmath.mpf(-chi)
+    gap = 1 + minus_chi
+    data = _series.coefficients(jnp.float64(0.5), jnp.float64(0.5), jnp.float64(chi))
+    removed = chi >= -1
+    separatrix = jnp.asarray(True)
+    data = _series.at_separatrix(
+        data, separatrix, jnp.float64(mpmath.sqrt(minus_chi / gap)), jnp.float64(1 / mpmath.sqrt(gap)),
+        jnp.float64(mpmath.sqrt(minus_chi) / gap), jnp.float64((-minus_chi if removed else 1) / gap))
+    u = np.array([0.0, 1e-9, -3e-4, 0.2, -1.0, 3.0, 17.0, -40.0, 350.0, 800.0])
+    sn, cn, dn, reduced, turns = (np.asarray(v) for v in _series.evaluate_series(data, jnp.float64(0.0), jnp.asarray(u)))
+    assert np.all(turns == 0)
+    theirs = []
+    for x in u:
+        x = mpmath.mpf(x)
+        closed = (x + mpmath.sqrt(minus_chi) * mpmath.atan(mpmath.sqrt(minus_chi) * mpmath.tanh(x))) / gap
+        if abs(x) <= 17:  # the closed form itself against mpmath's Pi(chi; gd u|1)
+            direct = mpmath.ellippi(chi, mpmath.asin(mpmath.tanh(x)), 1)
+            assert abs(closed - direct) <= mpmath.mpf(10) ** -25 * (1 + abs(direct))
+        theirs.append([float(mpmath.tanh(x)), float(mpmath.sech(x)), float(expanded(chi, closed, x))])
+    theirs = np.array(theirs)
+    # Measured: tanh to 1.1e-16, sech to 2.2e-16 relative, the integral to 2.2e-16 of the scale below.
+    assert np.abs(sn - theirs[:, 0]).max() <= 3.4e-16
+    assert np.all(np.abs(cn - theirs[:, 1]) <= 3.4e-16 * theirs[:, 1])
+    np.testing.assert_array_equal(dn, cn)
+    # The integral relative to its linear part (slope |u|, rounded like a product) plus its value at u = 1.
+    at_one = float(abs(expanded(chi, (1 + mpmath.sqrt(minus_chi) * mpmath.atan(mpmath.sqrt(minus_chi))) / gap, 1)))
+    third = np.abs(reduced - theirs[:, 2]) / (abs(float(data.slope)) * np.abs(u) + at_one)
+    assert third.max() <= 4e-16, third
 
 
 def test_nome_against_mpmath():
@@ -104,13 +204,19 @@ def test_nome_against_mpmath():
 
 
 def test_coefficient_gradients_are_finite():
-    """No NaN in the gradient of the series data at m = 0 (q = 0) or for a tiny characteristic."""
+    """No NaN in the gradient of the series data at m = 0 (q = 0), for a tiny characteristic, next to
+    the separatrix, or in the values of both series at several arguments."""
 
-    def total(m, chi):
+    def total(m, chi, separatrix):
         mc = 1 - m
         data = _series.coefficients(m, mc, chi)
-        return jnp.sum(data.rows) + data.amplitude + data.origin + data.quarter + data.nome
+        data = _series.at_separatrix(data, separatrix, 0.6 + 0 * m, 0.8 + 0 * m, 2.0 + 0 * m, 0.1 * chi)
+        values = _series.evaluate_series(data, mc, jnp.asarray([0.0, 1e-3, 0.7, -3.0, 40.0, 900.0]) * (1 + m))
+        return (jnp.sum(data.rows) + jnp.sum(data.complementary_rows) + data.amplitude + data.origin + data.quarter
+                + data.nome + data.slope + data.complementary_cn_factor + sum(jnp.sum(v) for v in values[:4]))
 
-    for m, chi in [(0.0, -0.5), (0.3, -1e-12), (0.9, -1.0), (0.0, -30.0)]:
-        grads = jax.grad(total, argnums=(0, 1))(jnp.float64(m), jnp.float64(chi))
-        assert all(np.isfinite(np.asarray(g)).all() for g in grads), (m, chi, grads)
+    gradient = jax.jit(jax.grad(total, argnums=(0, 1)))
+    for m, chi in [(0.0, -0.5), (0.3, -1e-12), (0.9, -1.0), (0.0, -30.0), (1 - 1e-10, -1e-12), (1 - 1e-16, -1e6)]:
+        for separatrix in (False, True):
+            grads = gradient(jnp.float64(m), jnp.float64(chi), jnp.asarray(separatrix))
+            assert all(np.isfinite(np.asarray(g)).all() for g in grads), (m, chi, separatrix, grads)
