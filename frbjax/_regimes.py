@@ -34,7 +34,7 @@ import jax.numpy as jnp
 
 from . import _series
 from ._fusion import materialise
-from .special import elliprf
+from .special import elliprf, elliprj
 from .special._legendre import _LARGE_NEGATIVE_CHARACTERISTIC, pi_without_first_kind
 
 MAJOR, MINOR, SEPARATRIX, UNIFORM = 0, 1, 2, 3
@@ -172,23 +172,47 @@ def constants(inertia, unit_momentum, regime):
     nu, m, mc, sn0, cn0 = materialise((nu, m, mc, sn0, cn0))
     # R_F: the phase u0 = F(am0|m) = sn0 R_F(cn0^2, dn0^2, 1) (DLMF 19.25.5 from sn0, cn0 themselves:
     # near the separatrix am0 is within 1e-13 of pi/2 and only cn0 carries the digits), and the
-    # series' K(m), a' and b (``_series.integral_arguments``).
-    cn0_squared = cn0 * cn0
+    # series' K(m), a' and b (``_series.integral_arguments``).  Where cn0^2 < mc sn0^2 (cn0 = 0 included)
+    # the phase is taken from the quarter period instead, |u0| = K - cn0 R_F(mc sn0^2, mc, dn0^2) (the
+    # integral from am0 to pi/2 with theta -> pi/2 - theta: DLMF 19.25.5 with parameter -m/mc, scaled
+    # by mc since R_F is homogeneous of degree -1/2).  Through cn0^2 the derivative in cn0 would be lost
+    # at cn0 = 0 (0 times the infinite dR_F/dx); the reflected arguments all lie between mc sn0^2 and
+    # 2 mc.  Not wider: where cn0^2 >> mc, K and the reflected integral have large derivatives in mc
+    # (~ 1/mc next to the separatrix) that cancel in u0.
+    mc_sn0_squared = mc * (sn0 * sn0)
+    reflected = cn0 * cn0 < mc_sn0_squared
+    dn0_squared = cn0 * cn0 + mc_sn0_squared
+    phase_x = jnp.where(reflected, mc_sn0_squared, cn0 * cn0)
+    phase_y = jnp.where(reflected, mc, dn0_squared)
+    phase_z = jnp.where(reflected, dn0_squared, jnp.ones_like(sn0))
     series_x, series_y, series_z = _series.integral_arguments(m, mc, nu)
     first_kind = elliprf(
-        jnp.concatenate([cn0_squared[None], series_x]),
-        jnp.concatenate([(cn0_squared + mc * sn0 * sn0)[None], series_y]),
-        jnp.concatenate([jnp.ones_like(sn0)[None], series_z]),
+        jnp.concatenate([phase_x[None], series_x]),
+        jnp.concatenate([phase_y[None], series_y]),
+        jnp.concatenate([phase_z[None], series_z]),
     )
     first_kind = materialise(first_kind)
-    out["u0"] = jnp.where(is_sep, separatrix_u0, sn0 * first_kind[0])
+    quarter, phase_integral = first_kind[1], first_kind[0]
+    sign = jnp.where(sn0 < 0, -1.0, 1.0).astype(sn0.dtype)
+    remaining_phase = cn0 * phase_integral  # K - |u0| where reflected
+    elliptic_u0 = jnp.where(reflected, sign * (quarter - remaining_phase), sn0 * phase_integral)
+    out["u0"] = jnp.where(is_sep, separatrix_u0, elliptic_u0)
     # R_J: the complete Pi(nu|m) (- K for nu >= -1) of every whole half-period, and the same at the
-    # phase u0 (for the attitude at t = 0, see ``reference``): one call on the two, stacked.
+    # phase u0 (for the attitude at t = 0, see ``reference``): one call on the two, stacked.  Where
+    # the phase is reflected, the direct form gets a stand-in amplitude (pi/4) and Pi at the phase is
+    # the complete one less the integral from |am0| to pi/2 (``_reflected_third_kind``).
+    direct_sn0 = jnp.where(reflected, jnp.sqrt(0.5).astype(sn0.dtype), sn0)
+    direct_cn0 = jnp.where(reflected, jnp.sqrt(0.5).astype(cn0.dtype), cn0)
     stack = lambda complete, initial: jnp.stack(jnp.broadcast_arrays(complete, initial))  # noqa: E731
     third_kind = pi_without_first_kind(
-        stack(nu, nu), stack(jnp.ones_like(sn0), sn0), stack(jnp.zeros_like(cn0), cn0), stack(m, m), stack(mc, mc))
+        stack(nu, nu), stack(jnp.ones_like(sn0), direct_sn0), stack(jnp.zeros_like(cn0), direct_cn0),
+        stack(m, m), stack(mc, mc))
     out["third_kind_complete"] = third_kind[0]
-    out["reference_third_kind"] = third_kind[1]
+    remaining_third_kind = _remaining_third_kind(
+        nu, jnp.where(reflected, sn0, 1), jnp.where(reflected, cn0, 0), mc,
+        jnp.where(reflected, phase_integral, 1), out["without_first_kind"])
+    out["reference_third_kind"] = jnp.where(
+        reflected, sign * (third_kind[0] - remaining_third_kind), third_kind[1])
     out["regime"] = regime
     # The theta series (``_series``) of every body: Pi(nu; am u|m) - u (nu >= -1) or Pi(nu; am u|m)
     # (nu < -1) on a reduced argument, in the nome q or (next to the separatrix) in the complementary
@@ -209,6 +233,30 @@ def constants(inertia, unit_momentum, regime):
         series, is_sep, first_amplitude, third_amplitude, (1 + first_amplitude) / third_amplitude,
         jnp.zeros_like(first_amplitude))
     return out
+
+
+def _remaining_third_kind(nu, sn0, cn0, mc, phase_integral, without_first_kind):
+    """The integral from |am0| to pi/2 of Pi's integrand (less F's where ``without_first_kind``).
+
+    With theta -> pi/2 - theta the integrand 1/((1 - nu sin^2) Delta) becomes
+    1/((1 - nu + nu sin^2) sqrt(mc + m sin^2)), an integral of DLMF 19.25.14's form up to sin = cn0
+    with characteristic nu' = -nu/(1 - nu) and parameter -m/mc; scaled by mc (homogeneity, DLMF
+    19.16.2) it is, with dn0^2 = cn0^2 + mc sn0^2 and R = R_F(mc sn0^2, mc, dn0^2) (``phase_integral``),
+
+        cn0 R / (1 - nu) - nu mc cn0^3 R_J(mc sn0^2, mc, dn0^2, mc (1 - nu sn0^2)/(1 - nu)) / (3 (1 - nu)^2),
+
+    and the same less cn0 R (F's part) is nu/(1 - nu) cn0 R - (the same R_J term): both terms have the
+    sign of nu, so nothing cancels.  Where this is used (cn0^2 < mc sn0^2) every argument lies between
+    mc/2 and 2 mc, so the derivative in cn0 at cn0 = 0 is kept.
+    """
+    sn0_squared, cn0_squared = sn0 * sn0, cn0 * cn0
+    dn0_squared = cn0_squared + mc * sn0_squared
+    gap = 1 - nu
+    parameter = mc * (1 - nu * sn0_squared) / gap
+    third = elliprj(mc * sn0_squared, mc, dn0_squared, parameter)
+    correction = nu * mc * cn0 * cn0_squared * third / (3 * gap * gap)
+    first_part = jnp.where(without_first_kind, nu / gap, 1 / gap) * cn0 * phase_integral
+    return first_part - correction
 
 
 def _unit_point(sn_scaled, cn_scaled):
