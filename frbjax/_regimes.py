@@ -229,10 +229,14 @@ def constants(inertia, unit_momentum, regime):
     # A = 1/delta = (1 + A1)/A3 (alpha = delta on the separatrix).
     first_amplitude = jnp.where(is_sep, out["amplitude"][..., 0], 0.5)
     third_amplitude = jnp.where(is_sep, out["amplitude"][..., 2], 0.5)
-    out["series"] = _series.at_separatrix(
+    series = _series.at_separatrix(
         series, is_sep, first_amplitude, third_amplitude, (1 + first_amplitude) / third_amplitude,
         jnp.zeros_like(first_amplitude))
-    return out
+    out["series"] = series
+    # Materialised: otherwise XLA fuses the last steps of the per-body constants (the series'
+    # coefficients, the tail of R_J's series in the complete Pi) into the evaluation's loops over
+    # bodies and times, and recomputes them at every time and for each output that uses them.
+    return materialise(out)
 
 
 def _remaining_third_kind(nu, sn0, cn0, mc, phase_integral, without_first_kind):

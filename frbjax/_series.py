@@ -320,7 +320,16 @@ def at_separatrix(data: SeriesData, separatrix, sin_shift, cos_shift, amplitude,
     )
 
 
-def _evaluate_complementary(data: SeriesData, reduced):
+def _complementary_exponentials(data: SeriesData, reduced):
+    """(h, D, F, G) of ``_evaluate_complementary`` at u = ``reduced``."""
+    distance = jnp.abs(reduced) * data.complementary_scale  # 2|w|
+    # -pi (K - |u|)/K' <= 0; the clip only absorbs the rounding of the reduction (and keeps the
+    # stand-ins of the other bodies finite).
+    gap = jnp.minimum(data.complementary_log_nome + distance, 0)
+    return jnp.exp(-distance / 2), -jnp.expm1(-distance), jnp.exp(gap), -jnp.expm1(gap)
+
+
+def _evaluate_complementary(data: SeriesData, reduced, exponentials):
     """(sn, cn) up to a common positive factor and theta_2(iw - beta'|q') up to one, at u = ``reduced``.
 
     With E = exp(-2|w|), D = 1 - E, F = q' exp(2|w|), G = 1 - F, h = exp(-|w|) and P_k = (1 - E^k)/(1 - E):
@@ -331,16 +340,9 @@ def _evaluate_complementary(data: SeriesData, reduced):
     """
     rows = jnp.moveaxis(data.complementary_rows, (-2, -1), (0, 1))
     cos_rows, sin_rows, odd_rows, even_rows = rows
-    distance = jnp.abs(reduced) * data.complementary_scale  # 2|w|
     sign = jnp.where(reduced < 0, -1, 1).astype(reduced.dtype)
-    half = jnp.exp(-distance / 2)
+    half, d, f, g = exponentials
     e = half * half
-    d = -jnp.expm1(-distance)
-    # -pi (K - |u|)/K' <= 0; the clip only absorbs the rounding of the reduction (and keeps the
-    # stand-ins of the other bodies finite).
-    gap = jnp.minimum(data.complementary_log_nome + distance, 0)
-    f = jnp.exp(gap)
-    g = -jnp.expm1(gap)
     e2 = e * e
     triple = 1 + e + e2  # P_3
     sn_scaled = sign * d * (odd_rows[0] + odd_rows[1] * f * triple)
@@ -363,7 +365,9 @@ def evaluate_series(data: SeriesData, mc, u, third_kind=True):
     turns = jnp.where(data.periodic, jnp.round(u / (2 * quarter)), 0)
     reduced = u - 2 * quarter * turns
     half_angle = reduced * (np.pi / 2) / quarter
-    sin_v, cos_v = materialise((jnp.sin(half_angle), jnp.cos(half_angle)))
+    # Materialised: each is used by several outputs, whose fused loops would otherwise recompute it.
+    reduced, sin_v, cos_v, *exponentials = materialise(
+        (reduced, jnp.sin(half_angle), jnp.cos(half_angle), *_complementary_exponentials(data, reduced)))
     # cos(k v), sin(k v) for k = 1 .. 2 terms by the rotation recurrence.
     cosines, sines = [cos_v], [sin_v]
     for _ in range(2 * terms - 1):
@@ -375,7 +379,7 @@ def evaluate_series(data: SeriesData, mc, u, third_kind=True):
     # sn : cn = theta_1 : mc^(1/4) theta_2 (theta_4 cancels), or S : (mc/q')^(1/4) T4/2.
     sn_scaled = sum(odd_sin[j] * sines[2 * j] for j in range(terms))
     cn_scaled = sum(odd_cos[j] * cosines[2 * j] for j in range(terms))
-    sn_c, cn_c, real_c, imaginary_c = _evaluate_complementary(data, reduced)
+    sn_c, cn_c, real_c, imaginary_c = _evaluate_complementary(data, reduced, exponentials)
     complementary = data.complementary
     sn_scaled = jnp.where(complementary, sn_c, sn_scaled)
     cn_scaled = jnp.where(complementary, cn_c, cn_scaled)
