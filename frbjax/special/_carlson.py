@@ -29,6 +29,14 @@ Derivatives (custom JVP rules):
   loop in its linear part: reverse mode then never transposes a duplication loop.  A partial derivative with respect to an argument
   that is exactly zero is infinite; there the tangent of that argument is ignored (documented
   convention), so no NaN reaches the caller.
+
+Every rule is differentiable again (forward or reverse over forward or reverse), with the same
+convention at every order: an argument that is exactly zero is frozen (``_frozen_at_zero``, every
+derivative with respect to it is 0), a partial derivative that is masked there is evaluated at a
+harmless point (``_positive_or_one``), and the square roots of the rules' loops are safe-where square
+roots (``_safe_sqrt``), so that no 0 * inf appears in a second derivative.  The second derivatives
+come from JAX differentiating the rules themselves: the derivative of the R_D of the R_F rule through
+R_D's rule, and the partial derivatives of R_D and R_J from the tangent of their rolled loops.
 """
 
 from __future__ import annotations
@@ -38,6 +46,7 @@ import functools
 import jax
 import jax.numpy as jnp
 from jax import lax
+from jax.custom_derivatives import SymbolicZero
 
 from .._fusion import materialise
 from ._common import is_double, over_sqrt, promote
@@ -73,22 +82,27 @@ def _duplicate(step, state, x, rolled=False):
     return state, quarter
 
 
-def _sqrt_for_tangents(x):
-    """sqrt whose derivative at 0 is taken as 0 (see the module note on zero arguments)."""
-    return _safe_sqrt(x)
-
-
 @jax.custom_jvp
 def _safe_sqrt(x):
-    return jnp.sqrt(x)
+    """sqrt(x) for the derivative rules' loops: its derivatives of every order at x = 0 are 0 (the
+    convention of the module note).  The value is a safe where, so that even differentiated as
+    written (which JAX may do in a composition of modes) nothing is infinite; the rule is the same
+    derivative with one product per tangent (compile time of the loops' tangents)."""
+    positive = x > 0
+    return jnp.where(positive, jnp.sqrt(jnp.where(positive, x, 1)), 0)
 
 
 @_safe_sqrt.defjvp
 def _safe_sqrt_jvp(primals, tangents):
     (x,), (dx,) = primals, tangents
-    root = jnp.sqrt(x)
-    inverse_twice_root = jnp.where(x > 0, 0.5 / jnp.where(x > 0, root, 1), 0)
-    return root, dx * inverse_twice_root
+    root = _safe_sqrt(x)
+    positive = x > 0
+    return root, dx * jnp.where(positive, 0.5 / jnp.where(positive, root, 1), 0)
+
+
+def _sqrt_for(rolled):
+    """The square root of the duplication: plain in the values, ``_safe_sqrt`` in the rules' loops."""
+    return _safe_sqrt if rolled else jnp.sqrt
 
 
 def _rf_polynomial(big_x, big_y):
@@ -126,8 +140,8 @@ def _rj_polynomial(e2, e3, e4, e5):
     )
 
 
-def _lambda(x, y, z):
-    sx, sy, sz = _sqrt_for_tangents(x), _sqrt_for_tangents(y), _sqrt_for_tangents(z)
+def _lambda(x, y, z, sqrt):
+    sx, sy, sz = sqrt(x), sqrt(y), sqrt(z)
     return sx * (sy + sz) + sy * sz, (sx, sy, sz)
 
 
@@ -140,7 +154,7 @@ def _rf_series(x, y, z, rolled=False):
 
     def step(state, _):
         x, y, z, mean = state
-        lam, _ = _lambda(x, y, z)
+        lam, _ = _lambda(x, y, z, _sqrt_for(rolled))
         return (x + lam) / 4, (y + lam) / 4, (z + lam) / 4, (mean + lam) / 4
 
     (x, y, z, mean), quarter = _duplicate(step, (x, y, z, mean0), x, rolled)
@@ -156,9 +170,11 @@ def _rf(x, y, z):
 
 def _rf_tangent(x, y, z, dx, dy, dz):
     # DLMF 19.18.1: dR_F/dz = -R_D(x, y, z)/6, and by symmetry for x and y.  The three R_D go through
-    # one duplication loop, stacked on a new leading axis (a third of the compiled code).
-    x, y, z = jnp.broadcast_arrays(x, y, z)
-    rd_x, rd_y, rd_z = _rd(jnp.stack([y, z, x]), jnp.stack([z, x, y]), jnp.stack([x, y, z]), True)
+    # one duplication loop, stacked on a new leading axis (a third of the compiled code).  R_D(x, y, z)
+    # is infinite at z = 0: evaluated at z = 1 there and masked (``_masked``).
+    x, y, z = (_frozen_at_zero(a) for a in jnp.broadcast_arrays(x, y, z))
+    rd_x, rd_y, rd_z = _rd(jnp.stack([y, z, x]), jnp.stack([z, x, y]),
+                           jnp.stack([_positive_or_one(x), _positive_or_one(y), _positive_or_one(z)]), True)
     return -(_masked(dx, x, rd_x) + _masked(dy, y, rd_y) + _masked(dz, z, rd_z)) / 6
 
 
@@ -167,8 +183,26 @@ def _rf_jvp(primals, tangents):
     return _rf(*primals), _rf_tangent(*primals, *tangents)
 
 
+def _frozen_at_zero(argument):
+    """``argument``, with every derivative taken as 0 where it is zero: the zero-argument convention of
+    the module note at every order (a rule's partial derivatives in the other arguments then do not
+    depend on it there either, so that second derivatives are symmetric)."""
+    return jnp.where(argument > 0, argument, lax.stop_gradient(argument))
+
+
+def _positive_or_one(argument):
+    """``argument`` where it is positive, 1 where it is zero: where a partial derivative is masked
+    (``_masked``) it is evaluated at this harmless point, so that its own derivatives are finite there
+    too (the safe-where pattern: a where alone would give 0 * inf = NaN one derivative later)."""
+    return jnp.where(argument > 0, argument, 1)
+
+
 def _masked(tangent, argument, partial):
-    """``tangent * partial`` with the zero-argument convention of the module note."""
+    """``tangent * partial`` with the zero-argument convention of the module note.
+
+    ``partial`` must be finite, with finite derivatives, where ``argument`` is zero (computed at
+    ``_positive_or_one`` of it, or in a loop with ``_safe_sqrt``).
+    """
     return tangent * jnp.where(argument > 0, partial, 0)
 
 
@@ -191,7 +225,7 @@ def _horner(coefficients, x):
     return result
 
 
-def _rc_one_plus(w, logarithm=True):
+def _rc_one_plus(w, logarithm=True, log=None):
     """R_C(1, w) for 0 < w <= 2 (DLMF 19.2.18-19.2.20), w given accurately (w = 1 + e_k in R_J).
 
     For w >= 1/2 one duplication step of R_C itself: with a = sqrt(w),
@@ -199,7 +233,8 @@ def _rc_one_plus(w, logarithm=True):
     [-0.1716, 0.1716], where a polynomial takes over (no arctangent; an absolute error of e' of an ulp
     moves R_C by a third of that).  For w < 1/2 (only when ``logarithm``): artanh(r)/r with
     r = sqrt(1 - w), written as log1p(2r(1 + r)/w)/2 so that w -> 0 loses nothing.
-    Everything is a function of w alone: XLA then fuses it into the surrounding duplication.
+    Everything is a function of w alone: XLA then fuses it into the surrounding duplication.  ``log``
+    is the logarithm for that branch (default ``_log_above_one``).
     """
     a = jnp.sqrt(w)
     inverse = 1 / (1 + a)
@@ -213,8 +248,36 @@ def _rc_one_plus(w, logarithm=True):
     # used twice is not fused, and materializing it every step costs more than a square root.
     root = jnp.sqrt(minus_e)
     argument = (1 + root) * (1 + root) / jnp.where(near, w, 1)  # >= 5.8: no cancellation in the log
-    value_near = _log_above_one(argument) * (jnp.sqrt(4 * minus_e) / 4) / minus_e
+    value_near = (log or _log_above_one)(argument) * (jnp.sqrt(4 * minus_e) / 4) / minus_e
     return jnp.where(near, value_near, value)
+
+
+_RC_DERIVATIVE = tuple((len(_RC_POLYNOMIAL) - 1 - k) * c for k, c in enumerate(_RC_POLYNOMIAL[:-1]))
+
+
+@jax.custom_jvp
+def _rc_one_plus_rolled(w):
+    """``_rc_one_plus`` for the rules' loops (XLA's logarithm), with the derivative in w as one
+    product per tangent: the tangents of the duplication then carry no polynomial (compile time)."""
+    return _rc_one_plus(w, log=jnp.log)
+
+
+@_rc_one_plus_rolled.defjvp
+def _rc_one_plus_rolled_jvp(primals, tangents):
+    (w,), (dw,) = primals, tangents
+    value = _rc_one_plus_rolled(w)
+    # w >= 1/2: value = 2 P(u) i, i = 1/(1 + a), u = (a - 1) i, a = sqrt(w); du/da = 2 i^2,
+    # di/da = -i^2 and da/dw = a/(2w), so d value/dw = i^2 (2 i P'(u) - P(u)) a / w.
+    a = jnp.sqrt(w)
+    inverse = 1 / (1 + a)
+    u = (a - 1) * inverse
+    polynomial = inverse * inverse * (2 * inverse * _horner(_RC_DERIVATIVE, u) - _horner(_RC_POLYNOMIAL, u)) * a / w
+    # w < 1/2: R_C(1, w) = artanh(r)/r, r = sqrt(1 - w), whose derivative is (R_C - 1/w)/(2(1 - w))
+    # (both terms positive apart, 1 - w > 1/2: no cancellation).
+    near = w < 0.5
+    minus_e = jnp.where(near, 1 - w, 1)
+    logarithmic = (value - 1 / jnp.where(near, w, 1)) / (2 * minus_e)
+    return value, dw * jnp.where(near, logarithmic, polynomial)
 
 
 # log(f) = 2 artanh(u) = 2u sum_k u^(2k)/(2k + 1), u = (f - 1)/(f + 1), |u| <= 0.1716 for
@@ -262,8 +325,8 @@ def _rf_rj_series(x, y, z, p, parameter_largest=False, rolled=False):
 
     def step(state, quarter):
         x, y, z, p, mean, mean_f, correction = state
-        lam, (sx, sy, sz) = _lambda(x, y, z)
-        sp = _sqrt_for_tangents(p)
+        lam, (sx, sy, sz) = _lambda(x, y, z, _sqrt_for(rolled))
+        sp = _sqrt_for(rolled)(p)
         ix, iy, iz = 1 / (sp + sx), 1 / (sp + sy), 1 / (sp + sz)
         # e_k = 4^{-3k} (p-x)(p-y)(p-z) / d_k^2 (Carlson 1995, eq. (2.19)), d_k = (sp+sx)(sp+sy)(sp+sz),
         # as a product of three ratios (sp - sx)/(sp + sx) in (-1, 1), each from the exact difference
@@ -274,7 +337,7 @@ def _rf_rj_series(x, y, z, p, parameter_largest=False, rolled=False):
         e = ratio_x * ratio_y * ratio_z
         if parameter_largest:
             # p >= x, y, z: every ratio and e are >= 0, and R_C(1, 1 + e) is an arctangent.
-            rc = _rc_one_plus(1 + e, logarithm=False)
+            rc = _rc_one_plus_rolled(1 + e) if rolled else _rc_one_plus(1 + e, logarithm=False)
         else:
             # 1 + e without cancellation when e -> -1: each ratio is sign * (1 - t) with
             # t = 1 - |ratio| = 2 min(sqrt p, sqrt x_j)/(sqrt p + sqrt x_j), computed without subtraction.
@@ -282,7 +345,12 @@ def _rf_rj_series(x, y, z, p, parameter_largest=False, rolled=False):
             ty = 2 * jnp.minimum(sp, sy) * iy
             tz = 2 * jnp.minimum(sp, sz) * iz
             one_minus_product = tx + ty + tz - (tx * ty + tx * tz + ty * tz) + tx * ty * tz
-            rc = _rc_one_plus(jnp.where(negative, one_minus_product, 1 + e))
+            w = jnp.where(negative, one_minus_product, 1 + e)
+            if rolled:
+                # The accurate value, with the tangent of 1 + e (the same function): the rules' loops
+                # then carry no tangents of t_x, t_y, t_z (compile time).
+                w = (1 + e) + lax.stop_gradient(w - (1 + e))
+            rc = _rc_one_plus_rolled(w) if rolled else _rc_one_plus(w)
         correction = correction + (quarter * rc) * (ix * iy * iz)
         x, y, z, p = (x + lam) / 4, (y + lam) / 4, (z + lam) / 4, (p + lam) / 4
         return x, y, z, p, (mean + lam) / 4, (mean_f + lam) / 4, correction
@@ -313,7 +381,7 @@ def _rd_series(x, y, z, rolled=False):
 
     def step(state, quarter):
         x, y, z, mean, correction = state
-        lam, (_, _, sz) = _lambda(x, y, z)
+        lam, (_, _, sz) = _lambda(x, y, z, _sqrt_for(rolled))
         correction = correction + quarter / (sz * (z + lam))
         return (x + lam) / 4, (y + lam) / 4, (z + lam) / 4, (mean + lam) / 4, correction
 
@@ -338,19 +406,28 @@ def _rd(x, y, z, rolled=False):
     return _rd_series(x, y, z, rolled)
 
 
-def _value_and_partials(function, primals):
-    """The value of an elementwise ``function`` and its partial derivatives in each argument.
+def _value_and_partials(function, primals, varying):
+    """The value of an elementwise ``function`` and its partial derivatives in the arguments at the
+    positions ``varying`` (a leading axis in that order; the other arguments are held fixed).
 
-    One forward-mode pass with a tangent per argument (vmapped, so the duplication loop runs once).
-    A JVP rule built on these partials is linear in the tangents with no loop in its linear part, so
-    reverse mode does not transpose the duplication loop (which would multiply the compile time).
+    One forward-mode pass with a tangent per varying argument (vmapped, so the duplication loop runs
+    once).  A JVP rule built on these partials is linear in the tangents with no loop in its linear
+    part, so reverse mode does not transpose the duplication loop (which would multiply the compile
+    time).  The rules pass only the arguments whose tangents are not symbolic zeros (``_varying``):
+    inside ellippiinc's rule, for one, R_J's x and z are fixed, and the loop carries two directions.
     """
-    primals = jnp.broadcast_arrays(*primals)
-    basis = jnp.eye(len(primals), dtype=primals[0].dtype)
+    primals = tuple(jnp.broadcast_arrays(*primals))
+    basis = jnp.eye(len(varying), dtype=primals[0].dtype)
+
+    def restricted(*moving):
+        arguments = list(primals)
+        for i, argument in zip(varying, moving):
+            arguments[i] = argument
+        return function(*arguments)
 
     def directional(unit):
-        tangents = tuple(jnp.full_like(value, unit[i]) for i, value in enumerate(primals))
-        return jax.jvp(function, tuple(primals), tangents)
+        tangents = tuple(jnp.full_like(primals[i], unit[k]) for k, i in enumerate(varying))
+        return jax.jvp(restricted, tuple(primals[i] for i in varying), tangents)
 
     values, partials = jax.vmap(directional)(basis)
     # Materialised: each partial feeds its own product with a tangent (and, in reverse mode, with a
@@ -358,14 +435,28 @@ def _value_and_partials(function, primals):
     return materialise((jax.tree.map(lambda v: v[0], values), partials))
 
 
-def _jvp_from_partials(function, primals, tangents):
-    value, partials = _value_and_partials(function, primals)
-    return value, sum(partials[i] * tangent for i, tangent in enumerate(tangents))
+def _varying(tangents):
+    """Positions of the tangents that are not symbolic zeros (rules with ``symbolic_zeros=True``)."""
+    return tuple(i for i, tangent in enumerate(tangents) if not isinstance(tangent, SymbolicZero))
 
 
-@_rd.defjvp
+def _jvp_from_partials(function, primals, tangents, may_vanish):
+    """The JVP of ``function`` from its partials; the arguments at the positions ``may_vanish`` may be
+    zero, where their tangents are ignored (module note: the partial there comes out finite through
+    ``_safe_sqrt``, but is not the derivative)."""
+    varying = _varying(tangents)
+    primals = tuple(_frozen_at_zero(a) if i in may_vanish else a for i, a in enumerate(primals))
+    if not varying:
+        value = function(*primals)
+        return value, jnp.zeros_like(value)
+    value, partials = _value_and_partials(function, primals, varying)
+    return value, sum(_masked(tangents[i], primals[i], partials[k]) if i in may_vanish
+                      else partials[k] * tangents[i] for k, i in enumerate(varying))
+
+
+@functools.partial(_rd.defjvp, symbolic_zeros=True)
 def _rd_jvp(rolled, primals, tangents):
-    return _jvp_from_partials(lambda a, b, c: _rd_series(a, b, c, True), primals, tangents)
+    return _jvp_from_partials(lambda a, b, c: _rd_series(a, b, c, True), primals, tangents, (0, 1))
 
 
 def _rj_rolled(x, y, z, p, parameter_largest=False):
@@ -377,9 +468,9 @@ def _rj(x, y, z, p):
     return _rj_series(x, y, z, p)
 
 
-@_rj.defjvp
+@functools.partial(_rj.defjvp, symbolic_zeros=True)
 def _rj_jvp(primals, tangents):
-    return _jvp_from_partials(_rj_rolled, primals, tangents)
+    return _jvp_from_partials(_rj_rolled, primals, tangents, (0, 1, 2))
 
 
 @jax.custom_jvp
@@ -388,15 +479,22 @@ def _rf_rj(x, y, z, p):
     return _rf_rj_series(x, y, z, p)
 
 
-@_rf_rj.defjvp
+@functools.partial(_rf_rj.defjvp, symbolic_zeros=True)
 def _rf_rj_jvp(primals, tangents):
     # Both partial derivatives from one rolled duplication loop (its tangent, as for R_J alone); the
-    # tangent of an argument that is exactly zero is ignored for R_F (module note).
-    (rf, rj), (rf_partials, rj_partials) = _value_and_partials(
-        lambda a, b, c, d: _rf_rj_series(a, b, c, d, rolled=True), primals)
-    rf_tangent = sum(_masked(tangent, argument, rf_partials[i])
-                     for i, (argument, tangent) in enumerate(zip(primals[:3], tangents[:3])))
-    rj_tangent = sum(rj_partials[i] * tangent for i, tangent in enumerate(tangents))
+    # tangent of an argument that is exactly zero is ignored (module note).
+    varying = _varying(tangents)
+    primals = tuple(_frozen_at_zero(a) for a in primals[:3]) + tuple(primals[3:])
+    series = lambda a, b, c, d: _rf_rj_series(a, b, c, d, rolled=True)  # noqa: E731
+    if not varying:
+        values = series(*primals)
+        return values, tuple(jnp.zeros_like(v) for v in values)
+    (rf, rj), (rf_partials, rj_partials) = _value_and_partials(series, primals, varying)
+    rf_tangent = sum(_masked(tangents[i], primals[i], rf_partials[k])
+                     for k, i in enumerate(varying) if i < 3)
+    rf_tangent = rf_tangent + jnp.zeros_like(rf)  # 0 when only p varies
+    rj_tangent = sum(_masked(tangents[i], primals[i], rj_partials[k]) if i < 3 else rj_partials[k] * tangents[i]
+                     for k, i in enumerate(varying))
     return (rf, rj), (rf_tangent, rj_tangent)
 
 
@@ -406,9 +504,9 @@ def _rj_parameter_largest(x, y, z, p):
     return _rj_series(x, y, z, p, True)
 
 
-@_rj_parameter_largest.defjvp
+@functools.partial(_rj_parameter_largest.defjvp, symbolic_zeros=True)
 def _rj_parameter_largest_jvp(primals, tangents):
-    return _jvp_from_partials(lambda a, b, c, d: _rj_rolled(a, b, c, d, True), primals, tangents)
+    return _jvp_from_partials(lambda a, b, c, d: _rj_rolled(a, b, c, d, True), primals, tangents, (0, 1, 2))
 
 
 # ---------------------------------------------------------------------------------------------- R_C
@@ -450,8 +548,8 @@ def _rc_positive_jvp(primals, tangents):
     dx, dy = tangents
     value = _rc_positive(x, y)
     # R_C(x, y) = R_F(x, y, y) and DLMF 19.18.1; both R_D in one loop.
-    x, y = jnp.broadcast_arrays(x, y)
-    rd_x, rd_y = _rd(jnp.stack([y, x]), jnp.stack([y, y]), jnp.stack([x, y]), True)
+    x, y = jnp.broadcast_arrays(_frozen_at_zero(x), y)
+    rd_x, rd_y = _rd(jnp.stack([y, x]), jnp.stack([y, y]), jnp.stack([_positive_or_one(x), y]), True)
     tangent = -_masked(dx, x, rd_x) / 6 - dy * rd_y / 3
     return value, tangent
 
@@ -528,7 +626,12 @@ def _rj_general(x, y, z, p):
 
 @_rj_general.defjvp
 def _rj_general_jvp(primals, tangents):
-    return jax.jvp(_rj_any_parameter, primals, tangents)
+    # A zero x, y or z is frozen (module note): DLMF 19.21.12 would otherwise carry the tangent of a zero
+    # argument through q into finite terms of a derivative that is infinite.
+    def frozen(x, y, z, p):
+        return _rj_any_parameter(_frozen_at_zero(x), _frozen_at_zero(y), _frozen_at_zero(z), p)
+
+    return jax.jvp(frozen, primals, tangents)
 
 
 def elliprj(x, y, z, p):
@@ -555,5 +658,5 @@ def elliprc(x, y):
     x, y = promote(x, y)
     positive = y > 0
     # One evaluation, its arguments chosen per point.
-    factor = jnp.where(positive, 1, jnp.sqrt(x / jnp.where(positive, 1, x - y)))
+    factor = jnp.sqrt(jnp.where(positive, 1, x / jnp.where(positive, 1, x - y)))  # safe at x = 0
     return factor * _rc_positive(jnp.where(positive, x, x - y), jnp.where(positive, y, -y))
