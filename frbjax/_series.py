@@ -49,9 +49,10 @@ only adds a term linear in u, and for |u| <= K
                                     sum q'^(n(n+1)) cosh((2n+1)w) cos((2n+1)beta')),
     slope' = Pi(chi|m)/K - A pi a'/(2 K K') = m/(m - chi) + A Z(a'|mc),
 
-the last form from Jacobi's imaginary transformation of the zeta function (i Z(ia|m) = -Z(a|mc) +
-dn sc(a|mc) - pi a/(2KK')), with Z(a'|mc) = (pi/(2K')) theta_4'(beta'|q')/theta_4(beta'|q') (DLMF
-22.16.32 for parameter mc): both terms are >= 0, so nothing cancels as chi -> -infinity, where
+the last form from Jacobi's imaginary transformation of his zeta function (i Z(ia|m) = -Z(a|mc) +
+dn sc(a|mc) - pi a/(2KK'), with Jacobi's Pi(u, a) = u Z(a) + ... above; checked against mpmath), and
+Z(a'|mc) = (pi/(2K')) theta_4'(beta'|q')/theta_4(beta'|q'), the logarithmic derivative of theta_4
+with nome q' (DLMF section 22.16(iii)): both terms are >= 0, so nothing cancels as chi -> -infinity, where
 slope' ~ 1/(-chi) while Pi(chi|m)/K ~ 1/sqrt(-chi).  Without F (chi >= -1, see ``coefficients``) the
 slope is slope' - 1 = chi/(m - chi) + A Z(a'|mc), again without cancellation as chi -> 0.
 Relative to the leading term the n-th terms of S and of the third kind are at most q'^(n^2) for
@@ -68,7 +69,7 @@ about 0.99993 in float64, 0.9987 in float32); the complementary series serves th
 
 Evaluation (``evaluate_series``): the half-period reduction u = 2jK + u_r, then for the direct series
 one sine and cosine of v_r = pi u_r/(2K), their multiples by the rotation recurrence and short dot
-products, for the complementary series one exp and two expm1; both are evaluated and selected per
+products, for the complementary series two exp and two expm1; both are evaluated and selected per
 body (elementwise and cheap), then one normalisation and one atan2 for the third kind.
 """
 
