@@ -200,7 +200,7 @@ def constants(inertia, unit_momentum, regime):
     # R_J: the complete Pi(nu|m) (- K for nu >= -1) of every whole half-period, and the same at the
     # phase u0 (for the attitude at t = 0, see ``reference``): one call on the two, stacked.  Where
     # the phase is reflected, the direct form gets a stand-in amplitude (pi/4) and Pi at the phase is
-    # the complete one less the integral from |am0| to pi/2 (``_reflected_third_kind``).
+    # the complete one less the integral from |am0| to pi/2 (``_remaining_third_kind``).
     direct_sn0 = jnp.where(reflected, jnp.sqrt(0.5).astype(sn0.dtype), sn0)
     direct_cn0 = jnp.where(reflected, jnp.sqrt(0.5).astype(cn0.dtype), cn0)
     stack = lambda complete, initial: jnp.stack(jnp.broadcast_arrays(complete, initial))  # noqa: E731

@@ -174,26 +174,39 @@ def reference(x):
 
 def _task(item):
     name, kind, x = item
-    start = time.perf_counter()
-    values, jacobian = reference(x)
-    text = lambda v: mpmath.nstr(v, DIGITS, strip_zeros=False)  # noqa: E731
-    print(f"{name}: {time.perf_counter() - start:.0f} s", flush=True)
+    values, jacobian = timed(name, reference, x)
     return dict(name=name, kind=kind, x=x, values=[text(v) for v in values],
                 jacobian=[[text(v) for v in row] for row in jacobian])
 
 
-def main():
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--processes", type=int, default=2)
+def text(value):
+    """An mpf as a string of DIGITS significant digits (the JSON files keep the references as text)."""
+    return mpmath.nstr(value, DIGITS, strip_zeros=False)
+
+
+def timed(name, compute, *arguments):
+    """compute(*arguments), printing how long it took (the generators run for minutes per point)."""
+    start = time.perf_counter()
+    result = compute(*arguments)
+    print(f"{name}: {time.perf_counter() - start:.0f} s", flush=True)
+    return result
+
+
+def write_references(description, task, items, output, default_processes, **metadata):
+    """Map ``task`` over ``items`` on a process pool (--processes) and write the records with metadata."""
+    parser = argparse.ArgumentParser(description=description)
+    parser.add_argument("--processes", type=int, default=default_processes)
     arguments = parser.parse_args()
-    items = points()
     with multiprocessing.Pool(arguments.processes) as pool:
-        records = pool.map(_task, items, chunksize=1)
-    data = dict(dps=DPS, step=STEP, outputs="L(3), Omega(3), q(4), R(9) row-major",
-                inputs="I(3), L(3), q0(4), t", points=records)
-    with open(OUTPUT, "w") as handle:
-        json.dump(data, handle, indent=1)
-    print("wrote", OUTPUT)
+        records = pool.map(task, items, chunksize=1)
+    with open(output, "w") as handle:
+        json.dump(dict(metadata, points=records), handle, indent=1)
+    print("wrote", output)
+
+
+def main():
+    write_references(__doc__.splitlines()[0], _task, points(), OUTPUT, 2, dps=DPS, step=STEP,
+                     outputs="L(3), Omega(3), q(4), R(9) row-major", inputs="I(3), L(3), q0(4), t")
 
 
 if __name__ == "__main__":

@@ -18,12 +18,8 @@ Nothing here uses a formula of frbjax.
 
 from __future__ import annotations
 
-import argparse
-import json
-import multiprocessing
 import os
 import sys
-import time
 
 import mpmath
 
@@ -32,11 +28,10 @@ sys.path.insert(0, os.path.dirname(HERE))
 sys.path.insert(0, HERE)
 
 import _reference as ref  # noqa: E402
-from make_gradient_references import ATTITUDE, _point  # noqa: E402
+from make_gradient_references import ATTITUDE, _point, text, timed, write_references  # noqa: E402
 
 DPS = 32
 STEP = "1e-6"
-DIGITS = 20
 OUTPUT = os.path.join(HERE, "hessian_references.json")
 
 
@@ -111,26 +106,14 @@ def reference(x):
 
 def _task(item):
     name, x = item
-    start = time.perf_counter()
-    values, hessian = reference(x)
-    text = lambda v: mpmath.nstr(v, DIGITS, strip_zeros=False)  # noqa: E731
-    print(f"{name}: {time.perf_counter() - start:.0f} s", flush=True)
+    values, hessian = timed(name, reference, x)
     return dict(name=name, x=x, values=[text(v) for v in values],
                 hessian=[[[text(v) for v in row] for row in block] for block in hessian])
 
 
 def main():
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--processes", type=int, default=1)
-    arguments = parser.parse_args()
-    items = points()
-    with multiprocessing.Pool(arguments.processes) as pool:
-        records = pool.map(_task, items, chunksize=1)
-    data = dict(dps=DPS, step=STEP, outputs="L(3), q(4)", inputs="I(3), L(3), t",
-                attitude=[float(v) for v in ATTITUDE], points=records)
-    with open(OUTPUT, "w") as handle:
-        json.dump(data, handle, indent=1)
-    print("wrote", OUTPUT)
+    write_references(__doc__.splitlines()[0], _task, points(), OUTPUT, 1, dps=DPS, step=STEP,
+                     outputs="L(3), q(4)", inputs="I(3), L(3), t", attitude=[float(v) for v in ATTITUDE])
 
 
 if __name__ == "__main__":
