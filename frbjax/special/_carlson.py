@@ -441,17 +441,21 @@ def _varying(tangents):
 
 
 def _jvp_from_partials(function, primals, tangents, may_vanish):
-    """The JVP of ``function`` from its partials; the arguments at the positions ``may_vanish`` may be
-    zero, where their tangents are ignored (module note: the partial there comes out finite through
-    ``_safe_sqrt``, but is not the derivative)."""
+    """The JVP of ``function`` (one array or a tuple of them) from its partials; the arguments at the
+    positions ``may_vanish`` may be zero, where their tangents are ignored (module note: the partial
+    there comes out finite through ``_safe_sqrt``, but is not the derivative)."""
     varying = _varying(tangents)
     primals = tuple(_frozen_at_zero(a) if i in may_vanish else a for i, a in enumerate(primals))
     if not varying:
         value = function(*primals)
-        return value, jnp.zeros_like(value)
+        return value, jax.tree.map(jnp.zeros_like, value)
     value, partials = _value_and_partials(function, primals, varying)
-    return value, sum(_masked(tangents[i], primals[i], partials[k]) if i in may_vanish
-                      else partials[k] * tangents[i] for k, i in enumerate(varying))
+
+    def tangent(partial):
+        return sum(_masked(tangents[i], primals[i], partial[k]) if i in may_vanish
+                   else partial[k] * tangents[i] for k, i in enumerate(varying))
+
+    return value, jax.tree.map(tangent, partials)
 
 
 @functools.partial(_rd.defjvp, symbolic_zeros=True)
@@ -481,21 +485,9 @@ def _rf_rj(x, y, z, p):
 
 @functools.partial(_rf_rj.defjvp, symbolic_zeros=True)
 def _rf_rj_jvp(primals, tangents):
-    # Both partial derivatives from one rolled duplication loop (its tangent, as for R_J alone); the
-    # tangent of an argument that is exactly zero is ignored (module note).
-    varying = _varying(tangents)
-    primals = tuple(_frozen_at_zero(a) for a in primals[:3]) + tuple(primals[3:])
+    # Both partial derivatives from one rolled duplication loop (its tangent, as for R_J alone).
     series = lambda a, b, c, d: _rf_rj_series(a, b, c, d, rolled=True)  # noqa: E731
-    if not varying:
-        values = series(*primals)
-        return values, tuple(jnp.zeros_like(v) for v in values)
-    (rf, rj), (rf_partials, rj_partials) = _value_and_partials(series, primals, varying)
-    rf_tangent = sum(_masked(tangents[i], primals[i], rf_partials[k])
-                     for k, i in enumerate(varying) if i < 3)
-    rf_tangent = rf_tangent + jnp.zeros_like(rf)  # 0 when only p varies
-    rj_tangent = sum(_masked(tangents[i], primals[i], rj_partials[k]) if i < 3 else rj_partials[k] * tangents[i]
-                     for k, i in enumerate(varying))
-    return (rf, rj), (rf_tangent, rj_tangent)
+    return _jvp_from_partials(series, primals, tangents, (0, 1, 2))
 
 
 @jax.custom_jvp
