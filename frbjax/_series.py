@@ -78,6 +78,7 @@ from __future__ import annotations
 from typing import NamedTuple
 
 import jax.numpy as jnp
+from jax import lax
 import numpy as np
 from jaxtyping import Array, Bool, Float
 
@@ -321,6 +322,17 @@ def at_separatrix(data: SeriesData, separatrix, sin_shift, cos_shift, amplitude,
     )
 
 
+def _complementary_part(data: SeriesData, reduced):
+    """``_evaluate_complementary`` at u = ``reduced``, its exponentials materialised (each feeds
+    several outputs, whose fused loops would otherwise recompute it)."""
+    return _evaluate_complementary(data, reduced, materialise(_complementary_exponentials(data, reduced)))
+
+
+def _no_complementary_part(data: SeriesData, reduced):
+    zero = jnp.zeros_like(reduced)
+    return zero, zero, zero, zero
+
+
 def _complementary_exponentials(data: SeriesData, reduced):
     """(h, D, F, G) of ``_evaluate_complementary`` at u = ``reduced``."""
     distance = jnp.abs(reduced) * data.complementary_scale  # 2|w|
@@ -367,8 +379,7 @@ def evaluate_series(data: SeriesData, mc, u, third_kind=True):
     reduced = u - 2 * quarter * turns
     half_angle = reduced * (np.pi / 2) / quarter
     # Materialised: each is used by several outputs, whose fused loops would otherwise recompute it.
-    reduced, sin_v, cos_v, *exponentials = materialise(
-        (reduced, jnp.sin(half_angle), jnp.cos(half_angle), *_complementary_exponentials(data, reduced)))
+    reduced, sin_v, cos_v = materialise((reduced, jnp.sin(half_angle), jnp.cos(half_angle)))
     # cos(k v), sin(k v) for k = 1 .. 2 terms by the rotation recurrence.
     cosines, sines = [cos_v], [sin_v]
     for _ in range(2 * terms - 1):
@@ -380,7 +391,10 @@ def evaluate_series(data: SeriesData, mc, u, third_kind=True):
     # sn : cn = theta_1 : mc^(1/4) theta_2 (theta_4 cancels), or S : (mc/q')^(1/4) T4/2.
     sn_scaled = sum(odd_sin[j] * sines[2 * j] for j in range(terms))
     cn_scaled = sum(odd_cos[j] * cosines[2 * j] for j in range(terms))
-    sn_c, cn_c, real_c, imaginary_c = _evaluate_complementary(data, reduced, exponentials)
+    # The complementary series serves only the bodies next to the separatrix (about 1 in 20,000 random
+    # ones): skipped for a batch that has none (under jax.vmap the cond becomes a select: computed).
+    sn_c, cn_c, real_c, imaginary_c = lax.cond(
+        jnp.any(data.complementary), _complementary_part, _no_complementary_part, data, reduced)
     complementary = data.complementary
     sn_scaled = jnp.where(complementary, sn_c, sn_scaled)
     cn_scaled = jnp.where(complementary, cn_c, cn_scaled)
