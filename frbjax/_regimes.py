@@ -34,8 +34,8 @@ import jax.numpy as jnp
 
 from . import _series
 from ._fusion import materialise
-from .special import elliprf, elliprj
-from .special._legendre import _LARGE_NEGATIVE_CHARACTERISTIC, pi_without_first_kind
+from .special._carlson import _rf_rj
+from .special._legendre import _LARGE_NEGATIVE_CHARACTERISTIC, pi_without_first_kind_from, third_kind_arguments
 
 MAJOR, MINOR, SEPARATRIX, UNIFORM = 0, 1, 2, 3
 
@@ -186,39 +186,54 @@ def constants(inertia, unit_momentum, regime):
     phase_y = jnp.where(reflected, mc, dn0_squared)
     phase_z = jnp.where(reflected, dn0_squared, jnp.ones_like(sn0))
     series_x, series_y, series_z = _series.integral_arguments(m, mc, nu)
-    first_kind = elliprf(
+    # R_J: the complete Pi(nu|m) (- K for nu >= -1) of every whole half-period, and the same at the
+    # phase u0 (for the attitude at t = 0, see ``reference``).  Where the phase is reflected, Pi at the
+    # phase is the complete one less the integral from |am0| to pi/2 (``_remaining_third_kind``), whose
+    # R_J has the x, y, z of the reflected phase; elsewhere the direct form (``third_kind_arguments``)
+    # has those of the direct phase.  So every elliptic integral of the constructor is an R_F and an R_J
+    # of shared x, y, z: one duplication loop (``_rf_rj``) on five rows, (x, y, z, p) =
+    #   the phase (R_F: u0; R_J: Pi at the phase, direct or remaining),
+    #   (0, mc, 1, 1 - n') (R_F: K(m); R_J: the complete Pi, n' the characteristic of DLMF 19.7.8),
+    #   the series' a', b and K' (R_J unused: p = 1 is a stand-in).
+    # The loop is rolled (``rolled=True``): per-body work, where twelve unrolled steps would only add
+    # compile time (the values are bit for bit the same); its JVP rule is one more rolled loop.
+    remaining_sn0 = jnp.where(reflected, sn0, 1)
+    remaining_cn0 = jnp.where(reflected, cn0, 0)
+    direct_sn0 = jnp.where(reflected, jnp.sqrt(0.5).astype(sn0.dtype), sn0)
+    direct_cn0 = jnp.where(reflected, jnp.sqrt(0.5).astype(cn0.dtype), cn0)
+    *_, direct_parameter = third_kind_arguments(nu, direct_sn0, direct_cn0, m, mc)
+    *_, complete_parameter = third_kind_arguments(nu, jnp.ones_like(sn0), jnp.zeros_like(cn0), m, mc)
+    remaining_parameter = mc * (1 - nu * (remaining_sn0 * remaining_sn0)) / (1 - nu)
+    phase_parameter = jnp.where(reflected, remaining_parameter, direct_parameter)
+    one = jnp.ones_like(sn0)
+    first_kind, third_kind = _rf_rj(
         jnp.concatenate([phase_x[None], series_x]),
         jnp.concatenate([phase_y[None], series_y]),
         jnp.concatenate([phase_z[None], series_z]),
+        jnp.stack(jnp.broadcast_arrays(phase_parameter, complete_parameter, one, one, one)),
+        True,
     )
-    first_kind = materialise(first_kind)
+    first_kind, third_kind = materialise((first_kind, third_kind[:2]))
     quarter, phase_integral = first_kind[1], first_kind[0]
     sign = jnp.where(sn0 < 0, -1.0, 1.0).astype(sn0.dtype)
     remaining_phase = cn0 * phase_integral  # K - |u0| where reflected
     elliptic_u0 = jnp.where(reflected, sign * (quarter - remaining_phase), sn0 * phase_integral)
     out["u0"] = jnp.where(is_sep, separatrix_u0, elliptic_u0)
-    # R_J: the complete Pi(nu|m) (- K for nu >= -1) of every whole half-period, and the same at the
-    # phase u0 (for the attitude at t = 0, see ``reference``): one call on the two, stacked.  Where
-    # the phase is reflected, the direct form gets a stand-in amplitude (pi/4) and Pi at the phase is
-    # the complete one less the integral from |am0| to pi/2 (``_remaining_third_kind``).
-    direct_sn0 = jnp.where(reflected, jnp.sqrt(0.5).astype(sn0.dtype), sn0)
-    direct_cn0 = jnp.where(reflected, jnp.sqrt(0.5).astype(cn0.dtype), cn0)
-    stack = lambda complete, initial: jnp.stack(jnp.broadcast_arrays(complete, initial))  # noqa: E731
-    third_kind = pi_without_first_kind(
-        stack(nu, nu), stack(jnp.ones_like(sn0), direct_sn0), stack(jnp.zeros_like(cn0), direct_cn0),
-        stack(m, m), stack(mc, mc))
-    out["third_kind_complete"] = third_kind[0]
+    complete_third_kind = pi_without_first_kind_from(
+        nu, jnp.ones_like(sn0), jnp.zeros_like(cn0), m, mc, third_kind[1])
+    out["third_kind_complete"] = complete_third_kind
     remaining_third_kind = _remaining_third_kind(
-        nu, jnp.where(reflected, sn0, 1), jnp.where(reflected, cn0, 0), mc,
-        jnp.where(reflected, phase_integral, 1), out["without_first_kind"])
+        nu, remaining_sn0, remaining_cn0, mc, jnp.where(reflected, phase_integral, 1),
+        jnp.where(reflected, third_kind[0], 1), out["without_first_kind"])
+    direct_third_kind = pi_without_first_kind_from(nu, direct_sn0, direct_cn0, m, mc, third_kind[0])
     out["reference_third_kind"] = jnp.where(
-        reflected, sign * (third_kind[0] - remaining_third_kind), third_kind[1])
+        reflected, sign * (complete_third_kind - remaining_third_kind), direct_third_kind)
     out["regime"] = regime
     # The theta series (``_series``) of every body: Pi(nu; am u|m) - u (nu >= -1) or Pi(nu; am u|m)
     # (nu < -1) on a reduced argument, in the nome q or (next to the separatrix) in the complementary
     # nome q'.  Unlike a Fourier series, whose terms fall like rho^n (rho -> 1 as nu -> -infinity),
     # the theta series' terms fall like q^(n(n-1)) rho^n, so every nu < 0 is expanded directly.
-    series = _series.coefficients(m, mc, nu, first_kind[1:], third_kind[0])
+    series = _series.coefficients(m, mc, nu, first_kind[1:], complete_third_kind)
     # The separatrix is the limit m = 1 of the major regime (q' = 0): its L is (A1 cn, sn, A3 dn) with
     # cn = dn = sech, sn = tanh, and its psi = u/(J2 B) + 2 arctan(delta tanh(u/2)) (formulas.md) equals
     # t/J2 + atan2(L2, L3) - arctan((A1/A3) tanh u): the major regime's alpha Pi(nu; gd u|1), with
@@ -239,7 +254,7 @@ def constants(inertia, unit_momentum, regime):
     return materialise(out)
 
 
-def _remaining_third_kind(nu, sn0, cn0, mc, phase_integral, without_first_kind):
+def _remaining_third_kind(nu, sn0, cn0, mc, phase_integral, third, without_first_kind):
     """The integral from |am0| to pi/2 of Pi's integrand (less F's where ``without_first_kind``).
 
     With theta -> pi/2 - theta the integrand 1/((1 - nu sin^2) Delta) becomes
@@ -251,14 +266,11 @@ def _remaining_third_kind(nu, sn0, cn0, mc, phase_integral, without_first_kind):
 
     and the same less cn0 R (F's part) is nu/(1 - nu) cn0 R - (the same R_J term): both terms have the
     sign of nu, so nothing cancels.  Where this is used (cn0^2 < mc sn0^2) every argument lies between
-    mc/2 and 2 mc, so the derivative in cn0 at cn0 = 0 is kept.
+    mc/2 and 2 mc, so the derivative in cn0 at cn0 = 0 is kept.  ``third`` is that R_J (computed by
+    the caller with the other integrals: ``constants``).
     """
-    sn0_squared, cn0_squared = sn0 * sn0, cn0 * cn0
-    dn0_squared = cn0_squared + mc * sn0_squared
     gap = 1 - nu
-    parameter = mc * (1 - nu * sn0_squared) / gap
-    third = elliprj(mc * sn0_squared, mc, dn0_squared, parameter)
-    correction = nu * mc * cn0 * cn0_squared * third / (3 * gap * gap)
+    correction = nu * mc * cn0 * (cn0 * cn0) * third / (3 * gap * gap)
     first_part = jnp.where(without_first_kind, nu / gap, 1 / gap) * cn0 * phase_integral
     return first_part - correction
 

@@ -222,19 +222,43 @@ def coefficients(m, mc, characteristic, integrals=None, complete=None) -> Series
     # sinh((2n+1) beta) = sum (-1)^n q^(n^2) (q/rho)^n (-expm1(-2 (2n+1) beta)): no cancellation.
     two_beta = np.pi * distance / quarter
     origin = -jnp.expm1(-two_beta)
+    # Every power by a recurrence over n (a product or two per term instead of an integer power or an
+    # exponential: a fraction of the compiled code, and rounding of a few ulp in terms that are at most
+    # q^2 of the first), and every 1 - x^k as (1 - x^(k-1)) + x^(k-1) (1 - x), a sum of non-negative
+    # terms, so that nothing cancels as the exponent -> 0 (chi -> 0 or chi -> -infinity).
+    q_squared = q * q
+    shift_decay = jnp.exp(-np.pi * shift / quarter)  # q/rho = exp(-2 alpha')
+    shift_decay_squared = shift_decay * shift_decay
+    shift_gap = -jnp.expm1(-2 * np.pi * shift / quarter)  # 1 - (q/rho)^2
+    beta_decay = jnp.exp(-two_beta)
+    beta_decay_squared = beta_decay * beta_decay
+    beta_gap = -jnp.expm1(-2 * two_beta)  # 1 - exp(-4 beta)
+    q_odd = jnp.ones_like(q)  # q^(n(n-1)) = q^(j(j+1))
+    q_power, q_even_power = jnp.ones_like(q), jnp.ones_like(q)  # q^(n-1), q^(2(n-1))
+    rho_power, shift_power = jnp.ones_like(rho), jnp.ones_like(shift_decay)  # rho^(n-1), (q/rho)^(n-1)
+    shift_square_power, shift_complement = jnp.ones_like(shift_decay), jnp.zeros_like(shift_decay)
+    beta_power, beta_complement = beta_decay, origin  # exp(-2(2n-1) beta), 1 - exp(-2(2n-1) beta)
     for j in range(terms):
         n = j + 1
-        q_odd = q ** (j * (j + 1))
+        q_power, rho_power, shift_power = q_power * q, rho_power * rho, shift_power * shift_decay
         rows[0].append(odd_scale * (-1) ** j * q_odd)
         rows[1].append(odd_scale * mc_fourth * q_odd)
-        growing = q ** (n * (n - 1)) * rho**n
+        growing = q_odd * rho_power
         # q^(n(n+1)) rho^(-n) = q^(n^2) (q/rho)^n with q/rho = exp(-2 alpha') <= 1.
-        decaying = q ** (n * n) * jnp.exp(-np.pi * n * shift / quarter)
+        decaying = q_odd * q_power * shift_power
+        # 1 - (q/rho)^(2n) = 1 - exp(-4 n alpha').
+        shift_complement = shift_complement + shift_square_power * shift_gap
+        shift_square_power = shift_square_power * shift_decay_squared
         sign = (-1) ** n
         rows[2].append(sign * (growing + decaying))
-        rows[3].append(jnp.where(moving, sign * growing * -jnp.expm1(-2 * np.pi * n * shift / quarter), 0))
+        rows[3].append(jnp.where(moving, sign * growing * shift_complement, 0))
         if n < terms:
-            origin = origin + sign * decaying * -jnp.expm1(-(2 * n + 1) * two_beta)
+            # 1 - exp(-2 (2n + 1) beta).
+            beta_complement = beta_complement + beta_power * beta_gap
+            beta_power = beta_power * beta_decay_squared
+            origin = origin + sign * decaying * beta_complement
+        q_even_power = q_even_power * q_squared
+        q_odd = q_odd * q_even_power
     stacked = jnp.stack([jnp.stack(jnp.broadcast_arrays(*row), -1) for row in rows], -2)
     without_first_kind = characteristic >= _LARGE_NEGATIVE_CHARACTERISTIC
 

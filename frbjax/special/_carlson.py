@@ -9,7 +9,9 @@ factor 4, and the seventh-order series errs by about the eighth power of that sp
 of steps per dtype (``_plan``: 12 in float64, enough for argument ratios down to 1e-300) keeps each
 function a straight-line XLA program.  The steps are unrolled, so that XLA fuses the whole evaluation
 into one vectorized pass over the points; the derivative rules use a rolled loop instead (one
-compiled step: compile time).  R_F and R_J of the same x, y, z share one loop (``_rf_rj``).  In R_J's
+compiled step: compile time), and so can a caller through the internal functions' ``rolled`` argument
+(the rigid body's per-body constants: there compile time outweighs the cost of the rolled loop, and
+the values are bit for bit the same).  R_F and R_J of the same x, y, z share one loop (``_rf_rj``).  In R_J's
 step, R_C(1, 1 + e_k) (Carlson 1995, eq. (2.19)) costs a square root and a polynomial; a logarithm
 only serves the points with 1 + e_k < 1/2.
 
@@ -163,9 +165,10 @@ def _rf_series(x, y, z, rolled=False):
     return over_sqrt(_rf_polynomial(dx0 * scale, dy0 * scale), mean)
 
 
-@jax.custom_jvp
-def _rf(x, y, z):
-    return _rf_series(x, y, z)
+@functools.partial(jax.custom_jvp, nondiff_argnums=(3,))
+def _rf(x, y, z, rolled=False):
+    """R_F; ``rolled`` compiles one duplication step instead of all (see ``_duplicate``)."""
+    return _rf_series(x, y, z, rolled)
 
 
 def _rf_tangent(x, y, z, dx, dy, dz):
@@ -179,8 +182,8 @@ def _rf_tangent(x, y, z, dx, dy, dz):
 
 
 @_rf.defjvp
-def _rf_jvp(primals, tangents):
-    return _rf(*primals), _rf_tangent(*primals, *tangents)
+def _rf_jvp(rolled, primals, tangents):
+    return _rf(*primals, rolled), _rf_tangent(*primals, *tangents)
 
 
 def _frozen_at_zero(argument):
@@ -467,37 +470,38 @@ def _rj_rolled(x, y, z, p, parameter_largest=False):
     return _rj_series(x, y, z, p, parameter_largest, True)
 
 
-@jax.custom_jvp
-def _rj(x, y, z, p):
-    return _rj_series(x, y, z, p)
+@functools.partial(jax.custom_jvp, nondiff_argnums=(4,))
+def _rj(x, y, z, p, rolled=False):
+    """R_J for p not much larger than x, y, z (``elliprj`` transforms the others)."""
+    return _rj_series(x, y, z, p, rolled=rolled)
 
 
 @functools.partial(_rj.defjvp, symbolic_zeros=True)
-def _rj_jvp(primals, tangents):
+def _rj_jvp(rolled, primals, tangents):
     return _jvp_from_partials(_rj_rolled, primals, tangents, (0, 1, 2))
 
 
-@jax.custom_jvp
-def _rf_rj(x, y, z, p):
+@functools.partial(jax.custom_jvp, nondiff_argnums=(4,))
+def _rf_rj(x, y, z, p, rolled=False):
     """(R_F(x, y, z), R_J(x, y, z, p)) from one duplication loop."""
-    return _rf_rj_series(x, y, z, p)
+    return _rf_rj_series(x, y, z, p, rolled=rolled)
 
 
 @functools.partial(_rf_rj.defjvp, symbolic_zeros=True)
-def _rf_rj_jvp(primals, tangents):
+def _rf_rj_jvp(rolled, primals, tangents):
     # Both partial derivatives from one rolled duplication loop (its tangent, as for R_J alone).
     series = lambda a, b, c, d: _rf_rj_series(a, b, c, d, rolled=True)  # noqa: E731
     return _jvp_from_partials(series, primals, tangents, (0, 1, 2))
 
 
-@jax.custom_jvp
-def _rj_parameter_largest(x, y, z, p):
+@functools.partial(jax.custom_jvp, nondiff_argnums=(4,))
+def _rj_parameter_largest(x, y, z, p, rolled=False):
     """R_J(x, y, z, p) for p >= max(x, y, z) (no logarithmic branch: see ``_rf_rj_series``)."""
-    return _rj_series(x, y, z, p, True)
+    return _rj_series(x, y, z, p, True, rolled)
 
 
 @functools.partial(_rj_parameter_largest.defjvp, symbolic_zeros=True)
-def _rj_parameter_largest_jvp(primals, tangents):
+def _rj_parameter_largest_jvp(rolled, primals, tangents):
     return _jvp_from_partials(lambda a, b, c, d: _rj_rolled(a, b, c, d, True), primals, tangents, (0, 1, 2))
 
 

@@ -199,25 +199,46 @@ def _pi_reduced_terms(n, s, c, m, mc):
     both terms are >= 0 for n < 0, so nothing cancels.  Both forms are one R_F (R_C(a, b) = R_F(a, b, b))
     plus one R_J, so each is evaluated once with its arguments chosen per point.
     """
-    one = jnp.ones_like(s)
-    x, y = c * c, _delta_squared(s, c, mc)
-    transformed = n < _LARGE_NEGATIVE_CHARACTERISTIC
-    n_far = jnp.where(transformed, n, 2 * _LARGE_NEGATIVE_CHARACTERISTIC)
-    omega = m / n_far
-    characteristic = jnp.where(transformed, omega, n)
-    p = 1 - characteristic * s * s
+    transformed, characteristic, kappa = _moved_characteristic(n, m)
     # One duplication loop gives R_F(x, y, 1) and R_J(x, y, 1, p).  For n < -1 the head
     # s R_C(c^2 Delta^2, (1 - n s^2)(1 - omega s^2)) is elementary (see ``pi_without_first_kind``):
     # arctan(sqrt(kappa) s / (c Delta)) / sqrt(kappa), kappa = (1 - n)(1 - omega); pi/2 at c = 0.
+    x, y, one, p = third_kind_arguments(n, s, c, m, mc)
     first, third = _rf_rj(x, y, one, p)
-    kappa = (1 - n_far) * (1 - omega)
     numerator, denominator = jnp.sqrt(kappa) * s, c * jnp.sqrt(y)
     positive = denominator > 0
     angle = jnp.where(positive, jnp.arctan(numerator / jnp.where(positive, denominator, 1)),
                       jnp.copysign(jnp.pi / 2, numerator))
     head = jnp.where(transformed, over_sqrt(angle, kappa), s * first)
-    coefficient = jnp.where(transformed, -omega, n)
+    coefficient = jnp.where(transformed, -characteristic, n)
     return head, coefficient * s**3 * third / 3
+
+
+def _moved_characteristic(n, m):
+    """(transformed, characteristic, kappa): n < -1 moves to omega = m/n by DLMF 19.7.8 (see
+    ``pi_without_first_kind``), with kappa = (1 - n)(1 - omega); n itself otherwise."""
+    transformed = n < _LARGE_NEGATIVE_CHARACTERISTIC
+    n_far = jnp.where(transformed, n, 2 * _LARGE_NEGATIVE_CHARACTERISTIC)
+    omega = m / n_far
+    return transformed, jnp.where(transformed, omega, n), (1 - n_far) * (1 - omega)
+
+
+def third_kind_arguments(n, s, c, m, mc):
+    """(x, y, z, p) of the one R_J(x, y, z, p) of ``pi_without_first_kind``: (c^2, Delta^2, 1, 1 - n' s^2),
+    n' the characteristic after DLMF 19.7.8.  x, y, z are those of F(phi_r|m) = s R_F(x, y, z)."""
+    _, characteristic, _ = _moved_characteristic(n, m)
+    x, y = c * c, _delta_squared(s, c, mc)
+    return x, y, jnp.ones_like(x), 1 - characteristic * s * s
+
+
+def pi_without_first_kind_from(n, s, c, m, mc, third):
+    """``pi_without_first_kind`` from ``third`` = R_J(*third_kind_arguments(n, s, c, m, mc)), for a
+    caller that computes it together with other Carlson integrals (one duplication loop)."""
+    transformed, characteristic, kappa = _moved_characteristic(n, m)
+    y = _delta_squared(s, c, mc)
+    head = jnp.where(transformed, over_sqrt(jnp.arctan2(jnp.sqrt(kappa) * s, c * jnp.sqrt(y)), kappa), 0)
+    tail = characteristic * s**3 * third / 3
+    return head + jnp.where(transformed, -tail, tail)
 
 
 def pi_without_first_kind(n, s, c, m, mc):
@@ -231,17 +252,8 @@ def pi_without_first_kind(n, s, c, m, mc):
     (DLMF 19.2.18), and Pi = that - (omega/3) s^3 R_J(c^2, Delta^2, 1, 1 - omega s^2).  In both cases
     the parameter of R_J is the largest argument (n, omega <= 0), which has a cheaper duplication.
     """
-    one = jnp.ones_like(s)
-    x, y = c * c, _delta_squared(s, c, mc)
-    transformed = n < _LARGE_NEGATIVE_CHARACTERISTIC
-    n_far = jnp.where(transformed, n, 2 * _LARGE_NEGATIVE_CHARACTERISTIC)
-    omega = m / n_far
-    characteristic = jnp.where(transformed, omega, n)
-    kappa = (1 - n_far) * (1 - omega)
-    root_kappa = jnp.sqrt(kappa)
-    head = jnp.where(transformed, over_sqrt(jnp.arctan2(root_kappa * s, c * jnp.sqrt(y)), kappa), 0)
-    tail = characteristic * s**3 * _rj_parameter_largest(x, y, one, 1 - characteristic * s * s) / 3
-    return head + jnp.where(transformed, -tail, tail)
+    third = _rj_parameter_largest(*third_kind_arguments(n, s, c, m, mc))
+    return pi_without_first_kind_from(n, s, c, m, mc, third)
 
 
 def _pi_complete(n, m, mc):
@@ -299,16 +311,12 @@ def _pi_complete_values(n, m, mc):
     for n >= -1, pi/(2 sqrt(kappa)) - (omega/3) R_J(0, mc, 1, 1 - omega) for n < -1 (DLMF 19.7.8), the
     complete R_J by ``_rj_complete`` and K by its polynomial (so that Pi(0|m) = K(m) to the last bit).
     """
-    transformed = n < _LARGE_NEGATIVE_CHARACTERISTIC
-    n_far = jnp.where(transformed, n, 2 * _LARGE_NEGATIVE_CHARACTERISTIC)
-    omega = m / n_far
-    characteristic = jnp.where(transformed, omega, n)
-    kappa = (1 - n_far) * (1 - omega)
+    transformed, characteristic, kappa = _moved_characteristic(n, m)
     positive = mc > 0
     safe_mc = jnp.where(positive, mc, 1)
     head = jnp.where(transformed, over_sqrt(jnp.pi / 2, kappa), _ellipk(m, mc))
     third = jnp.where(positive, _rj_complete(safe_mc, 1 - characteristic), jnp.inf)
-    coefficient = jnp.where(transformed, -omega, n)
+    coefficient = jnp.where(transformed, -characteristic, n)
     return head + coefficient * third / 3
 
 
