@@ -43,7 +43,6 @@ MAJOR, MINOR, SEPARATRIX, UNIFORM = 0, 1, 2, 3
 # regime whose formulas it feeds, so no square root of zero or division by zero is ever evaluated.
 _SAFE_INERTIA = (1.0, 2.0, 3.0)
 _SAFE_MAJOR = (0.3, 0.0, 0.9539392014169456)
-_SAFE_MINOR = (0.95, 0.0, 0.31224989991991997)
 
 
 def _substitute(condition, inertia, unit_momentum, safe_momentum):
@@ -85,39 +84,38 @@ def constants(inertia, unit_momentum, regime):
     """Per-body constants of the regime's exact solution (formulas.md), as a dict of arrays."""
     is_major, is_minor, is_sep = regime == MAJOR, regime == MINOR, regime == SEPARATRIX
 
-    # Around the major axis.
-    j, l = _substitute(is_major, inertia, unit_momentum, _SAFE_MAJOR)
+    # Around the major axis (around the minor axis): one set of formulas in the roles of the axes.
+    # The pivot axis p is the one the orbit circles, J1 (J3), o the other extreme, J3 (J1); g_p = g1
+    # (g3) and g_o = g3 (g1) are their energy gaps, and gap_p = J3 - J2 (J2 - J1) and gap_o = J2 - J1
+    # (J3 - J2) the gaps of J2 from o and from p.  Then the regime's formulas (formulas.md) read
+    #   A_p = sqrt(J_p g_o/c), A2 = sqrt(J2 g_o/gap_p), A_o = sqrt(J_o g_p/c), B = sqrt(g_p gap_p/(J1 J2 J3)),
+    #   m = g_o gap_o/(g_p gap_p), mc = c |g2|/(g_p gap_p), alpha = c/sqrt(J_p g_p gap_p J_o/J2),
+    #   nu = -J_p g_o/(J_o g_p), precession 1/J_p,
+    # so that the minor axis regime is the major one with the roles of J1 and J3 exchanged.
+    is_elliptic = is_major | is_minor
+    j, l = _substitute(is_elliptic, inertia, unit_momentum, _SAFE_MAJOR)
     j1, j2, j3 = j[..., 0], j[..., 1], j[..., 2]
     g1, g2, g3 = energy_gaps(j, l)
     a, b, c = j2 - j1, j3 - j2, j3 - j1
-    major = dict(
-        amplitude=jnp.stack([jnp.sqrt(j1 * g3 / c), jnp.sqrt(j2 * g3 / b), jnp.sqrt(j3 * g1 / c)], -1),
-        rate=jnp.sqrt(g1 * b / (j1 * j2 * j3)),
-        m=g3 * a / (g1 * b),
-        mc=c * (-g2) / (g1 * b),
-        alpha=c / jnp.sqrt(j1 * g1 * b * j3 / j2),
-        nu=-j1 * g3 / (j3 * g1),
-        precession=1 / j1,
+    j_pivot, j_other = jnp.where(is_minor, j3, j1), jnp.where(is_minor, j1, j3)
+    g_pivot, g_other = jnp.where(is_minor, g3, g1), jnp.where(is_minor, g1, g3)
+    gap_pivot, gap_other = jnp.where(is_minor, a, b), jnp.where(is_minor, b, a)
+    amplitude_pivot = jnp.sqrt(j_pivot * g_other / c)
+    amplitude_middle = jnp.sqrt(j2 * g_other / gap_pivot)
+    amplitude_other = jnp.sqrt(j_other * g_pivot / c)
+    elliptic = dict(
+        amplitude=jnp.stack([jnp.where(is_minor, amplitude_other, amplitude_pivot), amplitude_middle,
+                             jnp.where(is_minor, amplitude_pivot, amplitude_other)], -1),
+        rate=jnp.sqrt(g_pivot * gap_pivot / (j1 * j2 * j3)),
+        m=g_other * gap_other / (g_pivot * gap_pivot),
+        mc=c * jnp.abs(g2) / (g_pivot * gap_pivot),
+        alpha=c / jnp.sqrt(j1 * g_pivot * gap_pivot * j3 / j2),
+        nu=-j_pivot * g_other / (j_other * g_pivot),
+        precession=1 / j_pivot,
     )
-    # sn0 : cn0 = l2/A2 : l1/A1 (cn0 >= 0 in the working frame): ratios of the given components.
-    major_point = (l[..., 1] * major["amplitude"][..., 0], l[..., 0] * major["amplitude"][..., 1])
-
-    # Around the minor axis.
-    j, l = _substitute(is_minor, inertia, unit_momentum, _SAFE_MINOR)
-    j1, j2, j3 = j[..., 0], j[..., 1], j[..., 2]
-    g1, g2, g3 = energy_gaps(j, l)
-    a, b, c = j2 - j1, j3 - j2, j3 - j1
-    minor = dict(
-        amplitude=jnp.stack([jnp.sqrt(j1 * g3 / c), jnp.sqrt(j2 * g1 / a), jnp.sqrt(j3 * g1 / c)], -1),
-        rate=jnp.sqrt(g3 * a / (j1 * j2 * j3)),
-        m=g1 * b / (g3 * a),
-        mc=c * g2 / (g3 * a),
-        alpha=c / jnp.sqrt(j1 * g3 * a * j3 / j2),
-        nu=-j3 * g1 / (j1 * g3),
-        precession=1 / j3,
-    )
-    # sn0 : cn0 = l2/A2 : l3/A3.
-    minor_point = (l[..., 1] * minor["amplitude"][..., 2], l[..., 2] * minor["amplitude"][..., 1])
+    # sn0 : cn0 = l2/A2 : l_p/A_p (cn0 >= 0 in the working frame): ratios of the given components.
+    sn_scaled = l[..., 1] * amplitude_pivot
+    cn_scaled = jnp.where(is_minor, l[..., 2], l[..., 0]) * amplitude_middle
 
     # Separatrix: constants depend on the moments alone.
     j, l = _substitute(is_sep, inertia, unit_momentum, (0.0, 0.0, 1.0))
@@ -140,12 +138,11 @@ def constants(inertia, unit_momentum, regime):
 
     def pick(key):
         # Vector constants (the amplitudes) need the regime masks with a trailing axis.
-        vector = major[key].ndim > regime.ndim
-        minor_mask = is_minor[..., None] if vector else is_minor
+        vector = elliptic[key].ndim > regime.ndim
         separatrix_mask = is_sep[..., None] if vector else is_sep
-        return jnp.where(separatrix_mask, separatrix[key], jnp.where(minor_mask, minor[key], major[key]))
+        return jnp.where(separatrix_mask, separatrix[key], elliptic[key])
 
-    out = {key: pick(key) for key in major}
+    out = {key: pick(key) for key in elliptic}
     # alpha Pi(nu; am u|m) = alpha u + alpha (Pi - F)(nu; am u|m) for nu >= -1 (F(am u|m) = u).  The
     # constant alpha u0 drops out (only differences of psi matter) and alpha B = 1/J1 - 1/J3 turns the
     # precession rate 1/J1 (1/J3) into 1/J3 (1/J1).  This matters where alpha ~ 1/sqrt(J2 - J1) is huge
@@ -157,16 +154,13 @@ def constants(inertia, unit_momentum, regime):
     swapped_rate = jnp.where(is_minor, 1 / inertia[..., 0], 1 / inertia[..., 2])
     out["precession"] = jnp.where(out["without_first_kind"], swapped_rate, out["precession"])
 
-    # The elliptic integrals of the constructor, each kind in one call (one duplication loop each, and
-    # one for each JVP rule: compile time is dominated by these loops).  Bodies outside the elliptic
-    # regimes (separatrix, uniform rotation) get harmless stand-ins (their results are not used).
-    elliptic = is_major | is_minor
-    nu = jnp.where(elliptic, out["nu"], -0.5)
-    m = jnp.where(elliptic, out["m"], 0.5)
-    mc = jnp.where(elliptic, out["mc"], 0.5)
-    sn_scaled = jnp.where(is_minor, minor_point[0], major_point[0])
-    cn_scaled = jnp.where(is_minor, minor_point[1], major_point[1])
-    sn0, cn0 = _unit_point(jnp.where(elliptic, sn_scaled, 0.6), jnp.where(elliptic, cn_scaled, 0.8))
+    # The elliptic integrals of the constructor, all from one duplication loop (below).  Bodies outside
+    # the elliptic regimes (separatrix, uniform rotation) get harmless stand-ins (their results are not
+    # used).
+    nu = jnp.where(is_elliptic, out["nu"], -0.5)
+    m = jnp.where(is_elliptic, out["m"], 0.5)
+    mc = jnp.where(is_elliptic, out["mc"], 0.5)
+    sn0, cn0 = _unit_point(jnp.where(is_elliptic, sn_scaled, 0.6), jnp.where(is_elliptic, cn_scaled, 0.8))
     # Materialised: the integrals below and their derivatives would otherwise each recompute the
     # regime formulas above inside their own fused loops (see _fusion), in the gradient most of all.
     nu, m, mc, sn0, cn0 = materialise((nu, m, mc, sn0, cn0))
@@ -339,32 +333,34 @@ def reference(consts, unit_momentum):
 
 
 def _chart(psi, l1, l2, l3, minor):
-    """q̂ = exp(psi/2 about the spatial axis) ⊗ (the rotation taking that axis to l), formulas.md."""
-    # Materialised once: each of the eight outputs below would otherwise recompute psi (and the whole
+    """q̂ = exp(psi/2 about the spatial axis) ⊗ (the rotation taking that axis to l), formulas.md.
+
+    The chart is built on 1 + L1 in the major axis regime and on the separatrix (1 + L1 >= 1 - A1 > 0),
+    on 1 + L3 in the minor axis regime (1 + L3 >= 1 - A3 > 0).  Both are one formula: with the pivot
+    component L_p = L1 or L3 and (first, second) = (L3, L2) or (L2, L1),
+        w = cos(psi/2) r,  x_p = sin(psi/2) r,  (first cos + second sin)/(2r),  (first sin - second cos)/(2r),
+    r = sqrt((1 + L_p)/2), in the order (w, x_p, y, z) for the major regime and (w, y, z, x_p) for the
+    minor one: only the elementwise choice of inputs and the order of the outputs differ.
+    """
+    pivot = jnp.where(minor, l3, l1)
+    first = jnp.where(minor, l2, l3)
+    second = jnp.where(minor, l1, l2)
+    # Materialised once: each of the four outputs below would otherwise recompute psi (and the whole
     # evaluation behind it) in its own fused loop (see _fusion).
-    half_cos, half_sin, l1, l2, l3 = materialise((jnp.cos(psi / 2), jnp.sin(psi / 2), l1, l2, l3))
-    # Chart on 1 + L1 (major axis regime and separatrix): 1 + L1 >= 1 - A1 > 0.
-    base = 1 + l1
+    half_cos, half_sin, pivot, first, second = materialise(
+        (jnp.cos(psi / 2), jnp.sin(psi / 2), pivot, first, second))
+    base = 1 + pivot
     root, inverse = jnp.sqrt(base / 2), 1 / jnp.sqrt(2 * base)
-    chart_major = jnp.stack(
+    scalar = half_cos * root
+    along_pivot = half_sin * root
+    towards_first = (first * half_cos + second * half_sin) * inverse
+    towards_second = (-second * half_cos + first * half_sin) * inverse
+    return jnp.stack(
         [
-            half_cos * root,
-            half_sin * root,
-            (l3 * half_cos + l2 * half_sin) * inverse,
-            (-l2 * half_cos + l3 * half_sin) * inverse,
+            scalar,
+            jnp.where(minor, towards_first, along_pivot),
+            jnp.where(minor, towards_second, towards_first),
+            jnp.where(minor, along_pivot, towards_second),
         ],
         -1,
     )
-    # Chart on 1 + L3 (minor axis regime): 1 + L3 >= 1 - A3 > 0.
-    base = 1 + l3
-    root, inverse = jnp.sqrt(base / 2), 1 / jnp.sqrt(2 * base)
-    chart_minor = jnp.stack(
-        [
-            root * half_cos,
-            (l2 * half_cos + l1 * half_sin) * inverse,
-            (l2 * half_sin - l1 * half_cos) * inverse,
-            root * half_sin,
-        ],
-        -1,
-    )
-    return jnp.where(minor[..., None], chart_minor, chart_major)
