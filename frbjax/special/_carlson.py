@@ -63,20 +63,33 @@ def _plan(x):
     return (12, 2.0**-8) if is_double(x) else (7, 2.0**-5)
 
 
-def _duplicate(step, state, x, rolled=False):
+def _duplicate(step, state, x, rolled=False, converged=None):
     """Apply duplication ``step(state, q)`` (q = 4^-k at step k) ``_plan`` times; returns (state, 4^-N).
 
     Unrolled by default: XLA fuses the steps and the series into one vectorized pass over the points
     (a rolled loop writes the state to memory and back every step, several times slower).  The
-    derivative rules use ``rolled=True``: one compiled step instead of twelve (compile time).
+    derivative rules use ``rolled=True``: one compiled step instead of twelve (compile time).  With
+    ``converged(state, q)`` (rolled only) the loop stops as soon as every point's spread is below the
+    threshold of ``_plan``, where the series is as accurate as after all steps: values only (a loop
+    with a data-dependent end cannot be transposed), for the per-body integrals of the rigid body,
+    whose arguments rarely need all twelve steps.
     """
-    steps, _ = _plan(x)
+    steps, threshold = _plan(x)
     if rolled:
         def body(_, carry):
             quarter, state = carry
             return quarter / 4, step(state, quarter)
 
-        return lax.fori_loop(0, steps, body, (jnp.asarray(1.0, x.dtype), state))[::-1]
+        start = (jnp.asarray(1.0, x.dtype), state)
+        if converged is None:
+            return lax.fori_loop(0, steps, body, start)[::-1]
+
+        def going_on(carry):
+            k, (quarter, state) = carry
+            return (k < steps) & ~jnp.all(converged(state, quarter, threshold))
+
+        _, result = lax.while_loop(going_on, lambda carry: (carry[0] + 1, body(None, carry[1])), (0, start))
+        return result[::-1]
     quarter = 1.0
     for _ in range(steps):
         state = step(state, quarter)
@@ -316,8 +329,9 @@ def _log_above_one_jvp(primals, tangents):
     return _log_above_one(x), dx / x
 
 
-def _rf_rj_series(x, y, z, p, parameter_largest=False, rolled=False):
-    """(R_F(x, y, z), R_J(x, y, z, p)) from one duplication of x, y, z (the same for both)."""
+def _rf_rj_series(x, y, z, p, parameter_largest=False, rolled=False, early_exit=False):
+    """(R_F(x, y, z), R_J(x, y, z, p)) from one duplication of x, y, z (the same for both); with
+    ``early_exit`` (and ``rolled``) the loop ends where every point has converged (``_duplicate``)."""
     mean0 = (x + y + z + 2 * p) / 5
     dx0, dy0, dz0 = mean0 - x, mean0 - y, mean0 - z
     px0, py0, pz0 = p - x, p - y, p - z
@@ -358,8 +372,17 @@ def _rf_rj_series(x, y, z, p, parameter_largest=False, rolled=False):
         x, y, z, p = (x + lam) / 4, (y + lam) / 4, (z + lam) / 4, (p + lam) / 4
         return x, y, z, p, (mean + lam) / 4, (mean_f + lam) / 4, correction
 
+    # Carlson (1995): the series' arguments are (A_0 - x_0)/(4^k A_k) and the like (see below).
+    spread = jnp.maximum(jnp.maximum(jnp.abs(dx0), jnp.abs(dy0)), jnp.maximum(jnp.abs(dz0), jnp.abs(mean0 - p)))
+    spread_f = jnp.maximum(jnp.maximum(jnp.abs(fx0), jnp.abs(fy0)), jnp.abs(mean_f0 - z))
+
+    def converged(state, quarter, threshold):
+        mean, mean_f = state[4], state[5]
+        return (quarter * spread <= threshold * mean) & (quarter * spread_f <= threshold * mean_f)
+
     state = (x, y, z, p, mean0, mean_f0, jnp.zeros_like(mean0))
-    (x, y, z, p, mean, mean_f, correction), quarter = _duplicate(step, state, x, rolled)
+    (x, y, z, p, mean, mean_f, correction), quarter = _duplicate(
+        step, state, x, rolled, converged if early_exit else None)
     scale = quarter / mean
     big_x, big_y, big_z = dx0 * scale, dy0 * scale, dz0 * scale
     big_p = -(big_x + big_y + big_z) / 2
@@ -483,8 +506,9 @@ def _rj_jvp(rolled, primals, tangents):
 
 @functools.partial(jax.custom_jvp, nondiff_argnums=(4,))
 def _rf_rj(x, y, z, p, rolled=False):
-    """(R_F(x, y, z), R_J(x, y, z, p)) from one duplication loop."""
-    return _rf_rj_series(x, y, z, p, rolled=rolled)
+    """(R_F(x, y, z), R_J(x, y, z, p)) from one duplication loop; ``rolled``: a rolled loop that ends
+    where every point has converged (values; the rule's loop has all steps)."""
+    return _rf_rj_series(x, y, z, p, rolled=rolled, early_exit=rolled)
 
 
 @functools.partial(_rf_rj.defjvp, symbolic_zeros=True)
