@@ -35,7 +35,11 @@ import jax.numpy as jnp
 from . import _series
 from ._fusion import materialise
 from .special._carlson import _rf_rj
-from .special._legendre import _LARGE_NEGATIVE_CHARACTERISTIC, pi_without_first_kind_from, third_kind_arguments
+from .special._legendre import (
+    _LARGE_NEGATIVE_CHARACTERISTIC,
+    pi_without_first_kind_from,
+    third_kind_arguments,
+)
 
 MAJOR, MINOR, SEPARATRIX, UNIFORM = 0, 1, 2, 3
 
@@ -190,7 +194,8 @@ def constants(inertia, unit_momentum, regime):
     #   (0, mc, 1, 1 - n') (R_F: K(m); R_J: the complete Pi, n' the characteristic of DLMF 19.7.8),
     #   the series' a', b and K' (R_J unused: p = 1 is a stand-in).
     # The loop is rolled (``rolled=True``): per-body work, where twelve unrolled steps would only add
-    # compile time (the values are bit for bit the same); its JVP rule is one more rolled loop.
+    # compile time; it ends as soon as every body has converged, and its JVP rule is one more rolled
+    # loop (all steps).
     remaining_sn0 = jnp.where(reflected, sn0, 1)
     remaining_cn0 = jnp.where(reflected, cn0, 0)
     direct_sn0 = jnp.where(reflected, jnp.sqrt(0.5).astype(sn0.dtype), sn0)

@@ -9,9 +9,9 @@ factor 4, and the seventh-order series errs by about the eighth power of that sp
 of steps per dtype (``_plan``: 12 in float64, enough for argument ratios down to 1e-300) keeps each
 function a straight-line XLA program.  The steps are unrolled, so that XLA fuses the whole evaluation
 into one vectorized pass over the points; the derivative rules use a rolled loop instead (one
-compiled step: compile time), and so can a caller through the internal functions' ``rolled`` argument
-(the rigid body's per-body constants: there compile time outweighs the cost of the rolled loop, and
-the values are bit for bit the same).  R_F and R_J of the same x, y, z share one loop (``_rf_rj``).  In R_J's
+compiled step: compile time), and so does ``_rf_rj(..., rolled=True)`` for the rigid body's per-body
+constants, where compile time outweighs the cost of a rolled loop; that loop also ends as soon as
+every point has converged.  R_F and R_J of the same x, y, z share one loop (``_rf_rj``).  In R_J's
 step, R_C(1, 1 + e_k) (Carlson 1995, eq. (2.19)) costs a square root and a polynomial; a logarithm
 only serves the points with 1 + e_k < 1/2.
 
@@ -69,10 +69,10 @@ def _duplicate(step, state, x, rolled=False, converged=None):
     Unrolled by default: XLA fuses the steps and the series into one vectorized pass over the points
     (a rolled loop writes the state to memory and back every step, several times slower).  The
     derivative rules use ``rolled=True``: one compiled step instead of twelve (compile time).  With
-    ``converged(state, q)`` (rolled only) the loop stops as soon as every point's spread is below the
-    threshold of ``_plan``, where the series is as accurate as after all steps: values only (a loop
-    with a data-dependent end cannot be transposed), for the per-body integrals of the rigid body,
-    whose arguments rarely need all twelve steps.
+    ``converged(state, q, threshold)`` (rolled only) the loop stops as soon as every point's spread
+    is below the threshold of ``_plan``, where the series is as accurate as after all steps: values
+    only (a loop with a data-dependent end cannot be transposed), for the per-body integrals of the
+    rigid body, whose arguments rarely need all twelve steps.
     """
     steps, threshold = _plan(x)
     if rolled:
@@ -178,10 +178,9 @@ def _rf_series(x, y, z, rolled=False):
     return over_sqrt(_rf_polynomial(dx0 * scale, dy0 * scale), mean)
 
 
-@functools.partial(jax.custom_jvp, nondiff_argnums=(3,))
-def _rf(x, y, z, rolled=False):
-    """R_F; ``rolled`` compiles one duplication step instead of all (see ``_duplicate``)."""
-    return _rf_series(x, y, z, rolled)
+@jax.custom_jvp
+def _rf(x, y, z):
+    return _rf_series(x, y, z)
 
 
 def _rf_tangent(x, y, z, dx, dy, dz):
@@ -195,8 +194,8 @@ def _rf_tangent(x, y, z, dx, dy, dz):
 
 
 @_rf.defjvp
-def _rf_jvp(rolled, primals, tangents):
-    return _rf(*primals, rolled), _rf_tangent(*primals, *tangents)
+def _rf_jvp(primals, tangents):
+    return _rf(*primals), _rf_tangent(*primals, *tangents)
 
 
 def _frozen_at_zero(argument):
@@ -373,7 +372,8 @@ def _rf_rj_series(x, y, z, p, parameter_largest=False, rolled=False, early_exit=
         return x, y, z, p, (mean + lam) / 4, (mean_f + lam) / 4, correction
 
     # Carlson (1995): the series' arguments are (A_0 - x_0)/(4^k A_k) and the like (see below).
-    spread = jnp.maximum(jnp.maximum(jnp.abs(dx0), jnp.abs(dy0)), jnp.maximum(jnp.abs(dz0), jnp.abs(mean0 - p)))
+    spread = jnp.maximum(jnp.maximum(jnp.abs(dx0), jnp.abs(dy0)),
+                         jnp.maximum(jnp.abs(dz0), jnp.abs(mean0 - p)))
     spread_f = jnp.maximum(jnp.maximum(jnp.abs(fx0), jnp.abs(fy0)), jnp.abs(mean_f0 - z))
 
     def converged(state, quarter, threshold):
@@ -493,14 +493,13 @@ def _rj_rolled(x, y, z, p, parameter_largest=False):
     return _rj_series(x, y, z, p, parameter_largest, True)
 
 
-@functools.partial(jax.custom_jvp, nondiff_argnums=(4,))
-def _rj(x, y, z, p, rolled=False):
-    """R_J for p not much larger than x, y, z (``elliprj`` transforms the others)."""
-    return _rj_series(x, y, z, p, rolled=rolled)
+@jax.custom_jvp
+def _rj(x, y, z, p):
+    return _rj_series(x, y, z, p)
 
 
 @functools.partial(_rj.defjvp, symbolic_zeros=True)
-def _rj_jvp(rolled, primals, tangents):
+def _rj_jvp(primals, tangents):
     return _jvp_from_partials(_rj_rolled, primals, tangents, (0, 1, 2))
 
 
@@ -518,14 +517,14 @@ def _rf_rj_jvp(rolled, primals, tangents):
     return _jvp_from_partials(series, primals, tangents, (0, 1, 2))
 
 
-@functools.partial(jax.custom_jvp, nondiff_argnums=(4,))
-def _rj_parameter_largest(x, y, z, p, rolled=False):
+@jax.custom_jvp
+def _rj_parameter_largest(x, y, z, p):
     """R_J(x, y, z, p) for p >= max(x, y, z) (no logarithmic branch: see ``_rf_rj_series``)."""
-    return _rj_series(x, y, z, p, True, rolled)
+    return _rj_series(x, y, z, p, True)
 
 
 @functools.partial(_rj_parameter_largest.defjvp, symbolic_zeros=True)
-def _rj_parameter_largest_jvp(rolled, primals, tangents):
+def _rj_parameter_largest_jvp(primals, tangents):
     return _jvp_from_partials(lambda a, b, c, d: _rj_rolled(a, b, c, d, True), primals, tangents, (0, 1, 2))
 
 
