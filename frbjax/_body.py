@@ -10,7 +10,7 @@ from jax import lax
 from jaxtyping import Array, Float, Int
 
 from . import _quaternion as quaternion
-from ._fusion import materialise, sum_last
+from ._fusion import anywhere, materialise, sum_last
 from ._regimes import UNIFORM, classify, constants, evaluate
 from ._regimes import reference as regime_reference
 
@@ -240,7 +240,7 @@ class FreeRigidBody(eqx.Module):
             return jnp.where(uniform[..., None], fixed, moving)
 
         # Most batches have no uniformly rotating body: then its trigonometry is not evaluated at all.
-        return lax.cond(jnp.any(uniform), with_uniform, lambda moving: moving, moving)
+        return lax.cond(anywhere(uniform), with_uniform, lambda moving: moving, moving)
 
     def rotation_matrix(self, t) -> Float[Array, "... 3 3"]:
         """Attitude matrix R(t) with x_space = R x_body (dR/dt = R hat(Omega))."""

@@ -6,8 +6,15 @@ arctangent) feeds several outputs, such as the four components of a quaternion b
 its arithmetic.  ``lax.optimization_barrier`` does not prevent this on CPU (XLA removes it before
 fusion).  A conditional does: its results are buffers.  ``materialise`` wraps its arguments in a
 conditional whose predicate is always true, (a == a) | (a != a) for a data element a (true for NaN
-too), which XLA cannot fold away; the other branch is never taken.  Under ``jax.vmap`` the conditional
-becomes a select of the two branches, which is still correct.
+too), which XLA cannot fold away; the other branch is never taken.
+
+Under ``jax.vmap`` a conditional whose predicate is batched becomes a select of its two branches: no
+buffer any more, and every fused loop again recomputes what feeds it.  For ``jax.vmap(jax.hessian(f))``
+of a body's motion that made XLA build fusions so large that compiling took 13 GB and three minutes.
+So the predicates here come from ``anywhere``, a reduction whose batching rule reduces over the mapped
+axis too: its result is never batched, and the conditional stays a conditional under any number of
+``jax.vmap``.  The conditionals that skip work nobody in a batch needs (``_body``, ``_series``) use it
+for the same reason: under ``jax.vmap`` they skip it when no body of the whole mapped batch needs it.
 
 ``sum_last`` sums a short last axis by additions rather than a reduction, for a CPU miscompilation.
 """
@@ -17,6 +24,24 @@ from __future__ import annotations
 import jax
 import jax.numpy as jnp
 from jax import lax
+from jax.custom_batching import custom_vmap
+
+
+@custom_vmap
+def anywhere(flags):
+    """Whether any element of the boolean array ``flags`` is true: one unbatched scalar even under ``jax.vmap``.
+
+    Under ``jax.vmap`` it is true where any element of any mapped instance is: a predicate for
+    conditionals that skip work (their branches compute every element and select per element, so
+    a predicate true for more instances than need the work changes no value).
+    """
+    return jnp.any(flags)
+
+
+@anywhere.def_vmap
+def _anywhere_over_the_mapped_axis(axis_size, in_batched, flags):
+    del axis_size, in_batched
+    return jnp.any(flags), False
 
 
 def materialise(values):
@@ -25,7 +50,7 @@ def materialise(values):
     if not leaves:
         return values
     anchor = jnp.ravel(leaves[0])[0]
-    always = (anchor == anchor) | (anchor != anchor)
+    always = anywhere((anchor == anchor) | (anchor != anchor))
     return lax.cond(always, lambda v: v, lambda v: jax.tree_util.tree_map(jnp.zeros_like, v), values)
 
 
