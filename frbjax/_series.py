@@ -77,6 +77,7 @@ from __future__ import annotations
 
 from typing import NamedTuple
 
+import jax
 import jax.numpy as jnp
 from jax import lax
 import numpy as np
@@ -419,7 +420,7 @@ def evaluate_series(data: SeriesData, mc, u, third_kind=True):
     # ones): skipped for a batch that has none (under jax.vmap: when no instance of the mapped batch
     # has one, see ``_fusion.anywhere``).
     sn_c, cn_c, real_c, imaginary_c = lax.cond(
-        anywhere(data.complementary), _complementary_part, _no_complementary_part, data, reduced)
+        anywhere(data.complementary), jax.checkpoint(_complementary_part), _no_complementary_part, data, reduced)
     complementary = data.complementary
     sn_scaled = jnp.where(complementary, sn_c, sn_scaled)
     cn_scaled = jnp.where(complementary, cn_c, cn_scaled)
