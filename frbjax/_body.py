@@ -300,7 +300,7 @@ class FreeRigidBody(eqx.Module):
             return jnp.where(uniform[..., None], fixed, moving)
 
         # Most batches have no uniformly rotating body: then its trigonometry is not evaluated at all.
-        return lax.cond(anywhere(uniform), with_uniform, lambda moving: moving, moving)
+        return lax.cond(anywhere(uniform), jax.checkpoint(with_uniform), lambda moving: moving, moving)
 
     def rotation_matrix(self, t) -> Float[Array, "... 3 3"]:
         """Attitude matrix R(t) with x_space = R x_body (dR/dt = R hat(Omega))."""
