@@ -83,6 +83,32 @@ def _apply_jvp(primals, tangents):
     return value, sum(terms[1:], terms[0])
 
 
+@jax.custom_jvp
+def _normalised(vector):
+    """vector / |vector| over the last axis."""
+    return vector / jnp.sqrt(sum_last(vector * vector))[..., None]
+
+
+@_normalised.defjvp
+def _normalised_jvp(primals, tangents):
+    """d(v/|v|) = (dv - u (u . dv)) / |v| with u = v/|v|, component by component.
+
+    Written out so that reverse mode sums the components' contributions as additions: through the
+    broadcast 1/|v| of the value, the transpose was a reduction over the trailing axis (an XLA
+    reduction at every time).  (Writing the value component by component instead cost 5% of an
+    evaluation.)
+    """
+    (vector,), (tangent,) = primals, tangents
+    size = vector.shape[-1]
+    inverse_norm = 1 / jnp.sqrt(sum_last(vector * vector))
+    unit = [vector[..., k] * inverse_norm for k in range(size)]
+    along = unit[0] * tangent[..., 0]
+    for k in range(1, size):
+        along = along + unit[k] * tangent[..., k]
+    derivative = jnp.stack([(tangent[..., k] - unit[k] * along) * inverse_norm for k in range(size)], -1)
+    return _normalised(vector), derivative
+
+
 def _permutation_sign(order):
     """+1 for an even permutation of (0, 1, 2), -1 for an odd one."""
     i, j, k = order[..., 0], order[..., 1], order[..., 2]
@@ -285,11 +311,7 @@ class FreeRigidBody(eqx.Module):
         moving = _apply(self._attitude_map, materialise(particular))
         # Three products and the chart leave |q| - 1 at up to ~20 ulp; renormalising costs little and
         # keeps |q| = 1 and rotation_matrix (which assumes it) at the ulp level.
-        moving = materialise(moving)
-        inverse_norm = 1 / jnp.sqrt(sum_last(moving * moving))
-        # Component by component: the gradient in the norm is then a sum of four arrays, where a
-        # broadcast inverse_norm[..., None] had it reduced over the trailing axis (an XLA reduction).
-        moving = jnp.stack([moving[..., k] * inverse_norm for k in range(4)], -1)
+        moving = _normalised(materialise(moving))
         uniform = self._uniform()
 
         def with_uniform(moving):

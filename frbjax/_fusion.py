@@ -29,7 +29,7 @@ from jax.custom_batching import custom_vmap
 
 @custom_vmap
 def anywhere(flags):
-    """Whether any element of the boolean array ``flags`` is true: one unbatched scalar even under ``jax.vmap``.
+    """Whether any element of the boolean ``flags`` is true: one unbatched scalar even under ``jax.vmap``.
 
     Under ``jax.vmap`` it is true where any element of any mapped instance is: a predicate for
     conditionals that skip work (their branches compute every element and select per element, so

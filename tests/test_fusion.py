@@ -1,4 +1,4 @@
-"""frbjax._fusion (fusion boundaries that survive jax.vmap) and _body._apply's derivative rule.
+"""frbjax._fusion (fusion boundaries that survive jax.vmap); the JVP rules of _body._apply, _normalised.
 
 Under jax.vmap a conditional with a batched predicate becomes a select of both branches; the
 library's fusion boundaries (``materialise``) and the conditionals that skip unneeded work
@@ -15,7 +15,7 @@ import numpy as np
 from jax.test_util import check_grads
 
 from frbjax import FreeRigidBody
-from frbjax._body import _apply
+from frbjax._body import _apply, _normalised
 from frbjax._fusion import anywhere, materialise
 
 
@@ -70,3 +70,11 @@ def test_apply_value_and_derivatives():
     check_grads(_apply, (matrix, vector), order=2, modes=("fwd", "rev"))
     only_vector = jax.jacrev(lambda v: _apply(matrix[0], v))(vector[0, 0])
     np.testing.assert_array_equal(only_vector, matrix[0])
+
+
+def test_normalised_value_and_derivatives():
+    """_normalised is v / |v| and its custom JVP gives that map's derivatives to second order."""
+    vector = jnp.asarray(np.random.default_rng(4).normal(size=(3, 5, 4)))
+    np.testing.assert_allclose(_normalised(vector), vector / np.linalg.norm(vector, axis=-1, keepdims=True),
+                               rtol=4e-16, atol=0)
+    check_grads(_normalised, (vector,), order=2, modes=("fwd", "rev"))
