@@ -16,7 +16,7 @@
   the time of the loss alone.
 * jit compile time (lower + compile) of the forward loss and of its value_and_grad, and of every
   evaluation program of the sweep; the loss and its value_and_grad again compiled with XLA:CPU's
-  fusion emitters off (compile and run times).
+  fusion emitters off (compile and run times; not with --quick).
 
 Usage: python benchmarks/throughput.py [--max-size 10000000] [--quick] [--output-dir DIR]
 Writes throughput.json and throughput.png into benchmarks/results/ (or --output-dir).
@@ -164,13 +164,6 @@ def gradient_cost(options):
     both, both_compile = compile_time(jax.value_and_grad(loss, argnums=(0, 1)), inertia, momentum, attitude, t)
     forward_s = best_time(lambda: forward(inertia, momentum, attitude, t), options.repeats)
     both_s = best_time(lambda: both(inertia, momentum, attitude, t), options.repeats)
-    # The same two programs compiled with XLA:CPU's fusion emitters off (the README's recipe).
-    quick_forward, quick_forward_compile = compile_time(
-        loss, inertia, momentum, attitude, t, compiler_options=FAST_COMPILE_OPTIONS)
-    quick_both, quick_both_compile = compile_time(
-        jax.value_and_grad(loss, argnums=(0, 1)), inertia, momentum, attitude, t, compiler_options=FAST_COMPILE_OPTIONS)
-    quick_forward_s = best_time(lambda: quick_forward(inertia, momentum, attitude, t), options.repeats)
-    quick_both_s = best_time(lambda: quick_both(inertia, momentum, attitude, t), options.repeats)
     value, (d_inertia, d_momentum) = both(inertia, momentum, attitude, t)
     finite = bool(np.all(np.isfinite(np.asarray(d_inertia))) and np.all(np.isfinite(np.asarray(d_momentum))))
     row = {
@@ -183,21 +176,29 @@ def gradient_cost(options):
         "forward_compile_s": forward_compile,
         "value_and_grad_compile_s": both_compile,
         "gradient_finite": finite,
-        "fusion_emitters_off": {
-            "compiler_options": FAST_COMPILE_OPTIONS,
-            "forward_s": quick_forward_s,
-            "value_and_grad_s": quick_both_s,
-            "ratio_value_and_grad_over_forward": quick_both_s / quick_forward_s,
-            "forward_compile_s": quick_forward_compile,
-            "value_and_grad_compile_s": quick_both_compile,
-        },
+        "fusion_emitters_off": None,
     }
     print(f"  gradient: forward {forward_s * 1e3:.2f} ms, value_and_grad {both_s * 1e3:.2f} ms "
           f"(ratio {row['ratio_value_and_grad_over_forward']:.2f}); compile forward {forward_compile:.1f} s, "
           f"value_and_grad {both_compile:.1f} s", flush=True)
-    print(f"  with {FAST_COMPILE_OPTIONS}: forward {quick_forward_s * 1e3:.2f} ms, value_and_grad "
-          f"{quick_both_s * 1e3:.2f} ms; compile forward {quick_forward_compile:.1f} s, value_and_grad "
-          f"{quick_both_compile:.1f} s", flush=True)
+    if options.quick:  # two more large compilations: not in the smoke run
+        return row
+    # The same two programs compiled with XLA:CPU's fusion emitters off (the README's recipe).
+    forward, forward_compile = compile_time(loss, inertia, momentum, attitude, t, compiler_options=FAST_COMPILE_OPTIONS)
+    both, both_compile = compile_time(jax.value_and_grad(loss, argnums=(0, 1)), inertia, momentum, attitude, t,
+                                      compiler_options=FAST_COMPILE_OPTIONS)
+    forward_s = best_time(lambda: forward(inertia, momentum, attitude, t), options.repeats)
+    both_s = best_time(lambda: both(inertia, momentum, attitude, t), options.repeats)
+    row["fusion_emitters_off"] = {
+        "compiler_options": FAST_COMPILE_OPTIONS,
+        "forward_s": forward_s,
+        "value_and_grad_s": both_s,
+        "ratio_value_and_grad_over_forward": both_s / forward_s,
+        "forward_compile_s": forward_compile,
+        "value_and_grad_compile_s": both_compile,
+    }
+    print(f"  with {FAST_COMPILE_OPTIONS}: forward {forward_s * 1e3:.2f} ms, value_and_grad {both_s * 1e3:.2f} ms; "
+          f"compile forward {forward_compile:.1f} s, value_and_grad {both_compile:.1f} s", flush=True)
     return row
 
 
@@ -289,8 +290,9 @@ def main(argv=None):
         "gradient_over_forward": gradient["ratio_value_and_grad_over_forward"],
         "forward_compile_s": gradient["forward_compile_s"],
         "value_and_grad_compile_s": gradient["value_and_grad_compile_s"],
-        "forward_compile_s_fusion_emitters_off": gradient["fusion_emitters_off"]["forward_compile_s"],
-        "value_and_grad_compile_s_fusion_emitters_off": gradient["fusion_emitters_off"]["value_and_grad_compile_s"],
+        "forward_compile_s_fusion_emitters_off": (gradient["fusion_emitters_off"] or {}).get("forward_compile_s"),
+        "value_and_grad_compile_s_fusion_emitters_off":
+            (gradient["fusion_emitters_off"] or {}).get("value_and_grad_compile_s"),
         "targets_issue_4": {
             "quaternion_ns_per_eval_per_core": 300,
             "scipy_over_frbjax_quaternion_one_core": 4,
@@ -308,9 +310,11 @@ def main(argv=None):
     print(f"  construction: {summary['construction_ns_per_body_one_core']:.0f} ns per body on one core")
     print(f"  value_and_grad / forward: {summary['gradient_over_forward']:.2f} (target <= 4); compile forward "
           f"{summary['forward_compile_s']:.1f} s, value_and_grad {summary['value_and_grad_compile_s']:.1f} s "
-          f"(target forward + gradient <= 5 s); with the fusion emitters off "
-          f"{summary['forward_compile_s_fusion_emitters_off']:.1f} s + "
-          f"{summary['value_and_grad_compile_s_fusion_emitters_off']:.1f} s")
+          f"(target forward + gradient <= 5 s)")
+    if gradient["fusion_emitters_off"] is not None:
+        print(f"  compile with the fusion emitters off: forward "
+              f"{summary['forward_compile_s_fusion_emitters_off']:.1f} s, "
+              f"value_and_grad {summary['value_and_grad_compile_s_fusion_emitters_off']:.1f} s")
 
     result = {
         "description": "see the docstring of benchmarks/throughput.py",

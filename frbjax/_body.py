@@ -322,6 +322,8 @@ class FreeRigidBody(eqx.Module):
             return jnp.where(uniform[..., None], fixed, moving)
 
         # Most batches have no uniformly rotating body: then its trigonometry is not evaluated at all.
+        # Checkpointed: in reverse mode JAX gives both branches of a conditional the same residuals,
+        # so the branch taken would otherwise write zeros for every residual of this one, at every time.
         return lax.cond(anywhere(uniform), jax.checkpoint(with_uniform), lambda moving: moving, moving)
 
     def rotation_matrix(self, t) -> Float[Array, "... 3 3"]:

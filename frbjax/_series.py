@@ -418,7 +418,9 @@ def evaluate_series(data: SeriesData, mc, u, third_kind=True):
     cn_scaled = sum(odd_cos[j] * cosines[2 * j] for j in range(terms))
     # The complementary series serves only the bodies next to the separatrix (about 1 in 20,000 random
     # ones): skipped for a batch that has none (under jax.vmap: when no instance of the mapped batch
-    # has one, see ``_fusion.anywhere``).
+    # has one, see ``_fusion.anywhere``).  Checkpointed, so that in reverse mode the branch not taken
+    # does not write zeros for every residual of this one at every time (both branches of a
+    # conditional get the same residuals).
     sn_c, cn_c, real_c, imaginary_c = lax.cond(
         anywhere(data.complementary), jax.checkpoint(_complementary_part), _no_complementary_part, data, reduced)
     complementary = data.complementary
