@@ -8,12 +8,11 @@ import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
-from jax import lax
 from jax.custom_derivatives import SymbolicZero
 from jaxtyping import Array, Float, Int
 
 from . import _quaternion as quaternion
-from ._fusion import anywhere, materialise, sum_last
+from ._fusion import materialise, sum_last, when_any
 from ._regimes import UNIFORM, classify, constants, evaluate
 from ._regimes import reference as regime_reference
 
@@ -49,16 +48,21 @@ def _apply(matrix, vector):
     return sum_last(matrix * vector[..., None, :])
 
 
+def _dot(first, second):
+    """sum_j first[..., j] * second[..., j] as additions of (...)-shaped products, over j in order.
+
+    Unlike a reduction over a trailing axis (or a product with a broadcast), its transpose in reverse
+    mode is again products and additions of (...)-shaped arrays, never a reduction.
+    """
+    total = first[..., 0] * second[..., 0]
+    for j in range(1, second.shape[-1]):
+        total = total + first[..., j] * second[..., j]
+    return total
+
+
 def _apply_by_rows(matrix, vector):
-    """matrix @ vector as n sums of n products of (...)-shaped arrays, the sums over j in order."""
-    size = vector.shape[-1]
-    rows = []
-    for i in range(size):
-        total = matrix[..., i, 0] * vector[..., 0]
-        for j in range(1, size):
-            total = total + matrix[..., i, j] * vector[..., j]
-        rows.append(total)
-    return jnp.stack(rows, -1)
+    """matrix @ vector as n ``_dot`` of (...)-shaped arrays."""
+    return jnp.stack([_dot(matrix[..., i, :], vector) for i in range(vector.shape[-1])], -1)
 
 
 @functools.partial(_apply.defjvp, symbolic_zeros=True)
@@ -101,11 +105,9 @@ def _normalised_jvp(primals, tangents):
     (vector,), (tangent,) = primals, tangents
     size = vector.shape[-1]
     inverse_norm = 1 / jnp.sqrt(sum_last(vector * vector))
-    unit = [vector[..., k] * inverse_norm for k in range(size)]
-    along = unit[0] * tangent[..., 0]
-    for k in range(1, size):
-        along = along + unit[k] * tangent[..., k]
-    derivative = jnp.stack([(tangent[..., k] - unit[k] * along) * inverse_norm for k in range(size)], -1)
+    unit = jnp.stack([vector[..., k] * inverse_norm for k in range(size)], -1)
+    along = _dot(unit, tangent)
+    derivative = jnp.stack([(tangent[..., k] - unit[..., k] * along) * inverse_norm for k in range(size)], -1)
     return _normalised(vector), derivative
 
 
@@ -322,9 +324,7 @@ class FreeRigidBody(eqx.Module):
             return jnp.where(uniform[..., None], fixed, moving)
 
         # Most batches have no uniformly rotating body: then its trigonometry is not evaluated at all.
-        # Checkpointed: in reverse mode JAX gives both branches of a conditional the same residuals,
-        # so the branch taken would otherwise write zeros for every residual of this one, at every time.
-        return lax.cond(anywhere(uniform), jax.checkpoint(with_uniform), lambda moving: moving, moving)
+        return when_any(uniform, with_uniform, lambda moving: moving, moving)
 
     def rotation_matrix(self, t) -> Float[Array, "... 3 3"]:
         """Attitude matrix R(t) with x_space = R x_body (dR/dt = R hat(Omega))."""

@@ -13,8 +13,9 @@ buffer any more, and every fused loop again recomputes what feeds it.  For ``jax
 of a body's motion that made XLA build fusions so large that compiling took 13 GB and three minutes.
 So the predicates here come from ``anywhere``, a reduction whose batching rule reduces over the mapped
 axis too: its result is never batched, and the conditional stays a conditional under any number of
-``jax.vmap``.  The conditionals that skip work nobody in a batch needs (``_body``, ``_series``) use it
-for the same reason: under ``jax.vmap`` they skip it when no body of the whole mapped batch needs it.
+``jax.vmap``.  ``when_any``, the conditional that skips work nobody in a batch needs (``_body``,
+``_series``), uses it for the same reason: under ``jax.vmap`` it skips the work when no body of the
+whole mapped batch needs it.
 
 ``sum_last`` sums a short last axis by additions rather than a reduction, for a CPU miscompilation.
 """
@@ -42,6 +43,18 @@ def anywhere(flags):
 def _anywhere_over_the_mapped_axis(axis_size, in_batched, flags):
     del axis_size, in_batched
     return jnp.any(flags), False
+
+
+def when_any(flags, compute, skip, *operands):
+    """``compute(*operands)`` if any of ``flags`` is set (``anywhere``), else ``skip(*operands)``.
+
+    For work that only some elements need: ``compute`` must compute every element and the caller
+    select per element, and ``skip`` return placeholders of the same shapes.  ``compute`` is
+    checkpointed: in reverse mode JAX gives both branches of a conditional the same residuals, so
+    without it the usual branch, ``skip``, would write zeros for every residual of ``compute``, at
+    every time of an evaluation.
+    """
+    return lax.cond(anywhere(flags), jax.checkpoint(compute), skip, *operands)
 
 
 def materialise(values):

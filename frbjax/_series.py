@@ -77,13 +77,11 @@ from __future__ import annotations
 
 from typing import NamedTuple
 
-import jax
 import jax.numpy as jnp
-from jax import lax
 import numpy as np
 from jaxtyping import Array, Bool, Float
 
-from ._fusion import anywhere, materialise
+from ._fusion import materialise, when_any
 from .special import elliprf
 from .special._common import is_double
 from .special._legendre import _LARGE_NEGATIVE_CHARACTERISTIC, pi_without_first_kind
@@ -417,12 +415,9 @@ def evaluate_series(data: SeriesData, mc, u, third_kind=True):
     sn_scaled = sum(odd_sin[j] * sines[2 * j] for j in range(terms))
     cn_scaled = sum(odd_cos[j] * cosines[2 * j] for j in range(terms))
     # The complementary series serves only the bodies next to the separatrix (about 1 in 20,000 random
-    # ones): skipped for a batch that has none (under jax.vmap: when no instance of the mapped batch
-    # has one, see ``_fusion.anywhere``).  Checkpointed, so that in reverse mode the branch not taken
-    # does not write zeros for every residual of this one at every time (both branches of a
-    # conditional get the same residuals).
-    sn_c, cn_c, real_c, imaginary_c = lax.cond(
-        anywhere(data.complementary), jax.checkpoint(_complementary_part), _no_complementary_part, data, reduced)
+    # ones): skipped for a batch that has none (``_fusion.when_any``).
+    sn_c, cn_c, real_c, imaginary_c = when_any(
+        data.complementary, _complementary_part, _no_complementary_part, data, reduced)
     complementary = data.complementary
     sn_scaled = jnp.where(complementary, sn_c, sn_scaled)
     cn_scaled = jnp.where(complementary, cn_c, cn_scaled)
