@@ -159,6 +159,90 @@ def _validate(inertia, angular_momentum, attitude):
             raise ValueError("attitude must be a non-zero quaternion")
 
 
+@jax.jit
+def _construct(inertia, angular_momentum, attitude):
+    """The fields of a FreeRigidBody (see its docstring) from validated inputs, as one jitted program."""
+    dtype = jnp.result_type(inertia, angular_momentum, float)
+    if attitude is None:
+        attitude = jnp.zeros(inertia.shape[:-1] + (4,), dtype).at[..., 0].set(1)
+    attitude = jnp.asarray(attitude, dtype)
+    inertia = inertia.astype(dtype)
+    angular_momentum = angular_momentum.astype(dtype)
+    batch = jnp.broadcast_shapes(inertia.shape[:-1], angular_momentum.shape[:-1], attitude.shape[:-1])
+    inertia = jnp.broadcast_to(inertia, batch + (3,))
+    angular_momentum = jnp.broadcast_to(angular_momentum, batch + (3,))
+    attitude = jnp.broadcast_to(attitude, batch + (4,))
+    # Invalid values (possible only under tracing; _validate rejects concrete ones): every per-body
+    # input becomes NaN, and with it every output of that body (class docstring).
+    valid = (
+        jnp.all((inertia > 0) & jnp.isfinite(inertia), axis=-1)
+        & jnp.all(jnp.isfinite(angular_momentum), axis=-1)
+        & jnp.all(jnp.isfinite(attitude), axis=-1)
+        & jnp.any(attitude != 0, axis=-1)
+    )
+    inertia = jnp.where(valid[..., None], inertia, jnp.nan)
+    angular_momentum = jnp.where(valid[..., None], angular_momentum, jnp.nan)
+    attitude = jnp.where(valid[..., None], attitude, jnp.nan)
+    attitude = attitude / jnp.sqrt(sum_last(attitude * attitude))[..., None]
+
+    # Normalised in the working frame (a signed permutation: exact), where the components come in
+    # the order of the sorted moments: |L| then rounds the same way for the moments in any order,
+    # and a body with its axes relabelled computes bit for bit the same motion.
+    permutation, sorted_inertia, momentum_working = working_frame(inertia, angular_momentum)
+    norm_squared = sum_last(momentum_working**2)
+    moving = norm_squared > 0
+    norm = jnp.sqrt(jnp.where(moving, norm_squared, 1))
+    unit_working = momentum_working / norm[..., None]
+    norm = jnp.where(moving, norm, 0)
+
+    regime = classify(sorted_inertia, unit_working, norm)
+    consts = constants(sorted_inertia, unit_working, regime)
+
+    # q(t) = q0 ⊗ P ⊗ conj(q̂(0)) ⊗ q̂(|L| t) ⊗ conj(P)  (formulas.md, "Matching the initial
+    # state", with the phase folded into q̂; P is the working frame as a quaternion).
+    frame_rotation = quaternion.from_matrix(permutation)
+    reference = regime_reference(consts, unit_working)
+    offset = quaternion.multiply(
+        quaternion.multiply(attitude, frame_rotation), quaternion.conjugate(reference)
+    )
+    # p -> offset ⊗ p ⊗ conj(P) is linear in p: one 4 x 4 matrix per body, columns the images of
+    # the unit quaternions, so that each evaluation costs 16 products instead of two Hamilton
+    # products.
+    unit = jnp.eye(4, dtype=dtype)
+    columns = quaternion.multiply(
+        quaternion.multiply(offset[..., None, :], unit), quaternion.conjugate(frame_rotation)[..., None, :]
+    )
+    attitude_map = jnp.swapaxes(columns, -1, -2)
+
+    return dict(
+        inertia=inertia,
+        initial_angular_momentum=angular_momentum,
+        initial_attitude=attitude,
+        # An invalid body has norm 0 here (its L is NaN), so it is classified UNIFORM and its outputs
+        # come from the NaN inputs; its |L| is reported as NaN too.
+        momentum_norm=jnp.where(valid, norm, jnp.nan),
+        permutation=permutation,
+        regime=regime,
+        _constants=consts,
+        _attitude_map=attitude_map,
+    )
+
+
+def _compiled(method):
+    """A method of (body, t) as one jitted program, cached by the shapes and dtypes of both.
+
+    Called eagerly, an evaluation is one dispatch of a compiled program (as equinox's filter_jit and
+    diffrax do); inside the caller's jit, vmap or grad it is traced inline like any other function.
+    """
+    compiled = jax.jit(method)
+
+    @functools.wraps(method)
+    def call(self, t):
+        return compiled(self, jnp.asarray(t))
+
+    return call
+
+
 class FreeRigidBody(eqx.Module):
     r"""Exact torque-free motion of a rigid body (Euler's equations and the attitude), batched.
 
@@ -216,68 +300,11 @@ class FreeRigidBody(eqx.Module):
         _validate(inertia, angular_momentum, attitude)
         inertia = jnp.asarray(inertia)
         angular_momentum = jnp.asarray(angular_momentum)
-        dtype = jnp.result_type(inertia, angular_momentum, float)
-        if attitude is None:
-            attitude = jnp.zeros(inertia.shape[:-1] + (4,), dtype).at[..., 0].set(1)
-        attitude = jnp.asarray(attitude, dtype)
-        inertia = inertia.astype(dtype)
-        angular_momentum = angular_momentum.astype(dtype)
-        batch = jnp.broadcast_shapes(inertia.shape[:-1], angular_momentum.shape[:-1], attitude.shape[:-1])
-        inertia = jnp.broadcast_to(inertia, batch + (3,))
-        angular_momentum = jnp.broadcast_to(angular_momentum, batch + (3,))
-        attitude = jnp.broadcast_to(attitude, batch + (4,))
-        # Invalid values (possible only under tracing; _validate rejects concrete ones): every per-body
-        # input becomes NaN, and with it every output of that body (class docstring).
-        valid = (
-            jnp.all((inertia > 0) & jnp.isfinite(inertia), axis=-1)
-            & jnp.all(jnp.isfinite(angular_momentum), axis=-1)
-            & jnp.all(jnp.isfinite(attitude), axis=-1)
-            & jnp.any(attitude != 0, axis=-1)
-        )
-        inertia = jnp.where(valid[..., None], inertia, jnp.nan)
-        angular_momentum = jnp.where(valid[..., None], angular_momentum, jnp.nan)
-        attitude = jnp.where(valid[..., None], attitude, jnp.nan)
-        attitude = attitude / jnp.sqrt(sum_last(attitude * attitude))[..., None]
-
-        # Normalised in the working frame (a signed permutation: exact), where the components come in
-        # the order of the sorted moments: |L| then rounds the same way for the moments in any order,
-        # and a body with its axes relabelled computes bit for bit the same motion.
-        permutation, sorted_inertia, momentum_working = working_frame(inertia, angular_momentum)
-        norm_squared = sum_last(momentum_working**2)
-        moving = norm_squared > 0
-        norm = jnp.sqrt(jnp.where(moving, norm_squared, 1))
-        unit_working = momentum_working / norm[..., None]
-        norm = jnp.where(moving, norm, 0)
-
-        regime = classify(sorted_inertia, unit_working, norm)
-        consts = constants(sorted_inertia, unit_working, regime)
-
-        # q(t) = q0 ⊗ P ⊗ conj(q̂(0)) ⊗ q̂(|L| t) ⊗ conj(P)  (formulas.md, "Matching the initial
-        # state", with the phase folded into q̂; P is the working frame as a quaternion).
-        frame_rotation = quaternion.from_matrix(permutation)
-        reference = regime_reference(consts, unit_working)
-        offset = quaternion.multiply(
-            quaternion.multiply(attitude, frame_rotation), quaternion.conjugate(reference)
-        )
-        # p -> offset ⊗ p ⊗ conj(P) is linear in p: one 4 x 4 matrix per body, columns the images of
-        # the unit quaternions, so that each evaluation costs 16 products instead of two Hamilton
-        # products.
-        unit = jnp.eye(4, dtype=dtype)
-        columns = quaternion.multiply(
-            quaternion.multiply(offset[..., None, :], unit), quaternion.conjugate(frame_rotation)[..., None, :]
-        )
-        attitude_map = jnp.swapaxes(columns, -1, -2)
-
-        self.inertia = inertia
-        self.initial_angular_momentum = angular_momentum
-        self.initial_attitude = attitude
-        # An invalid body has norm 0 here (its L is NaN), so it is classified UNIFORM and its outputs
-        # come from the NaN inputs; its |L| is reported as NaN too.
-        self.momentum_norm = jnp.where(valid, norm, jnp.nan)
-        self.permutation = permutation
-        self.regime = regime
-        self._constants = consts
-        self._attitude_map = attitude_map
+        attitude = None if attitude is None else jnp.asarray(attitude)
+        # One compiled program (cached by shape and dtype): called eagerly, construction is a single
+        # dispatch instead of hundreds of eager operations; under the caller's jit it is inlined.
+        for name, value in _construct(inertia, angular_momentum, attitude).items():
+            setattr(self, name, value)
 
     # ------------------------------------------------------------------------------------ helpers
 
@@ -288,27 +315,12 @@ class FreeRigidBody(eqx.Module):
     def _uniform(self):
         return self.regime == UNIFORM
 
-    # ------------------------------------------------------------------------------------- public
-
-    def angular_momentum(self, t) -> Float[Array, "... 3"]:
-        """Body-frame angular momentum L(t), shape broadcast(batch, t.shape) + (3,).
-
-        Evaluates only the Jacobi functions: no elliptic integral of the third kind.
-        """
-        t, tau = self._time(t)
-        unit_working, _ = evaluate(self._constants, tau, attitude=False)
+    def _momentum_from(self, unit_working):
         moving = self.momentum_norm[..., None] * _apply(self.permutation, unit_working)
         fixed = jnp.broadcast_to(self.initial_angular_momentum, moving.shape)
         return jnp.where(self._uniform()[..., None], fixed, moving)
 
-    def angular_velocity(self, t) -> Float[Array, "... 3"]:
-        """Body-frame angular velocity Omega(t) = L(t) / I."""
-        return self.angular_momentum(t) / self.inertia
-
-    def quaternion(self, t) -> Float[Array, "... 4"]:
-        """Attitude q(t) (w, x, y, z), body to space, continuous in t, equal to the attitude at t = 0."""
-        t, tau = self._time(t)
-        particular, _ = evaluate(self._constants, tau)
+    def _attitude_from(self, t, tau, particular):
         # q = offset ⊗ q̂ ⊗ conj(P) (formulas.md, "Matching the initial state"), as one matrix product.
         moving = _apply(self._attitude_map, materialise(particular))
         # Three products and the chart leave |q| - 1 at up to ~20 ulp; renormalising costs little and
@@ -326,6 +338,42 @@ class FreeRigidBody(eqx.Module):
         # Most batches have no uniformly rotating body: then its trigonometry is not evaluated at all.
         return when_any(uniform, with_uniform, lambda moving: moving, moving)
 
+    # ------------------------------------------------------------------------------------- public
+
+    @_compiled
+    def angular_momentum(self, t) -> Float[Array, "... 3"]:
+        """Body-frame angular momentum L(t), shape broadcast(batch, t.shape) + (3,).
+
+        Evaluates only the Jacobi functions: no elliptic integral of the third kind.
+        """
+        t, tau = self._time(t)
+        unit_working, _ = evaluate(self._constants, tau, attitude=False)
+        return self._momentum_from(unit_working)
+
+    @_compiled
+    def angular_velocity(self, t) -> Float[Array, "... 3"]:
+        """Body-frame angular velocity Omega(t) = L(t) / I."""
+        return self.angular_momentum(t) / self.inertia
+
+    @_compiled
+    def quaternion(self, t) -> Float[Array, "... 4"]:
+        """Attitude q(t) (w, x, y, z), body to space, continuous in t, equal to the attitude at t = 0."""
+        t, tau = self._time(t)
+        particular, _ = evaluate(self._constants, tau)
+        return self._attitude_from(t, tau, particular)
+
+    @_compiled
+    def state(self, t) -> tuple[Float[Array, "... 3"], Float[Array, "... 4"]]:
+        """(angular_momentum(t), quaternion(t)) from one evaluation of the motion.
+
+        The same values as the two methods (bit for bit), at the cost of ``quaternion`` alone: the
+        Jacobi functions that give the attitude give L too.
+        """
+        t, tau = self._time(t)
+        particular, unit_working = evaluate(self._constants, tau)
+        return self._momentum_from(unit_working), self._attitude_from(t, tau, particular)
+
+    @_compiled
     def rotation_matrix(self, t) -> Float[Array, "... 3 3"]:
         """Attitude matrix R(t) with x_space = R x_body (dR/dt = R hat(Omega))."""
         return quaternion.as_matrix(self.quaternion(t))
