@@ -1,0 +1,263 @@
+"""Everything before the first evaluation: construction, one-body, eager and compile costs (one core).
+
+Every row pairs frbjax with its peer or its own floor, both measured in this run, on one core (the
+process pins itself to CPU 0 and runs XLA single-threaded before JAX starts), float64:
+
+* ``construction``: build + one evaluation per body (16384 random bodies, one time each, one jitted
+  program) against one evaluation of the prebuilt bodies; target ratio <= 3.
+* ``state_at_T``: the state (L, q) at T = 10 of 1024 random bodies, construction included, against
+  diffrax Dopri8 at rtol = atol = 1e-12 (vmapped, benchmarks/work_precision.py's solve); target
+  diffrax / frbjax >= 500 (stretch 1000).
+* ``one_body``: jitted ``FreeRigidBody(I, L, q).quaternion(t)`` for one body and one time against a
+  trivial jitted function of the same four arguments (JAX's dispatch); target ratio <= 2.
+* ``eager``: ``FreeRigidBody(I, L, q).quaternion(t)`` at 1000 times without jit, second call, against
+  the same under jit; target ratio <= 10; the first eager call (compilation included) is reported.
+* ``compile``: compile time of a quaternion loss over 1000 bodies x 100 common times, forward and
+  value_and_grad (in inertia and L), against diffrax Dopri8 solving the same loss (rtol = atol = 1e-12),
+  XLA's default options; target frbjax / diffrax <= 1.
+* ``fit_first_call``: ``fit_attitude`` on 200 samples, first call (compilation included), against the
+  diffrax value_and_grad compile time above; target ratio <= 2.
+* ``gpu_construction``: construction per body at 10^6 bodies on the default device, only where JAX
+  has a GPU; target <= 2 ns.
+
+Usage: python benchmarks/setup_cost.py [--quick] [--output-dir DIR]
+Writes setup_cost.json and setup_cost.png into benchmarks/results/ (or --output-dir).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import platform
+import sys
+import time
+from pathlib import Path
+
+if hasattr(os, "sched_setaffinity"):
+    os.sched_setaffinity(0, {sorted(os.sched_getaffinity(0))[0]})
+os.environ.setdefault("XLA_FLAGS", "--xla_cpu_multi_thread_eigen=false")
+
+import jax  # noqa: E402
+
+jax.config.update("jax_enable_x64", True)
+
+import jax.numpy as jnp  # noqa: E402
+import numpy as np  # noqa: E402
+
+HERE = Path(__file__).resolve().parent
+sys.path.insert(0, str(HERE))
+from throughput import best_time as _best_time  # noqa: E402
+from throughput import bodies, compile_time  # noqa: E402
+from work_precision import diffrax_function  # noqa: E402
+
+from frbjax import FreeRigidBody, fit_attitude  # noqa: E402
+
+# The figures of issue 13 before this work (one core, same machine class), for the plot and the JSON.
+BEFORE = {
+    "construction": 1367 / 115,
+    "state_at_T": 233.0,
+    "one_body": 21.1 / 5.2,
+    "eager": 693 / 0.11,
+    "compile_forward": 3.3 / 1.5,
+    "compile_value_and_grad": 11.5 / 5.1,
+    "fit_first_call": 18.0 / 5.1,
+}
+# Targets: a ratio at most this (or, for state_at_T, at least this).
+TARGETS = {
+    "construction": 3.0,
+    "state_at_T": 500.0,
+    "one_body": 2.0,
+    "eager": 10.0,
+    "compile_forward": 1.0,
+    "compile_value_and_grad": 1.0,
+    "fit_first_call": 2.0,
+}
+
+
+def best_time(call, repeats, min_total=0.2):
+    """throughput.best_time of an already compiled call (the first call, which compiles, is not timed)."""
+    jax.block_until_ready(call())
+    return _best_time(call, repeats, min_total)
+
+
+def construction(options, rng):
+    n = 1024 if options.quick else 16384
+    inertia, momentum, attitude = (jnp.asarray(a) for a in bodies(rng, n))
+    t = jnp.asarray(rng.uniform(0, 100, n))
+    build = jax.jit(FreeRigidBody)
+    built = build(inertia, momentum, attitude)
+    evaluate = jax.jit(lambda body, t: body.quaternion(t))
+    both = jax.jit(lambda i, m, a, t: FreeRigidBody(i, m, a).quaternion(t))
+    evaluation_s = best_time(lambda: evaluate(built, t), options.repeats)
+    both_s = best_time(lambda: both(inertia, momentum, attitude, t), options.repeats)
+    return {"bodies": n, "evaluation_ns": evaluation_s / n * 1e9, "construction_and_evaluation_ns": both_s / n * 1e9,
+            "ratio": both_s / evaluation_s}
+
+
+def state_at_final_time(options, rng):
+    n = 128 if options.quick else 1024
+    inertia, momentum, attitude = (jnp.asarray(a) for a in bodies(rng, n))
+    final = jnp.asarray([10.0])
+    frbjax_state = jax.jit(lambda i, m, a, t: FreeRigidBody(i, m, a).state(t[0]))
+    dopri8 = diffrax_function("Dopri8")
+    frbjax_s = best_time(lambda: frbjax_state(inertia, momentum, attitude, final), options.repeats)
+    diffrax_s = best_time(lambda: dopri8(inertia, momentum, attitude, final, 1e-12), 3)
+    momentum_frbjax, attitude_frbjax = frbjax_state(inertia, momentum, attitude, final)
+    momentum_diffrax, attitude_diffrax, _, ok = dopri8(inertia, momentum, attitude, final, 1e-12)
+    # Attitude difference up to the sign of q (diffrax integrates q directly: the same sign).
+    difference = max(float(jnp.max(jnp.abs(momentum_frbjax - momentum_diffrax[:, 0]))),
+                     float(jnp.max(jnp.abs(attitude_frbjax - attitude_diffrax[:, 0]))))
+    return {"bodies": n, "T": 10.0, "frbjax_s": frbjax_s, "diffrax_dopri8_1e-12_s": diffrax_s,
+            "ratio": diffrax_s / frbjax_s, "max_difference": difference, "diffrax_ok": bool(jnp.all(ok))}
+
+
+def one_body(options, rng):
+    inertia, momentum, attitude = (jnp.asarray(a[0]) for a in bodies(rng, 1))
+    t = jnp.asarray(3.0)
+    motion = jax.jit(lambda i, m, a, t: FreeRigidBody(i, m, a).quaternion(t))
+    trivial = jax.jit(lambda i, m, a, t: a * t + jnp.sum(i * m))
+    motion_s = best_time(lambda: motion(inertia, momentum, attitude, t), max(options.repeats, 200), min_total=0.5)
+    trivial_s = best_time(lambda: trivial(inertia, momentum, attitude, t), max(options.repeats, 200), min_total=0.5)
+    return {"frbjax_us": motion_s * 1e6, "trivial_jit_us": trivial_s * 1e6, "ratio": motion_s / trivial_s}
+
+
+def eager(options, rng):
+    inertia, momentum, attitude = (jnp.asarray(a[0]) for a in bodies(rng, 1))
+    t = jnp.linspace(-100.0, 100.0, 1000)
+    start = time.perf_counter()
+    jax.block_until_ready(FreeRigidBody(inertia, momentum, attitude).quaternion(t))
+    first_s = time.perf_counter() - start
+    eager_s = _best_time(lambda: FreeRigidBody(inertia, momentum, attitude).quaternion(t), options.repeats)
+    jitted = jax.jit(lambda i, m, a, t: FreeRigidBody(i, m, a).quaternion(t))
+    jitted_s = best_time(lambda: jitted(inertia, momentum, attitude, t), options.repeats)
+    return {"times": 1000, "first_call_s": first_s, "eager_ms": eager_s * 1e3, "jitted_ms": jitted_s * 1e3,
+            "ratio": eager_s / jitted_s}
+
+
+def compile_times(options, rng):
+    n, k = (100, 10) if options.quick else (1000, 100)
+    inertia, momentum, attitude = (jnp.asarray(a) for a in bodies(rng, n))
+    times = jnp.linspace(1.0, 100.0, k)
+    weights = jnp.asarray(rng.normal(size=4))
+
+    def frbjax_loss(inertia, momentum):
+        return jnp.sum(FreeRigidBody(inertia, momentum, attitude).quaternion(times[:, None]) * weights)
+
+    solve = diffrax_function("Dopri8")
+
+    def diffrax_loss(inertia, momentum):
+        _, q, _, _ = solve(inertia, momentum, attitude, times, 1e-12)
+        return jnp.sum(q * weights)
+
+    row = {"bodies": n, "times": k}
+    for name, loss in (("frbjax", frbjax_loss), ("diffrax_dopri8", diffrax_loss)):
+        _, forward_s = compile_time(loss, inertia, momentum)
+        _, both_s = compile_time(jax.value_and_grad(loss, argnums=(0, 1)), inertia, momentum)
+        row[f"{name}_forward_s"], row[f"{name}_value_and_grad_s"] = forward_s, both_s
+    row["ratio_forward"] = row["frbjax_forward_s"] / row["diffrax_dopri8_forward_s"]
+    row["ratio_value_and_grad"] = row["frbjax_value_and_grad_s"] / row["diffrax_dopri8_value_and_grad_s"]
+    return row
+
+
+def fit_first_call(options, rng, diffrax_value_and_grad_s):
+    samples = 200
+    body = FreeRigidBody(jnp.asarray([0.6, 0.8, 1.0]), jnp.asarray([0.3, 1.0, 0.2]))
+    times = jnp.linspace(0.0, 60.0, samples)
+    observed = body.quaternion(times)
+    start = time.perf_counter()
+    jax.block_until_ready(fit_attitude(times, observed).inertia)
+    first_s = time.perf_counter() - start
+    return {"samples": samples, "first_call_s": first_s, "diffrax_value_and_grad_compile_s": diffrax_value_and_grad_s,
+            "ratio": first_s / diffrax_value_and_grad_s}
+
+
+def gpu_construction(options, rng):
+    if jax.default_backend() != "gpu":
+        return None
+    n = 10**5 if options.quick else 10**6
+    inertia, momentum, attitude = (jax.device_put(jnp.asarray(a)) for a in bodies(rng, n))
+    build = jax.jit(FreeRigidBody)
+    seconds = best_time(lambda: build(inertia, momentum, attitude), options.repeats)
+    return {"bodies": n, "ns_per_body": seconds / n * 1e9, "device": str(jax.devices()[0])}
+
+
+def main(argv=None):
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--quick", action="store_true", help="small sizes (a smoke run)")
+    parser.add_argument("--repeats", type=int, default=5)
+    parser.add_argument("--seed", type=int, default=0)
+    parser.add_argument("--output-dir", default=str(HERE / "results"))
+    options = parser.parse_args(argv)
+    rng = np.random.default_rng(options.seed)
+    rows = {}
+    for name, measure in (("construction", construction), ("state_at_T", state_at_final_time),
+                          ("one_body", one_body), ("eager", eager), ("compile", compile_times)):
+        rows[name] = measure(options, rng)
+        print(name, json.dumps(rows[name]), flush=True)
+    rows["fit_first_call"] = fit_first_call(options, rng, rows["compile"]["diffrax_dopri8_value_and_grad_s"])
+    print("fit_first_call", json.dumps(rows["fit_first_call"]), flush=True)
+    rows["gpu_construction"] = gpu_construction(options, rng)
+    ratios = {
+        "construction": rows["construction"]["ratio"],
+        "state_at_T": rows["state_at_T"]["ratio"],
+        "one_body": rows["one_body"]["ratio"],
+        "eager": rows["eager"]["ratio"],
+        "compile_forward": rows["compile"]["ratio_forward"],
+        "compile_value_and_grad": rows["compile"]["ratio_value_and_grad"],
+        "fit_first_call": rows["fit_first_call"]["ratio"],
+    }
+    met = {name: (ratios[name] >= TARGETS[name]) if name == "state_at_T" else (ratios[name] <= TARGETS[name])
+           for name in ratios}
+    for name in ratios:
+        print(f"{name:24s} before {BEFORE[name]:9.3g}  now {ratios[name]:9.3g}  target "
+              f"{'>=' if name == 'state_at_T' else '<='} {TARGETS[name]:g}  {'met' if met[name] else 'MISSED'}")
+    result = {
+        "script": "benchmarks/setup_cost.py",
+        "quick": options.quick,
+        "machine": {"platform": platform.platform(), "cpus_used": 1, "jax": jax.__version__,
+                    "backend": jax.default_backend()},
+        "rows": rows,
+        "ratios": ratios,
+        "before": BEFORE,
+        "targets": TARGETS,
+        "met": met,
+    }
+    output = Path(options.output_dir)
+    output.mkdir(parents=True, exist_ok=True)
+    (output / "setup_cost.json").write_text(json.dumps(result, indent=1) + "\n")
+    plot(result, output / "setup_cost.png")
+    print("wrote", output / "setup_cost.json", "and", output / "setup_cost.png")
+
+
+def plot(result, path):
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    names = list(result["ratios"])
+    # Every row as "how far from its target": ratio / target (>= 1 missed), state_at_T inverted.
+    def distance(name, ratio):
+        target = result["targets"][name]
+        return target / ratio if name == "state_at_T" else ratio / target
+
+    before = [distance(name, result["before"][name]) for name in names]
+    now = [distance(name, result["ratios"][name]) for name in names]
+    positions = np.arange(len(names))
+    figure, axes = plt.subplots(figsize=(9, 4.5))
+    axes.barh(positions + 0.2, before, height=0.4, color="0.75", label="before (issue 13)")
+    axes.barh(positions - 0.2, now, height=0.4, color="tab:blue", label="now")
+    axes.axvline(1.0, color="k", lw=1)
+    axes.set_xscale("log")
+    axes.set_yticks(positions, names)
+    axes.invert_yaxis()
+    axes.set_xlabel("measured / target (left of the line: target met)")
+    axes.set_title("Setup costs on one core, each against its peer in the same run")
+    axes.legend(loc="lower right")
+    figure.tight_layout()
+    figure.savefig(path, dpi=120)
+
+
+if __name__ == "__main__":
+    main()
