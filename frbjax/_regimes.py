@@ -211,6 +211,7 @@ def constants(inertia, unit_momentum, regime):
         jnp.concatenate([phase_z[None], series_z]),
         jnp.stack(jnp.broadcast_arrays(phase_parameter, complete_parameter, one, one, one)),
         True,
+        2,
     )
     first_kind, third_kind = materialise((first_kind, third_kind[:2]))
     quarter, phase_integral = first_kind[1], first_kind[0]

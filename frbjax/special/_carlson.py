@@ -328,12 +328,19 @@ def _log_above_one_jvp(primals, tangents):
     return _log_above_one(x), dx / x
 
 
-def _rf_rj_series(x, y, z, p, parameter_largest=False, rolled=False, early_exit=False):
+def _rf_rj_series(x, y, z, p, parameter_largest=False, rolled=False, early_exit=False, third_kind_rows=None):
     """(R_F(x, y, z), R_J(x, y, z, p)) from one duplication of x, y, z (the same for both); with
-    ``early_exit`` (and ``rolled``) the loop ends where every point has converged (``_duplicate``)."""
-    mean0 = (x + y + z + 2 * p) / 5
-    dx0, dy0, dz0 = mean0 - x, mean0 - y, mean0 - z
-    px0, py0, pz0 = p - x, p - y, p - z
+    ``early_exit`` (and ``rolled``) the loop ends where every point has converged (``_duplicate``).
+
+    With ``third_kind_rows`` = k, R_J is computed for the first k rows (leading axis) only: the other
+    rows duplicate x, y, z for R_F alone, without R_J's costlier terms (R_C at every step)."""
+    def rows(argument):
+        return argument if third_kind_rows is None else argument[:third_kind_rows]
+
+    x_j, y_j, z_j, p = rows(x), rows(y), rows(z), rows(p)
+    mean0 = (x_j + y_j + z_j + 2 * p) / 5
+    dx0, dy0, dz0 = mean0 - x_j, mean0 - y_j, mean0 - z_j
+    px0, py0, pz0 = p - x_j, p - y_j, p - z_j
     # e_k < 0 (an odd number of arguments above p) is decided by the inputs alone.
     negative = (px0 < 0) ^ (py0 < 0) ^ (pz0 < 0)
     mean_f0 = (x + y + z) / 3
@@ -342,6 +349,7 @@ def _rf_rj_series(x, y, z, p, parameter_largest=False, rolled=False, early_exit=
     def step(state, quarter):
         x, y, z, p, mean, mean_f, correction = state
         lam, (sx, sy, sz) = _lambda(x, y, z, _sqrt_for(rolled))
+        sx, sy, sz, lam_j = rows(sx), rows(sy), rows(sz), rows(lam)
         sp = _sqrt_for(rolled)(p)
         ix, iy, iz = 1 / (sp + sx), 1 / (sp + sy), 1 / (sp + sz)
         # e_k = 4^{-3k} (p-x)(p-y)(p-z) / d_k^2 (Carlson 1995, eq. (2.19)), d_k = (sp+sx)(sp+sy)(sp+sz),
@@ -368,8 +376,8 @@ def _rf_rj_series(x, y, z, p, parameter_largest=False, rolled=False, early_exit=
                 w = (1 + e) + lax.stop_gradient(w - (1 + e))
             rc = _rc_one_plus_rolled(w) if rolled else _rc_one_plus(w)
         correction = correction + (quarter * rc) * (ix * iy * iz)
-        x, y, z, p = (x + lam) / 4, (y + lam) / 4, (z + lam) / 4, (p + lam) / 4
-        return x, y, z, p, (mean + lam) / 4, (mean_f + lam) / 4, correction
+        x, y, z, p = (x + lam) / 4, (y + lam) / 4, (z + lam) / 4, (p + lam_j) / 4
+        return x, y, z, p, (mean + lam_j) / 4, (mean_f + lam) / 4, correction
 
     # Carlson (1995): the series' arguments are (A_0 - x_0)/(4^k A_k) and the like (see below).
     spread = jnp.maximum(jnp.maximum(jnp.abs(dx0), jnp.abs(dy0)),
@@ -378,7 +386,7 @@ def _rf_rj_series(x, y, z, p, parameter_largest=False, rolled=False, early_exit=
 
     def converged(state, quarter, threshold):
         mean, mean_f = state[4], state[5]
-        return (quarter * spread <= threshold * mean) & (quarter * spread_f <= threshold * mean_f)
+        return jnp.all(quarter * spread <= threshold * mean) & jnp.all(quarter * spread_f <= threshold * mean_f)
 
     state = (x, y, z, p, mean0, mean_f0, jnp.zeros_like(mean0))
     (x, y, z, p, mean, mean_f, correction), quarter = _duplicate(
@@ -477,9 +485,17 @@ def _jvp_from_partials(function, primals, tangents, may_vanish):
         return value, jax.tree.map(jnp.zeros_like, value)
     value, partials = _value_and_partials(function, primals, varying)
 
+    def rows_of(argument, partial):
+        # An output computed on the leading rows of the arguments only (``_rf_rj``'s
+        # ``third_kind_rows``) takes the tangents of those rows.
+        if partial.ndim > 1 and jnp.ndim(argument) == partial.ndim - 1 and argument.shape[0] != partial.shape[1]:
+            return argument[: partial.shape[1]]
+        return argument
+
     def tangent(partial):
-        return sum(_masked(tangents[i], primals[i], partial[k]) if i in may_vanish
-                   else partial[k] * tangents[i] for k, i in enumerate(varying))
+        return sum(_masked(rows_of(tangents[i], partial), rows_of(primals[i], partial), partial[k])
+                   if i in may_vanish else partial[k] * rows_of(tangents[i], partial)
+                   for k, i in enumerate(varying))
 
     return value, jax.tree.map(tangent, partials)
 
@@ -503,17 +519,18 @@ def _rj_jvp(primals, tangents):
     return _jvp_from_partials(_rj_rolled, primals, tangents, (0, 1, 2))
 
 
-@functools.partial(jax.custom_jvp, nondiff_argnums=(4,))
-def _rf_rj(x, y, z, p, rolled=False):
+@functools.partial(jax.custom_jvp, nondiff_argnums=(4, 5))
+def _rf_rj(x, y, z, p, rolled=False, third_kind_rows=None):
     """(R_F(x, y, z), R_J(x, y, z, p)) from one duplication loop; ``rolled``: a rolled loop that ends
-    where every point has converged (values; the rule's loop has all steps)."""
-    return _rf_rj_series(x, y, z, p, rolled=rolled, early_exit=rolled)
+    where every point has converged (values; the rule's loop has all steps); ``third_kind_rows``: R_J
+    of the first rows only (``_rf_rj_series``)."""
+    return _rf_rj_series(x, y, z, p, rolled=rolled, early_exit=rolled, third_kind_rows=third_kind_rows)
 
 
 @functools.partial(_rf_rj.defjvp, symbolic_zeros=True)
-def _rf_rj_jvp(rolled, primals, tangents):
+def _rf_rj_jvp(rolled, third_kind_rows, primals, tangents):
     # Both partial derivatives from one rolled duplication loop (its tangent, as for R_J alone).
-    series = lambda a, b, c, d: _rf_rj_series(a, b, c, d, rolled=True)  # noqa: E731
+    series = lambda a, b, c, d: _rf_rj_series(a, b, c, d, rolled=True, third_kind_rows=third_kind_rows)  # noqa: E731
     return _jvp_from_partials(series, primals, tangents, (0, 1, 2))
 
 
