@@ -225,13 +225,17 @@ def coefficients(m, mc, characteristic, integrals=None, complete=None) -> Series
     # exponential: a fraction of the compiled code, and rounding of a few ulp in terms that are at most
     # q^2 of the first), and every 1 - x^k as (1 - x^(k-1)) + x^(k-1) (1 - x), a sum of non-negative
     # terms, so that nothing cancels as the exponent -> 0 (chi -> 0 or chi -> -infinity).
-    q_squared = q * q
     shift_decay = jnp.exp(-np.pi * shift / quarter)  # q/rho = exp(-2 alpha')
-    shift_decay_squared = shift_decay * shift_decay
     shift_gap = -jnp.expm1(-2 * np.pi * shift / quarter)  # 1 - (q/rho)^2
     beta_decay = jnp.exp(-two_beta)
-    beta_decay_squared = beta_decay * beta_decay
     beta_gap = -jnp.expm1(-2 * two_beta)  # 1 - exp(-4 beta)
+    # Materialised: every coefficient below is a product chain of these, and each output's fused
+    # loop would otherwise recompute their exponentials (and the nome's) for itself.
+    q, q_over_m, rho, origin, shift_decay, shift_gap, beta_decay, beta_gap, amplitude = materialise(
+        (q, q_over_m, rho, origin, shift_decay, shift_gap, beta_decay, beta_gap, amplitude))
+    q_squared = q * q
+    shift_decay_squared = shift_decay * shift_decay
+    beta_decay_squared = beta_decay * beta_decay
     q_odd = jnp.ones_like(q)  # q^(n(n-1)) = q^(j(j+1))
     q_power, q_even_power = jnp.ones_like(q), jnp.ones_like(q)  # q^(n-1), q^(2(n-1))
     rho_power, shift_power = jnp.ones_like(rho), jnp.ones_like(shift_decay)  # rho^(n-1), (q/rho)^(n-1)
