@@ -38,6 +38,7 @@ from .special._carlson import _rf_rj
 from .special._legendre import (
     _LARGE_NEGATIVE_CHARACTERISTIC,
     pi_without_first_kind_from,
+    rj_complete,
     third_kind_arguments,
 )
 
@@ -188,11 +189,12 @@ def constants(inertia, unit_momentum, regime):
     # phase u0 (for the attitude at t = 0, see ``reference``).  Where the phase is reflected, Pi at the
     # phase is the complete one less the integral from |am0| to pi/2 (``_remaining_third_kind``), whose
     # R_J has the x, y, z of the reflected phase; elsewhere the direct form (``third_kind_arguments``)
-    # has those of the direct phase.  So every elliptic integral of the constructor is an R_F and an R_J
-    # of shared x, y, z: one duplication loop (``_rf_rj``) on five rows, (x, y, z, p) =
-    #   the phase (R_F: u0; R_J: Pi at the phase, direct or remaining),
-    #   (0, mc, 1, 1 - n') (R_F: K(m); R_J: the complete Pi, n' the characteristic of DLMF 19.7.8),
-    #   the series' a', b and K' (R_J unused: p = 1 is a stand-in).
+    # has those of the direct phase.  So the constructor's R_F share one duplication loop (``_rf_rj``)
+    # on five rows (x, y, z): the phase (u0), (0, mc, 1) (K(m)) and the series' a', b and K'; the
+    # phase's row also gives R_J(x, y, z, p) (Pi at the phase, direct or remaining), and only that row
+    # pays for R_J's terms (``third_kind_rows=1``).  The complete R_J(0, mc, 1, 1 - n') (n' the
+    # characteristic of DLMF 19.7.8) comes from Bulirsch's cel iteration (``rj_complete``: a square
+    # root and a quotient per step instead of R_J's duplication with an R_C at every step).
     # The loop is rolled (``rolled=True``): per-body work, where twelve unrolled steps would only add
     # compile time; it ends as soon as every body has converged, and its JVP rule is one more rolled
     # loop (all steps).
@@ -205,15 +207,16 @@ def constants(inertia, unit_momentum, regime):
     remaining_parameter = mc * (1 - nu * (remaining_sn0 * remaining_sn0)) / (1 - nu)
     phase_parameter = jnp.where(reflected, remaining_parameter, direct_parameter)
     one = jnp.ones_like(sn0)
-    first_kind, third_kind = _rf_rj(
+    first_kind, phase_third_kind = _rf_rj(
         jnp.concatenate([phase_x[None], series_x]),
         jnp.concatenate([phase_y[None], series_y]),
         jnp.concatenate([phase_z[None], series_z]),
-        jnp.stack(jnp.broadcast_arrays(phase_parameter, complete_parameter, one, one, one)),
+        jnp.stack(jnp.broadcast_arrays(phase_parameter, one, one, one, one)),
         True,
-        2,
+        1,
     )
-    first_kind, third_kind = materialise((first_kind, third_kind[:2]))
+    third_kind = jnp.concatenate([phase_third_kind, rj_complete(mc, complete_parameter)[None]])
+    first_kind, third_kind = materialise((first_kind, third_kind))
     quarter, phase_integral = first_kind[1], first_kind[0]
     sign = jnp.where(sn0 < 0, -1.0, 1.0).astype(sn0.dtype)
     remaining_phase = cn0 * phase_integral  # K - |u0| where reflected

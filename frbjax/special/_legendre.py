@@ -25,7 +25,7 @@ from __future__ import annotations
 import jax
 import jax.numpy as jnp
 
-from ._carlson import _horner, _rd, _rf, _rf_rj, _rj_parameter_largest
+from ._carlson import _horner, _rd, _rf, _rf_rj, _rj, _rj_parameter_largest
 from ._common import complement, is_double, over_sqrt, promote
 
 
@@ -302,6 +302,22 @@ def _rj_complete(mc, p):
         qc = 2 * jnp.sqrt(e)
         e = qc * em
     return 1.5 * jnp.pi * (b + a * em) / (em * (em + p))
+
+
+@jax.custom_jvp
+def rj_complete(mc, p):
+    """R_J(0, mc, 1, p) for 0 < mc <= 1 and p > 0: the value by Bulirsch's cel iteration
+    (``_rj_complete``), the derivatives from R_J's rule (the tangent of its duplication)."""
+    return _rj_complete(mc, p)
+
+
+@rj_complete.defjvp
+def _rj_complete_jvp(primals, tangents):
+    mc, p = primals
+    zero, one = jnp.zeros_like(mc), jnp.ones_like(mc)
+    # x = 0 and z = 1 are constants of the closure: R_J's rule then carries the two directions alone.
+    _, tangent = jax.jvp(lambda mc, p: _rj(zero, mc, one, p), (mc, p), tangents)
+    return rj_complete(mc, p), tangent
 
 
 def _pi_complete_values(n, m, mc):
