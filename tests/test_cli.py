@@ -18,11 +18,11 @@ from frbjax import _calgo903 as calgo
 from frbjax import cli
 
 REPOSITORY = pathlib.Path(__file__).resolve().parents[1]
-DATA = REPOSITORY.parent / "shared" / "reference" / "calgo903"
+DATA = REPOSITORY / "tests" / "data" / "calgo903"
 
 def needs_data(test):
-    """The CALGO 903 files must be there (../shared beside the repository, as in CI): no skip, a
-    missing folder fails loudly here."""
+    """The CALGO 903 files must be there (tests/data/calgo903, tracked): no skip, a missing folder
+    fails loudly here."""
     assert DATA.is_dir(), f"CALGO 903 reference data not found: {DATA}"
     return test
 
