@@ -25,7 +25,7 @@ and reports the ratio error / floor (the issue's target: <= 10 everywhere) per s
     (at fixed |L| t).
 
 The reference (``Reference`` below) is an independent closed form written for this script in mpmath
-(not frbjax's formulas, not shared/design/formulas.md's attitude): L(t) from the textbook Jacobi
+(not frbjax's formulas, not the attitude of docs/theory.md): L(t) from the textbook Jacobi
 solution of Euler's equations (mpmath.ellipfun, ellipf), and the attitude as
 
     q(t) = q0 ⊗ r(0)* ⊗ exp(chi(t)/2 about p) ⊗ r(t),

@@ -21,8 +21,8 @@ def working_frame(inertia, momentum):
     """Signed permutation P (det +1, columns = working axes in body coordinates) and the working data.
 
     The working frame sorts the moments (J1 <= J2 <= J3) and uses the body's symmetry under a rotation
-    by pi about a principal axis to make l1 >= 0 and l3 >= 0 (formulas.md, "Reduce to the normalised,
-    sorted problem"): with those signs one formula per regime covers every orbit.
+    by pi about a principal axis to make l1 >= 0 and l3 >= 0 (docs/theory.md §2,
+    "The working frame"): with those signs one formula per regime covers every orbit.
     """
     order = jnp.argsort(inertia, axis=-1, stable=True)
     permutation = jnp.swapaxes(jnp.eye(3, dtype=inertia.dtype)[order], -1, -2)
@@ -173,7 +173,7 @@ class FreeRigidBody(eqx.Module):
     dL/dt = L x Omega, dR/dt = R hat(Omega), Omega = L / I, exactly: L through Jacobi elliptic functions,
     the attitude through the elliptic integral of the third kind (Celledoni, Fassò, Säfström and Zanna,
     "The exact computation of the free rigid body motion and its use in splitting methods", SIAM J. Sci.
-    Comput. 30 (2008); formulas in shared/design/formulas.md).  Everything per body (regime, phase, the
+    Comput. 30 (2008); derivation in docs/theory.md).  Everything per body (regime, phase, the
     particular solution at the phase) is computed once here; evaluations at many times reuse it.
 
     Invalid inputs: wrong trailing shapes or leading shapes that do not broadcast raise ValueError,
@@ -252,8 +252,8 @@ class FreeRigidBody(eqx.Module):
         regime = classify(sorted_inertia, unit_working, norm)
         consts = constants(sorted_inertia, unit_working, regime)
 
-        # q(t) = q0 ⊗ P ⊗ conj(q̂(0)) ⊗ q̂(|L| t) ⊗ conj(P)  (formulas.md, "Matching the initial
-        # state", with the phase folded into q̂; P is the working frame as a quaternion).
+        # q(t) = q0 ⊗ P ⊗ conj(q̂(0)) ⊗ q̂(|L| t) ⊗ conj(P)  (docs/theory.md §8, "Matching the
+        # initial state", with the phase folded into q̂; P is the working frame as a quaternion).
         frame_rotation = quaternion.from_matrix(permutation)
         reference = regime_reference(consts, unit_working)
         offset = quaternion.multiply(
@@ -309,7 +309,7 @@ class FreeRigidBody(eqx.Module):
         """Attitude q(t) (w, x, y, z), body to space, continuous in t, equal to the attitude at t = 0."""
         t, tau = self._time(t)
         particular, _ = evaluate(self._constants, tau)
-        # q = offset ⊗ q̂ ⊗ conj(P) (formulas.md, "Matching the initial state"), as one matrix product.
+        # q = offset ⊗ q̂ ⊗ conj(P) (docs/theory.md §8), as one matrix product.
         moving = _apply(self._attitude_map, materialise(particular))
         # Three products and the chart leave |q| - 1 at up to ~20 ulp; renormalising costs little and
         # keeps |q| = 1 and rotation_matrix (which assumes it) at the ulp level.
