@@ -11,7 +11,7 @@ gaps a = J2 - J1, b = J3 - J2, c = J3 - J1:
 - regime "around the major axis" (g2 < 0, parameter m = g3 a/(g1 b) < 1):
   L = (A1 cn, A2 sn, A3 dn)(u),  psi = t/J1 + atan2(L2, L3) - alpha Pi(nu; am u | m),
   quaternion chart built on 1 + L1;
-- regime "around the minor axis" (g2 > 0, m = g1 b/(g3 a) < 1, the seeds' mu = 1/m):
+- regime "around the minor axis" (g2 > 0, m = g1 b/(g3 a) < 1, older write-ups' mu = 1/m):
   L = (A1 dn, A2 sn, A3 cn)(u),  psi = t/J3 - atan2(L2, L1) + alpha Pi(nu; am u | m),
   quaternion chart built on 1 + L3;
 - separatrix (g2 = 0): L = (A1 sech, tanh, A3 sech)(u), psi = t/J2 + 2 atan(delta tanh(u/2)),
