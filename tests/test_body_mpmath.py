@@ -27,7 +27,7 @@ import _reference as ref
 
 DATA = os.path.join(os.path.dirname(__file__), "data", "mpmath_references.json")
 
-# The targets are 2e-14 (generic bodies) and 1e-12 (|d I2 - 1| ~ 1e-8); frbjax does better, so
+# The accuracy targets are 2e-14 (generic bodies) and 1e-12 (|d I2 - 1| ~ 1e-8); frbjax does better, so
 # the tolerances are the measured worst errors (L relative to |L|, q) with a margin of ~1.5:
 GENERIC_TOLERANCE = 5e-15  # measured worst 3.2e-15 (q, minor_unit at |L| t = 30)
 NEAR_SEPARATRIX_TOLERANCE = 1.5e-13  # measured worst 8.6e-14 (q, near_separatrix_major at |L| t = -30)

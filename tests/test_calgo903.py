@@ -89,7 +89,7 @@ def test_free_examples(name):
 def test_example4_final_quaternion():
     """q(10) of example 4: the Fortran's (NP = 5) to 1e-9, the exact one to 1e-13.
 
-    The issue quotes the Fortran's value, the last record of out_example4.dat.  The exact value comes
+    The Fortran's value is the last record of out_example4.dat.  The exact value comes
     from an independent integration of Euler's equations and dq/dt = q (0, Omega)/2 (scipy's DOP853,
     rtol 2.2e-14); frbjax agrees with it to 2e-15, and both are 7.7e-10 from the Fortran's.
     """
