@@ -1,17 +1,17 @@
 """The exact free rigid body in numpy + scipy.special: the closed form a user would write by hand.
 
 This is the peer that benchmarks/work_precision.py and benchmarks/throughput.py time frbjax against.
-It follows shared/design/formulas.md line by line, with nothing from frbjax:
+It follows docs/theory.md line by line, with nothing from frbjax's code:
 
 * working frame: sort the moments (J1 <= J2 <= J3) with a signed permutation P of determinant +1 and
   flip two axes so that l1 >= 0 and l3 >= 0 (the body's symmetry under a rotation by pi about a
-  principal axis); every orbit sign s of formulas.md is then +1;
+  principal axis); every orbit sign of the formulas is then +1;
 * regime around the major axis (d J2 < 1): L = (A1 cn, A2 sn, A3 dn)(u|m),
   psi = tau/J1 + atan2(L2, L3) - alpha Pi(nu; am u|m), quaternion chart built on 1 + L1;
   regime around the minor axis (d J2 > 1): L = (A1 dn, A2 sn, A3 cn)(u|m),
   psi = tau/J3 - atan2(L2, L1) + alpha Pi(nu; am u|m), chart built on 1 + L3;
 * u = u0 + B tau with tau = |L| t, the phase u0 = F(am0|m) matching the initial angular momentum;
-* q(t) = q0 ⊗ P ⊗ conj(q̂(u0)) ⊗ q̂(u) ⊗ conj(P)  (formulas.md, "Matching the initial state").
+* q(t) = q0 ⊗ P ⊗ conj(q̂(u0)) ⊗ q̂(u) ⊗ conj(P)  (docs/theory.md §8).
 
 Special functions: scipy.special.ellipj for sn, cn, dn, am (after reducing u modulo the period 4K, so
 that its accuracy does not decay with time), Carlson's elliprf / elliprj for K, F and Pi:
@@ -138,7 +138,7 @@ class ScipyFreeRigidBody:
         l1, l2, l3 = np.moveaxis(working / norm[..., None], -1, 0)
         j1, j2, j3 = np.moveaxis(np.take_along_axis(inertia, order, axis=-1), -1, 0)
         a, b, c = j2 - j1, j3 - j2, j3 - j1
-        # 1 - d J1, d J2 - 1, d J3 - 1 without cancellation (formulas.md).
+        # 1 - d J1, d J2 - 1, d J3 - 1 without cancellation (docs/theory.md §3).
         g1 = l2 * l2 * a / j2 + l3 * l3 * c / j3
         g2 = l1 * l1 * a / j1 - l3 * l3 * b / j3
         g3 = l1 * l1 * c / j1 + l2 * l2 * b / j2

@@ -27,7 +27,7 @@ import numpy as np  # noqa: E402
 from frbjax import _calgo903 as calgo  # noqa: E402
 
 REPOSITORY = pathlib.Path(__file__).resolve().parents[1]
-DATA = REPOSITORY.parent / "shared" / "reference" / "calgo903"
+DATA = REPOSITORY / "tests" / "data" / "calgo903"
 
 
 def main(argv=None):

@@ -12,7 +12,7 @@ For every case (a body and a time) the script measures
   reference.  No float64 algorithm can be expected to beat this by much: its inputs are only known to
   half an ulp, and evaluating the motion in float64 makes rounding errors of that size.
 
-and reports the ratio error / floor (the issue's target: <= 10 everywhere) per sweep:
+and reports the ratio error / floor (the target: <= 10 everywhere) per sweep:
 
 (a) ``separatrix``: |d I2 - 1| from 1e-1 down to 1e-16 on both sides (d = 2E/|L|^2), I = (1, 2, 3);
     the x axis is the exact d I2 - 1 of the float64 inputs; plus one body exactly on the separatrix.
@@ -25,7 +25,7 @@ and reports the ratio error / floor (the issue's target: <= 10 everywhere) per s
     (at fixed |L| t).
 
 The reference (``Reference`` below) is an independent closed form written for this script in mpmath
-(not frbjax's formulas, not shared/design/formulas.md's attitude): L(t) from the textbook Jacobi
+(not frbjax's formulas, not the attitude of docs/theory.md): L(t) from the textbook Jacobi
 solution of Euler's equations (mpmath.ellipfun, ellipf), and the attitude as
 
     q(t) = q0 ⊗ r(0)* ⊗ exp(chi(t)/2 about p) ⊗ r(t),

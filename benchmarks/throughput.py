@@ -293,7 +293,7 @@ def main(argv=None):
         "forward_compile_s_fusion_emitters_off": (gradient["fusion_emitters_off"] or {}).get("forward_compile_s"),
         "value_and_grad_compile_s_fusion_emitters_off":
             (gradient["fusion_emitters_off"] or {}).get("value_and_grad_compile_s"),
-        "targets_issue_4": {
+        "targets": {
             "quaternion_ns_per_eval_per_core": 300,
             "scipy_over_frbjax_quaternion_one_core": 4,
             "gradient_over_forward": 4,

@@ -21,8 +21,8 @@ def working_frame(inertia, momentum):
     """Signed permutation P (det +1, columns = working axes in body coordinates) and the working data.
 
     The working frame sorts the moments (J1 <= J2 <= J3) and uses the body's symmetry under a rotation
-    by pi about a principal axis to make l1 >= 0 and l3 >= 0 (formulas.md, "Reduce to the normalised,
-    sorted problem"): with those signs one formula per regime covers every orbit.
+    by pi about a principal axis to make l1 >= 0 and l3 >= 0 (docs/theory.md §2,
+    "The working frame"): with those signs one formula per regime covers every orbit.
     """
     # Stable ranks (ties keep their order) by comparisons: body i's moment goes to working axis
     # rank_i.  (XLA's sort of the three moments cost 170 ns per body on CPU, these 10 ns.)
@@ -205,8 +205,8 @@ def _construct(inertia, angular_momentum, attitude):
     regime = classify(sorted_inertia, unit_working, norm)
     consts = constants(sorted_inertia, unit_working, regime)
 
-    # q(t) = q0 ⊗ P ⊗ conj(q̂(0)) ⊗ q̂(|L| t) ⊗ conj(P)  (formulas.md, "Matching the initial
-    # state", with the phase folded into q̂; P is the working frame as a quaternion).
+    # q(t) = q0 ⊗ P ⊗ conj(q̂(0)) ⊗ q̂(|L| t) ⊗ conj(P)  (docs/theory.md §8, "Matching the
+    # initial state", with the phase folded into q̂; P is the working frame as a quaternion).
     frame_rotation = quaternion.from_matrix(permutation)
     reference = regime_reference(consts, unit_working)
     offset = quaternion.multiply(
@@ -264,7 +264,7 @@ class FreeRigidBody(eqx.Module):
     dL/dt = L x Omega, dR/dt = R hat(Omega), Omega = L / I, exactly: L through Jacobi elliptic functions,
     the attitude through the elliptic integral of the third kind (Celledoni, Fassò, Säfström and Zanna,
     "The exact computation of the free rigid body motion and its use in splitting methods", SIAM J. Sci.
-    Comput. 30 (2008); formulas in shared/design/formulas.md).  Everything per body (regime, phase, the
+    Comput. 30 (2008); derivation in docs/theory.md).  Everything per body (regime, phase, the
     particular solution at the phase) is computed once here; evaluations at many times reuse it.
 
     Invalid inputs: wrong trailing shapes or leading shapes that do not broadcast raise ValueError,
@@ -328,7 +328,7 @@ class FreeRigidBody(eqx.Module):
         return jnp.where(self._uniform()[..., None], fixed, moving)
 
     def _attitude_from(self, t, tau, particular):
-        # q = offset ⊗ q̂ ⊗ conj(P) (formulas.md, "Matching the initial state"), as one matrix product.
+        # q = offset ⊗ q̂ ⊗ conj(P) (docs/theory.md §8), as one matrix product.
         moving = _apply(self._attitude_map, materialise(particular))
         # Three products and the chart leave |q| - 1 at up to ~20 ulp; renormalising costs little and
         # keeps |q| = 1 and rotation_matrix (which assumes it) at the ulp level.

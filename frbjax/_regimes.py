@@ -1,17 +1,17 @@
 """The exact motion in the working frame: per-body constants of each regime and their evaluation.
 
-Notation and formulas: ``shared/design/formulas.md`` (checked numerically on both signs of every branch).
+Notation, formulas and their derivation: ``docs/theory.md`` (checked numerically on both signs of every branch).
 The working frame has sorted moments J1 <= J2 <= J3 and a unit angular momentum l with l1 >= 0 and
 l3 >= 0 (the body's symmetry under rotation by pi about a principal axis makes this free: see
-``_body.working_frame``), so every orbit sign ``s`` of formulas.md is +1 here.
+``_body.working_frame``), so every orbit sign of the formulas is +1 here.
 
-With g1 = 1 - d J1, g3 = d J3 - 1, g2 = d J2 - 1 computed without cancellation (formulas.md), and the
+With g1 = 1 - d J1, g3 = d J3 - 1, g2 = d J2 - 1 computed without cancellation (docs/theory.md §3), and the
 gaps a = J2 - J1, b = J3 - J2, c = J3 - J1:
 
 - regime "around the major axis" (g2 < 0, parameter m = g3 a/(g1 b) < 1):
   L = (A1 cn, A2 sn, A3 dn)(u),  psi = t/J1 + atan2(L2, L3) - alpha Pi(nu; am u | m),
   quaternion chart built on 1 + L1;
-- regime "around the minor axis" (g2 > 0, m = g1 b/(g3 a) < 1, the seeds' mu = 1/m):
+- regime "around the minor axis" (g2 > 0, m = g1 b/(g3 a) < 1, older write-ups' mu = 1/m):
   L = (A1 dn, A2 sn, A3 cn)(u),  psi = t/J3 - atan2(L2, L1) + alpha Pi(nu; am u | m),
   quaternion chart built on 1 + L3;
 - separatrix (g2 = 0): L = (A1 sech, tanh, A3 sech)(u), psi = t/J2 + 2 atan(delta tanh(u/2)),
@@ -59,7 +59,7 @@ def _substitute(condition, inertia, unit_momentum, safe_momentum):
 
 
 def energy_gaps(inertia, unit_momentum):
-    """(g1, g2, g3) = (1 - d J1, d J2 - 1, d J3 - 1) without cancellation (formulas.md)."""
+    """(g1, g2, g3) = (1 - d J1, d J2 - 1, d J3 - 1) without cancellation (docs/theory.md §3)."""
     j1, j2, j3 = inertia[..., 0], inertia[..., 1], inertia[..., 2]
     l1s, l2s, l3s = unit_momentum[..., 0] ** 2, unit_momentum[..., 1] ** 2, unit_momentum[..., 2] ** 2
     g1 = l2s * (j2 - j1) / j2 + l3s * (j3 - j1) / j3
@@ -86,13 +86,13 @@ def classify(inertia, unit_momentum, momentum_norm):
 
 
 def constants(inertia, unit_momentum, regime):
-    """Per-body constants of the regime's exact solution (formulas.md), as a dict of arrays."""
+    """Per-body constants of the regime's exact solution (docs/theory.md §4-5), as a dict of arrays."""
     is_major, is_minor, is_sep = regime == MAJOR, regime == MINOR, regime == SEPARATRIX
 
     # Around the major axis (around the minor axis): one set of formulas in the roles of the axes.
     # The pivot axis p is the one the orbit circles, J1 (J3), o the other extreme, J3 (J1); g_p = g1
     # (g3) and g_o = g3 (g1) are their energy gaps, and gap_p = J3 - J2 (J2 - J1) and gap_o = J2 - J1
-    # (J3 - J2) the gaps of J2 from o and from p.  Then the regime's formulas (formulas.md) read
+    # (J3 - J2) the gaps of J2 from o and from p.  Then the regime's formulas (docs/theory.md §4) read
     #   A_p = sqrt(J_p g_o/c), A2 = sqrt(J2 g_o/gap_p), A_o = sqrt(J_o g_p/c), B = sqrt(g_p gap_p/(J1 J2 J3)),
     #   m = g_o gap_o/(g_p gap_p), mc = c |g2|/(g_p gap_p), alpha = c/sqrt(J_p g_p gap_p J_o/J2),
     #   nu = -J_p g_o/(J_o g_p), precession 1/J_p,
@@ -238,7 +238,7 @@ def constants(inertia, unit_momentum, regime):
     # the theta series' terms fall like q^(n(n-1)) rho^n, so every nu < 0 is expanded directly.
     series = _series.coefficients(m, mc, nu, first_kind[1:], complete_third_kind)
     # The separatrix is the limit m = 1 of the major regime (q' = 0): its L is (A1 cn, sn, A3 dn) with
-    # cn = dn = sech, sn = tanh, and its psi = u/(J2 B) + 2 arctan(delta tanh(u/2)) (formulas.md) equals
+    # cn = dn = sech, sn = tanh, and its psi = u/(J2 B) + 2 arctan(delta tanh(u/2)) (docs/theory.md §5) equals
     # t/J2 + atan2(L2, L3) - arctan((A1/A3) tanh u): the major regime's alpha Pi(nu; gd u|1), with
     # nu = -J1 b/(J3 a), is alpha (u + sqrt(-nu) arctan(sqrt(-nu) tanh u))/(1 - nu), whose linear part
     # turns t/J1 into t/J2 (alpha B/(1 - nu) = 1/J1 - 1/J2) and whose bounded part has
@@ -291,10 +291,10 @@ def _unit_point(sn_scaled, cn_scaled):
 def evaluate(consts, tau, attitude=True):
     """Unit angular momentum and (if ``attitude``) the particular quaternion q̂ at unit-|L| time tau.
 
-    q̂ is the solution of formulas.md at phase u = u0 + B tau, except that the precession angle psi
+    q̂ is the solution of docs/theory.md §5 at phase u = u0 + B tau, except that the precession angle psi
     counts from tau = 0 (psi = precession * tau + the bounded terms at u): only differences of psi
     enter the motion (q̂ is a rotation about the fixed spatial axis by psi times a function of L), and
-    the phase time t0 = u0/B of formulas.md is unbounded for nearly spherical bodies (B -> 0).
+    the phase time t0 = u0/B of the textbook form is unbounded for nearly spherical bodies (B -> 0).
 
     Every body goes through its theta series (``_series``: in the nome q, or next to the separatrix
     and on it in the complementary nome q'), elementwise: the third-kind integral is 2 turns times the
@@ -342,7 +342,7 @@ def reference(consts, unit_momentum):
 
 
 def _chart(psi, l1, l2, l3, minor):
-    """q̂ = exp(psi/2 about the spatial axis) ⊗ (the rotation taking that axis to l), formulas.md.
+    """q̂ = exp(psi/2 about the spatial axis) ⊗ (the rotation taking that axis to l), docs/theory.md §5.
 
     The chart is built on 1 + L1 in the major axis regime and on the separatrix (1 + L1 >= 1 - A1 > 0),
     on 1 + L3 in the minor axis regime (1 + L3 >= 1 - A3 > 0).  Both are one formula: with the pivot

@@ -2,7 +2,7 @@
 
 The float64 evaluation uses the same (float32-rounded) inputs converted exactly to float64, so the
 difference is frbjax's float32 error alone.  Generic bodies: moments in [0.5, 2.5] with relative gaps
-of at least 10%, |d I2 - 1| >= 0.05, |L| in [0.5, 2], |L| |t| <= 10 (the issue's target: 1e-5).
+of at least 10%, |d I2 - 1| >= 0.05, |L| in [0.5, 2], |L| |t| <= 10 (the accuracy target: 1e-5).
 """
 
 from __future__ import annotations
@@ -68,7 +68,7 @@ def test_single_body_dtypes():
 
 
 # Measured worst differences from float64 (64 bodies x 16 times): L / |L| 9.4e-7, q 1.5e-6, R 2.8e-6
-# (seeds 1 and 2 of generic_bodies: up to 1.1e-6, 1.2e-6, 3.2e-6).  Issue target: 1e-5.
+# (seeds 1 and 2 of generic_bodies: up to 1.1e-6, 1.2e-6, 3.2e-6).  Accuracy target: 1e-5.
 TOLERANCE = dict(angular_momentum=2e-6, quaternion=3e-6, rotation_matrix=5e-6)
 
 

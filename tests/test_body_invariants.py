@@ -46,10 +46,10 @@ def invariant_errors(inertia, momentum, attitude, L, q, R):
 # --------------------------------------------------------------------------------------------------
 # Invariants: random bodies at random times with |L| |t| from 1e-3 to 1e4.
 
-# Measured worst (seed 31415, 64 bodies x 32 times) and tolerances.  The issue's target for |q| = 1,
+# Measured worst (seed 31415, 64 bodies x 32 times) and tolerances.  The accuracy target for |q| = 1,
 # energy, |L| and R(t) L(t) constant is 1e-14; the tolerances are ~2x the measured worst, all below it.
-ISSUE_TARGET = 1e-14
-ISSUE_INVARIANTS = ("quaternion_norm", "momentum_norm", "energy", "spatial_momentum_R", "spatial_momentum_q")
+ACCURACY_TARGET = 1e-14
+TARGETED_INVARIANTS = ("quaternion_norm", "momentum_norm", "energy", "spatial_momentum_R", "spatial_momentum_q")
 RANDOM_TOLERANCE = dict(
     quaternion_norm=4.5e-16,  # measured 2.2e-16 (q is renormalised once per evaluation)
     momentum_norm=1e-15,  # measured 4.8e-16
@@ -57,7 +57,7 @@ RANDOM_TOLERANCE = dict(
     spatial_momentum_R=3.5e-15,  # measured 1.7e-15
     spatial_momentum_q=3.5e-15,  # measured 1.6e-15 (q ⊗ L ⊗ q*)
     matrix_of_quaternion=1.2e-15,  # measured 5.6e-16 (rotation_matrix against the matrix of quaternion)
-    orthogonality=4e-15,  # measured 2.0e-15 (R^T R - 1; not an issue target)
+    orthogonality=4e-15,  # measured 2.0e-15 (R^T R - 1; not a targeted invariant)
 )
 
 
@@ -106,8 +106,8 @@ def special_bodies():
 
 
 # Tolerance on the worst of all invariants (as in RANDOM_TOLERANCE) of each family, 16 times with |L| |t|
-# from 1e-2 to 1e3: ~2x the measured worst (always R^T R - 1 here); in addition the invariants of the
-# issue must be within its target 1e-14.
+# from 1e-2 to 1e3: ~2x the measured worst (always R^T R - 1 here); in addition the targeted invariants
+# must be within the target 1e-14.
 SPECIAL_TOLERANCE = {
     # measured 4.2e-14; FAILS the target: q ⊗ L ⊗ q* off by 1.1e-14 and R L by 1.0e-14 for
     # I = (0.7, 1.4, 1.4), L = (-0.2, 0.9, 0.4) at |L| t = 250, where |q| - 1 = 5.6e-15.
@@ -149,8 +149,8 @@ def test_invariants_special_bodies(special_motion, family):
     worst, errors = measure_special(special_motion, family)
     assert np.isfinite(special_motion[1][4]).all()
     assert worst <= SPECIAL_TOLERANCE[family], f"{family}: {errors}"
-    for name in ISSUE_INVARIANTS:
-        assert errors[name] <= ISSUE_TARGET, f"{family}: {name} {errors[name]:.2e}"
+    for name in TARGETED_INVARIANTS:
+        assert errors[name] <= ACCURACY_TARGET, f"{family}: {name} {errors[name]:.2e}"
 
 
 def test_zero_momentum():

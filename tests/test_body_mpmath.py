@@ -1,4 +1,4 @@
-"""FreeRigidBody against 30-digit solutions of the equations of motion (mpmath.odefun) and the seeds' numbers.
+"""FreeRigidBody against 30-digit solutions of the equations of motion (mpmath.odefun) and published numbers.
 
 The references are in tests/data/mpmath_references.json, written by tests/data/make_mpmath_references.py
 (rerun it to regenerate; ~2 minutes): mpmath's Taylor-series ODE solver at 34 digits integrating
@@ -7,7 +7,7 @@ to |L| t = 30.  ``test_live_reference`` recomputes one of them here, at 30 digit
 
 Errors are absolute: |L_frbjax - L_ref| / |L(0)| and |q_frbjax - q_ref|, componentwise max.
 
-The flip period of the seeds' case I = (1, 2, 3), d = 0.5000001 is measured from the motion (zero
+The flip period of the worked example I = (1, 2, 3), d = 0.5000001 is measured from the motion (zero
 crossings of L2 located with a root finder on ``angular_momentum``) and compared with the printed
 116.472 and with a 30-digit quadrature of dt = dL2 / (dL2/dt) over one period, written out below
 from the two conservation laws alone.
@@ -27,7 +27,7 @@ import _reference as ref
 
 DATA = os.path.join(os.path.dirname(__file__), "data", "mpmath_references.json")
 
-# The issue's targets are 2e-14 (generic bodies) and 1e-12 (|d I2 - 1| ~ 1e-8); frbjax does better, so
+# The accuracy targets are 2e-14 (generic bodies) and 1e-12 (|d I2 - 1| ~ 1e-8); frbjax does better, so
 # the tolerances are the measured worst errors (L relative to |L|, q) with a margin of ~1.5:
 GENERIC_TOLERANCE = 5e-15  # measured worst 3.2e-15 (q, minor_unit at |L| t = 30)
 NEAR_SEPARATRIX_TOLERANCE = 1.5e-13  # measured worst 8.6e-14 (q, near_separatrix_major at |L| t = -30)
@@ -124,7 +124,7 @@ def test_live_reference(frbjax_values):
 
 
 # --------------------------------------------------------------------------------------------------
-# The seeds' numbers.
+# Published numbers: a worked example's q(10), from the Fortran code with its semi-exact quadrature.
 
 SEEDS_Q10 = np.array([-0.3676198430772359, -0.6306293413288832, -0.6127232632258010, 0.3028737154869889])
 

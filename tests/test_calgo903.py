@@ -1,7 +1,7 @@
 """frbjax against the example data of CALGO 903 (FRB, Celledoni and Zanna, ACM TOMS 37(2), 2010).
 
-The reference files are real outputs of the Fortran code (``../shared/reference/calgo903`` beside the
-repository; FORMAT.md there describes them).  Examples 0 and 2 use the exact Fortran routine (NP = 0),
+The reference files are real outputs of the Fortran code (``tests/data/calgo903``; its README.md
+gives their provenance and layouts).  Examples 0 and 2 use the exact Fortran routine (NP = 0),
 so frbjax must agree to rounding; examples 3 and 4 use its semi-exact quadrature (NP = 5), about 1e-9
 from the exact motion; example 1 is a torqued body integrated by splitting, compared over its first
 steps here (benchmarks/calgo903_example1.py runs all 10,000).
@@ -22,11 +22,11 @@ import pytest
 from frbjax import _calgo903 as calgo
 
 REPOSITORY = pathlib.Path(__file__).resolve().parents[1]
-DATA = REPOSITORY.parent / "shared" / "reference" / "calgo903"
+DATA = REPOSITORY / "tests" / "data" / "calgo903"
 
 def needs_data(test):
-    """The CALGO 903 files must be there (../shared beside the repository, as in CI): no skip, a
-    missing folder fails loudly here."""
+    """The CALGO 903 files must be there (tests/data/calgo903, tracked): no skip, a missing folder
+    fails loudly here."""
     assert DATA.is_dir(), f"CALGO 903 reference data not found: {DATA}"
     return test
 
@@ -89,7 +89,7 @@ def test_free_examples(name):
 def test_example4_final_quaternion():
     """q(10) of example 4: the Fortran's (NP = 5) to 1e-9, the exact one to 1e-13.
 
-    The issue quotes the Fortran's value, the last record of out_example4.dat.  The exact value comes
+    The Fortran's value is the last record of out_example4.dat.  The exact value comes
     from an independent integration of Euler's equations and dq/dt = q (0, Omega)/2 (scipy's DOP853,
     rtol 2.2e-14); frbjax agrees with it to 2e-15, and both are 7.7e-10 from the Fortran's.
     """

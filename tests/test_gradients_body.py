@@ -10,7 +10,7 @@ of y = (L(t), Omega(t), q(t), R(t)) with respect to x = (I, L, q0, t) from mpmat
   smooth: I1 = I2, I2 = I3, a zero component of L, t = 0, L = 0;
 * "branch" points where frbjax switches to a limiting formula (see CONVENTION below).
 
-Error measure per point and input coordinate j (the issue's target is 1e-9; TOL below):
+Error measure per point and input coordinate j (the accuracy target is 1e-9; TOL below):
 
     |J_ad[:, j] - J_ref[:, j]|_inf / |J_ref[:, j]|_inf
 
@@ -62,18 +62,18 @@ from frbjax import _quaternion as quaternion
 
 # Worst measured relative column errors (generic and smooth points): jacfwd 3.9e-13, jacrev 2.1e-13
 # (both at "separatrix +1e-03", d/dI2; the derivatives there are ill-conditioned), every other point
-# <= 4e-15.  The target is 1e-9.
+# <= 4e-15.  The accuracy target is 1e-9.
 TOL = 1e-12
 # At |d I2 - 1| = 1e-6 (the points "separatrix +1e-06" and "separatrix -1e-06") the derivatives in I2 are
 # ill-conditioned (they grow like 1/|d I2 - 1|): measured 5.4e-12 (+1e-6) and 8.6e-11 (-1e-6, d/dI2)
 # since the complementary-nome series (0a9be7b) replaced the Carlson/Landen evaluation there (which
-# measured 3.9e-13).  Still far below the 1e-9.
+# measured 3.9e-13).  Still far below the target 1e-9.
 TOL_NEXT_TO_SEPARATRIX = 1.5e-10
 # d^2 y/dt^2 against the equations of motion: worst measured 1.1e-15.
 TOL_SECOND = 1e-14
 # Hessians against 32-digit second differences (tests/data/hessian_references.json), worst measured
 # relative error per point: 2.9e-12 (major), 4.8e-12 (minor), 1.1e-10 (separatrix -1e-3, where the
-# second derivatives in I2 are ill-conditioned).  The target is 1e-9.
+# second derivatives in I2 are ill-conditioned).  The accuracy target is 1e-9.
 TOL_HESSIAN = {"major": 1e-11, "minor unsorted": 1e-11, "separatrix -1e-03": 2e-10}
 DATA = pathlib.Path(__file__).resolve().parent / "data" / "gradient_references.json"
 INPUTS = ["I1", "I2", "I3", "L1", "L2", "L3", "qw", "qx", "qy", "qz", "t"]

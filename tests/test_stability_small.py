@@ -3,7 +3,7 @@
 For each case the 60-digit reference of benchmarks/stability.py (an independent mpmath closed form,
 checked against mpmath.odefun in ``test_reference_against_odefun``) gives the error of frbjax, and the
 same reference at 3 copies of the inputs moved by one ulp (every scalar: moments, L, attitude, time)
-gives the conditioning floor.  The assertion is the issue's target, error <= 10 max(floor, eps), with
+gives the conditioning floor.  The assertion is the accuracy target, error <= 10 max(floor, eps), with
 eps = 2.2e-16 standing in for "a few ulp" where the floor is below one ulp of 1.
 """
 
@@ -21,7 +21,7 @@ EPS = float(np.finfo(np.float64).eps)
 # Measured on these points (3 perturbations, jit, float64): worst error / max(floor, eps) per sweep
 # separatrix 1.14 (L, d I2 - 1 = 1e-12), gaps 1.44 (L, one-ulp gap (I3-I2)/I2), time 0.90, ratios 2.19
 # (q, I = (1, 1e3, 1e6) at |L| t = -100), momentum 0.72; saddle 22.4 (see SADDLE_FACTOR).  The bound
-# is the issue's target, 10.
+# is the accuracy target, 10.
 FACTOR = 10.0
 
 

@@ -61,7 +61,7 @@ def cases():
         momentum = ref.separatrix_momentum(sorted_inertia, offset, l2, signs)
         order = np.argsort(np.argsort(inertia))  # position of each moment in the sorted list
         add(name, "near_separatrix", inertia, momentum[order], attitude(), sign)
-    # The seeds' body (Fortran reference q(10) with a semi-exact quadrature).
+    # The worked example's body ("seeds": Fortran reference q(10) with a semi-exact quadrature).
     out.append(
         (
             "seeds",

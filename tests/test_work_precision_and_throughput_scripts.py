@@ -104,7 +104,7 @@ def test_throughput_quick(tmp_path, request):
     for key, value in result["summary"].items():
         if key.endswith("_fusion_emitters_off"):
             assert value is None, (key, value)
-        elif key not in ("targets_issue_4", "largest_batch", "scipy_comparison_batch"):
+        elif key not in ("targets", "largest_batch", "scipy_comparison_batch"):
             assert _finite_positive(value), (key, value)
     assert "Summary" in stdout
 

@@ -1,0 +1,93 @@
+"""The wheel: built from the tracked files alone, installed into a new virtual environment, run elsewhere.
+
+What a user who installs frbjax gets: ``python -m build --wheel`` on a copy of the tracked files (so
+that nothing untracked in this checkout can make it pass), ``pip install`` of that wheel into a fresh
+venv (its dependencies come from the package index, as for a user), and then, from a folder with no
+source tree in it, the installed ``frbjax`` command and package: ``frbjax demo`` runs (without
+matplotlib, which the wheel does not require: it prints its table and says that the plot is left
+out), the version is the one of ``frbjax/__init__.py`` and ``py.typed`` ships.
+
+Slow (a build and an install, ~1-2 minutes with pip's cache warm); CI runs it.
+"""
+
+from __future__ import annotations
+
+import os
+import pathlib
+import re
+import shutil
+import subprocess
+import sys
+
+import pytest
+
+REPOSITORY = pathlib.Path(__file__).resolve().parents[1]
+UNTRACKED_DIRECTORIES = {".git", ".venv", "__pycache__", ".pytest_cache", ".hypothesis", "build",
+                         "dist", "site", ".ipynb_checkpoints"}
+
+
+def tracked_files():
+    git = shutil.which("git")
+    if git is not None and (REPOSITORY / ".git").exists():
+        listing = subprocess.run([git, "ls-files", "-z"], cwd=REPOSITORY, capture_output=True,
+                                 check=True).stdout.decode()
+        return [pathlib.Path(name) for name in listing.split("\0") if name]
+    return [path.relative_to(REPOSITORY) for path in REPOSITORY.rglob("*") if path.is_file()
+            and not any(part in UNTRACKED_DIRECTORIES or part.endswith(".egg-info")
+                        for part in path.relative_to(REPOSITORY).parts)]
+
+
+def clean_environment(**extra):
+    """The environment without this checkout on the path and without the test venv's settings."""
+    env = {key: value for key, value in os.environ.items()
+           if key not in ("PYTHONPATH", "VIRTUAL_ENV", "PYTHONHOME") and not key.startswith("JAX_")}
+    env.update(extra)
+    return env
+
+
+def run(command, cwd, timeout, env=None):
+    result = subprocess.run(command, cwd=cwd, capture_output=True, text=True, timeout=timeout,
+                            env=clean_environment() if env is None else env)
+    assert result.returncode == 0, f"{command}:\n{result.stdout[-4000:]}\n{result.stderr[-4000:]}"
+    return result
+
+
+@pytest.mark.slow
+def test_wheel_installs_and_runs_from_another_folder(tmp_path):
+    source = tmp_path / "source"
+    for name in tracked_files():
+        if (REPOSITORY / name).is_file():
+            (source / name).parent.mkdir(parents=True, exist_ok=True)
+            shutil.copy2(REPOSITORY / name, source / name)
+    dist = tmp_path / "dist"
+    run([sys.executable, "-m", "build", "--wheel", "--outdir", str(dist), str(source)], tmp_path, 600)
+    wheels = list(dist.glob("frbjax-*.whl"))
+    assert len(wheels) == 1, wheels
+
+    version = re.search(r'^__version__ = "([^"]+)"', (REPOSITORY / "frbjax" / "__init__.py").read_text(),
+                        re.MULTILINE)[1]
+    assert wheels[0].name.startswith(f"frbjax-{version}-")
+
+    venv = tmp_path / "venv"
+    run([sys.executable, "-m", "venv", str(venv)], tmp_path, 300)
+    python = venv / "bin" / "python"
+    run([str(python), "-m", "pip", "install", "--quiet", str(wheels[0])], tmp_path, 900)
+
+    elsewhere = tmp_path / "elsewhere"
+    elsewhere.mkdir()
+    shutil.rmtree(source)  # no source tree anywhere near
+    check = run([str(python), "-c",
+                 "import pathlib, frbjax; "
+                 "print(frbjax.__version__); print(pathlib.Path(frbjax.__file__).parent)"], elsewhere, 300)
+    installed_version, package = check.stdout.split()
+    assert installed_version == version
+    assert pathlib.Path(package).is_relative_to(venv)
+    assert (pathlib.Path(package) / "py.typed").is_file()
+
+    env = clean_environment(FRBJAX_CACHE_DIR=str(tmp_path / "cache"))
+    demo = run([str(venv / "bin" / "frbjax"), "demo", "--quick"], elsewhere, 600, env=env)
+    assert "4K(m)/B" in demo.stdout
+    observed = next(line for line in demo.stdout.splitlines() if "rises through 0 every" in line)
+    assert float(observed.split("relative difference")[1].strip(" )")) < 1e-10
+    assert "no plot: matplotlib is not installed" in demo.stdout
+    assert not (elsewhere / "frbjax_demo.png").exists()
