@@ -185,52 +185,35 @@ def constants(inertia, unit_momentum, regime):
     phase_y = jnp.where(reflected, mc, dn0_squared)
     phase_z = jnp.where(reflected, dn0_squared, jnp.ones_like(sn0))
     series_x, series_y, series_z = _series.integral_arguments(m, mc, nu)
-    # R_J: the complete Pi(nu|m) (- K for nu >= -1) of every whole half-period, and the same at the
-    # phase u0 (for the attitude at t = 0, see ``reference``).  Where the phase is reflected, Pi at the
-    # phase is the complete one less the integral from |am0| to pi/2 (``_remaining_third_kind``), whose
-    # R_J has the x, y, z of the reflected phase; elsewhere the direct form (``third_kind_arguments``)
-    # has those of the direct phase.  So the constructor's R_F share one duplication loop (``_rf_rj``)
-    # on five rows (x, y, z): the phase (u0), (0, mc, 1) (K(m)) and the series' a', b and K'; the
-    # phase's row also gives R_J(x, y, z, p) (Pi at the phase, direct or remaining), and only that row
-    # pays for R_J's terms (``third_kind_rows=1``).  The complete R_J(0, mc, 1, 1 - n') (n' the
-    # characteristic of DLMF 19.7.8) comes from Bulirsch's cel iteration (``rj_complete``: a square
-    # root and a quotient per step instead of R_J's duplication with an R_C at every step).
-    # The loop is rolled (``rolled=True``): per-body work, where twelve unrolled steps would only add
-    # compile time; it ends as soon as every body has converged, and its JVP rule is one more rolled
-    # loop (all steps).
-    remaining_sn0 = jnp.where(reflected, sn0, 1)
-    remaining_cn0 = jnp.where(reflected, cn0, 0)
-    direct_sn0 = jnp.where(reflected, jnp.sqrt(0.5).astype(sn0.dtype), sn0)
-    direct_cn0 = jnp.where(reflected, jnp.sqrt(0.5).astype(cn0.dtype), cn0)
-    *_, direct_parameter = third_kind_arguments(nu, direct_sn0, direct_cn0, m, mc)
-    *_, complete_parameter = third_kind_arguments(nu, jnp.ones_like(sn0), jnp.zeros_like(cn0), m, mc)
-    remaining_parameter = mc * (1 - nu * (remaining_sn0 * remaining_sn0)) / (1 - nu)
-    phase_parameter = jnp.where(reflected, remaining_parameter, direct_parameter)
+    # One duplication (``_rf_rj`` with ``third_kind_rows=0``: R_F alone) on five rows (x, y, z): the
+    # phase (u0), (0, mc, 1) (K(m)) and the series' a', b and K'.  Its twelve steps are unrolled (an R_F
+    # step is three square roots: little code, one fused pass) and always all taken, so that a body
+    # gets the same bits alone or in any batch; its JVP rule is a rolled loop.
+    # The only third-kind integral of the constructor is the complete Pi(nu|m) (- K for nu >= -1) of
+    # every whole half-period, from R_J(0, mc, 1, 1 - n') (n' the characteristic of DLMF 19.7.8) by
+    # Bulirsch's cel iteration (``rj_complete``: a square root and a quotient per step, where R_J's
+    # duplication costs an R_C at every step).  Pi at the phase u0, for the attitude at t = 0, is the
+    # series' own value at u0 (``evaluate`` at tau = 0, see ``_body``): the same function as at every
+    # other time, so that the attitude at t = 0 is the given one to rounding.
     one = jnp.ones_like(sn0)
-    first_kind, phase_third_kind = _rf_rj(
+    first_kind, _ = _rf_rj(
         jnp.concatenate([phase_x[None], series_x]),
         jnp.concatenate([phase_y[None], series_y]),
         jnp.concatenate([phase_z[None], series_z]),
-        jnp.stack(jnp.broadcast_arrays(phase_parameter, one, one, one, one)),
-        True,
-        1,
+        jnp.stack(jnp.broadcast_arrays(one, one, one, one, one)),
+        False,
+        0,
     )
-    third_kind = jnp.concatenate([phase_third_kind, rj_complete(mc, complete_parameter)[None]])
-    first_kind, third_kind = materialise((first_kind, third_kind))
+    *_, complete_parameter = third_kind_arguments(nu, one, jnp.zeros_like(cn0), m, mc)
+    complete_rj = rj_complete(mc, complete_parameter)
+    first_kind, complete_rj = materialise((first_kind, complete_rj))
     quarter, phase_integral = first_kind[1], first_kind[0]
     sign = jnp.where(sn0 < 0, -1.0, 1.0).astype(sn0.dtype)
     remaining_phase = cn0 * phase_integral  # K - |u0| where reflected
     elliptic_u0 = jnp.where(reflected, sign * (quarter - remaining_phase), sn0 * phase_integral)
     out["u0"] = jnp.where(is_sep, separatrix_u0, elliptic_u0)
-    complete_third_kind = pi_without_first_kind_from(
-        nu, jnp.ones_like(sn0), jnp.zeros_like(cn0), m, mc, third_kind[1])
+    complete_third_kind = pi_without_first_kind_from(nu, one, jnp.zeros_like(cn0), m, mc, complete_rj)
     out["third_kind_complete"] = complete_third_kind
-    remaining_third_kind = _remaining_third_kind(
-        nu, remaining_sn0, remaining_cn0, mc, jnp.where(reflected, phase_integral, 1),
-        jnp.where(reflected, third_kind[0], 1), out["without_first_kind"])
-    direct_third_kind = pi_without_first_kind_from(nu, direct_sn0, direct_cn0, m, mc, third_kind[0])
-    out["reference_third_kind"] = jnp.where(
-        reflected, sign * (complete_third_kind - remaining_third_kind), direct_third_kind)
     out["regime"] = regime
     # The theta series (``_series``) of every body: Pi(nu; am u|m) - u (nu >= -1) or Pi(nu; am u|m)
     # (nu < -1) on a reduced argument, in the nome q or (next to the separatrix) in the complementary
@@ -255,27 +238,6 @@ def constants(inertia, unit_momentum, regime):
     # coefficients, the tail of R_J's series in the complete Pi) into the evaluation's loops over
     # bodies and times, and recomputes them at every time and for each output that uses them.
     return materialise(out)
-
-
-def _remaining_third_kind(nu, sn0, cn0, mc, phase_integral, third, without_first_kind):
-    """The integral from |am0| to pi/2 of Pi's integrand (less F's where ``without_first_kind``).
-
-    With theta -> pi/2 - theta the integrand 1/((1 - nu sin^2) Delta) becomes
-    1/((1 - nu + nu sin^2) sqrt(mc + m sin^2)), an integral of DLMF 19.25.14's form up to sin = cn0
-    with characteristic nu' = -nu/(1 - nu) and parameter -m/mc; scaled by mc (homogeneity, DLMF
-    19.16.2) it is, with dn0^2 = cn0^2 + mc sn0^2 and R = R_F(mc sn0^2, mc, dn0^2) (``phase_integral``),
-
-        cn0 R / (1 - nu) - nu mc cn0^3 R_J(mc sn0^2, mc, dn0^2, mc (1 - nu sn0^2)/(1 - nu)) / (3 (1 - nu)^2),
-
-    and the same less cn0 R (F's part) is nu/(1 - nu) cn0 R - (the same R_J term): both terms have the
-    sign of nu, so nothing cancels.  Where this is used (cn0^2 < mc sn0^2) every argument lies between
-    mc/2 and 2 mc, so the derivative in cn0 at cn0 = 0 is kept.  ``third`` is that R_J (computed by
-    the caller with the other integrals: ``constants``).
-    """
-    gap = 1 - nu
-    correction = nu * mc * cn0 * (cn0 * cn0) * third / (3 * gap * gap)
-    first_part = jnp.where(without_first_kind, nu / gap, 1 / gap) * cn0 * phase_integral
-    return first_part - correction
 
 
 def _unit_point(sn_scaled, cn_scaled):
@@ -316,29 +278,6 @@ def evaluate(consts, tau, attitude=True):
     partner = jnp.where(minor, l1, l3)
     psi = consts["precession"] * tau + orientation * (jnp.arctan2(l2, partner) - consts["alpha"] * third_kind)
     return _chart(psi, l1, l2, l3, minor), momentum
-
-
-def reference(consts, unit_momentum):
-    """q̂ at tau = 0, from the given unit angular momentum itself (no series or Jacobi functions).
-
-    At tau = 0 the phase u0 lies in [-K, K] (cn0 >= 0 in the working frame), so the third-kind
-    integral needs no whole periods; ``constants`` computed it from sn0, cn0, ratios of the given
-    components (``reference_third_kind``).
-    """
-    regime = consts["regime"]
-    minor, separatrix = regime == MINOR, regime == SEPARATRIX
-    # Uniform rotation (L = 0 included) has stand-in constants of the major regime; its stand-in L too,
-    # so that nothing here is NaN (its result is not used).
-    uniform = (regime == UNIFORM)[..., None]
-    unit_momentum = jnp.where(uniform, jnp.asarray(_SAFE_MAJOR, unit_momentum.dtype), unit_momentum)
-    l1, l2, l3 = unit_momentum[..., 0], unit_momentum[..., 1], unit_momentum[..., 2]
-    partner = jnp.where(minor, l1, l3)
-    third_kind = consts["reference_third_kind"]
-    orientation = jnp.where(minor, -1, 1)
-    psi_elliptic = orientation * (jnp.arctan2(l2, partner) - consts["alpha"] * third_kind)
-    psi_separatrix = 2 * jnp.arctan(consts["alpha"] * jnp.tanh(consts["u0"] / 2))
-    psi = jnp.where(separatrix, psi_separatrix, psi_elliptic)
-    return _chart(psi, l1, l2, l3, minor)
 
 
 def _chart(psi, l1, l2, l3, minor):
