@@ -235,7 +235,7 @@ def constants(inertia, unit_momentum, regime):
         jnp.zeros_like(first_amplitude))
     out["series"] = series
     # Materialised: otherwise XLA fuses the last steps of the per-body constants (the series'
-    # coefficients, the tail of R_J's series in the complete Pi) into the evaluation's loops over
+    # coefficients, the tail of the complete Pi) into the evaluation's loops over
     # bodies and times, and recomputes them at every time and for each output that uses them.
     return materialise(out)
 
