@@ -45,8 +45,8 @@ def test_torqued_quick(tmp_path, request):
     for method in top["methods"].values():
         for point in method["points"]:
             assert _finite_positive(point["seconds"]) and _finite_positive(point["error"]), point
-    # blanes_moan6 at h = 0.25 to T = 10: measured 1.2e-12.
-    assert top["methods"]["blanes_moan6"]["points"][-1]["error"] < 1e-11
+    # The spinning top, blanes_moan6 at h = 0.25 to T = 10: measured 1.7e-9.
+    assert top["methods"]["blanes_moan6"]["points"][-1]["error"] < 5e-9
 
     energy = json.loads((tmp_path / "torqued_energy.json").read_text())
     assert (tmp_path / "torqued_energy.png").stat().st_size > 0
