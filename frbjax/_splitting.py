@@ -222,7 +222,8 @@ def _unwrap(terms):
     # is not public API): unwrap by the wrappers' fields.
     direction = 1
     term = terms
-    while not isinstance(term, RigidBodyTerm) and isinstance(getattr(term, "term", None), diffrax.AbstractTerm):
+    while not isinstance(term, RigidBodyTerm) and isinstance(getattr(term, "term", None),
+                                                              diffrax.AbstractTerm):
         direction = direction * getattr(term, "direction", 1)
         term = term.term
     if not isinstance(term, RigidBodyTerm):
@@ -310,6 +311,8 @@ class RigidBodySplitting(diffrax.AbstractSolver):
         """One step of size h (any sign) from the state y = (L, q) at time t."""
         momentum, attitude = y
         dtype = jnp.result_type(momentum, attitude)
+        # diffrax's times are float64 under x64 even for a float32 state: keep the state's precision.
+        t, h = jnp.asarray(t, dtype), jnp.asarray(h, dtype)
         kicks = jnp.asarray(self.kicks, dtype)
         flows = jnp.asarray(self.flows, dtype)
         # Kick i + 1 comes after the free flows 0..i: at time t + h (f_0 + ... + f_i).

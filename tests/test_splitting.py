@@ -205,6 +205,12 @@ def test_float32():
     # Over the first 200 steps (T = 10, 1200 free flows) measured 2.2e-5 (float32 eps 1.2e-7); later
     # the top's own sensitivity to its initial state amplifies float32's rounding (6e-3 at T = 100).
     assert state_error((single[0][1:201], single[1][1:201]), (momenta[:200], attitudes[:200])) < 6e-5
+    # diffeqsolve keeps float32 given float32 times (diffrax promotes the state to the times' dtype).
+    times = [np.float32(x) for x in (0.0, 10.0, 0.05)]
+    solution = diffrax.diffeqsolve(term32, frbjax.RigidBodySplitting("blanes_moan4"), *times, y32,
+                                   args=args32, max_steps=250)
+    assert solution.ys[0].dtype == np.float32 and solution.ys[1].dtype == np.float32
+    assert state_error((solution.ys[0][-1], solution.ys[1][-1]), (momenta[199], attitudes[199])) < 6e-5
 
 
 def test_energy_bounded_where_tsit5_drifts():
