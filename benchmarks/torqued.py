@@ -20,8 +20,9 @@ Three parts (``--parts``, default all), each writing JSON (and a PNG) into bench
 * ``batch`` (torqued_batch.json): 4096 heavy tops with different initial states against one body,
   blanes_moan6, microseconds per free flow per body.
 
-``--quick`` shrinks everything (a smoke test of the script: the slow heavy top to T = 10 with
-blanes_moan6 and Dopri8 at two points each, 10^3 energy steps against Tsit5, 8 bodies).  The numbers are wall times on the machine that runs the script; say which when quoting.
+``--quick`` shrinks everything (a smoke test of the script: the heavy top to T = 10 with
+blanes_moan6 and Dopri8 at two points each, 10^3 energy steps against Tsit5, 8 bodies).  The numbers
+are wall times on the machine that runs the script; say which when quoting.
 
 Usage: python benchmarks/torqued.py [--quick] [--parts work_precision energy batch] [--output-dir DIR]
 """
@@ -117,6 +118,10 @@ def time_at_target(points):
     return None
 
 
+def _time_at_target(points):
+    return time_at_target([(point["error"], point["seconds"]) for point in points])
+
+
 def work_precision(quick, repeats):
     final_time = 10.0 if quick else 1000.0
     methods = {"blanes_moan6": [0.5, 0.25]} if quick else SPLITTING_STEPS
@@ -152,21 +157,22 @@ def work_precision(quick, repeats):
                 state = run(jnp.asarray(step))
                 seconds = best_time(lambda: run(jnp.asarray(step)), repeats)
                 points.append({"step": step, "error": state_error(state, reference), "seconds": seconds})
-                print(f"  {method:13s} h={step:<8g} error {points[-1]['error']:.2e}  {seconds:.4f} s", flush=True)
+                print(f"  {method:13s} h={step:<8g} error {points[-1]['error']:.2e}  {seconds:.4f} s",
+                      flush=True)
             entry["methods"][method] = {"kind": "splitting", "points": points,
-                                        "seconds_at_target": time_at_target([(p["error"], p["seconds"]) for p in points])}
+                                        "seconds_at_target": _time_at_target(points)}
         for solver_name, solver in runge_kutta.items():
             run = dopri8 if solver_name == "Dopri8" else rk_program(solver)
             points = []
             for tolerance in tolerances:
                 *state, count = run(jnp.asarray(tolerance))
                 seconds = best_time(lambda: run(jnp.asarray(tolerance)), repeats)
-                points.append({"tolerance": tolerance, "steps": int(count), "error": state_error(state, reference),
-                               "seconds": seconds})
+                points.append({"tolerance": tolerance, "steps": int(count),
+                               "error": state_error(state, reference), "seconds": seconds})
                 print(f"  {solver_name:13s} tol={tolerance:<8g} error {points[-1]['error']:.2e}  {seconds:.4f} s",
                       flush=True)
             entry["methods"][solver_name] = {"kind": "diffrax", "points": points,
-                                             "seconds_at_target": time_at_target([(p["error"], p["seconds"]) for p in points])}
+                                             "seconds_at_target": _time_at_target(points)}
         fastest = {kind: min((m["seconds_at_target"] for m in entry["methods"].values()
                               if m["kind"] == kind and m["seconds_at_target"]), default=None)
                    for kind in ("splitting", "diffrax")}
@@ -227,11 +233,12 @@ def energy(quick, repeats):
     splitting = program(frbjax.RigidBodySplitting("blanes_moan4"), step)
     states = splitting()
     splitting_seconds = best_time(splitting, 1 if not quick else repeats)
+    splitting_error = np.abs(np.asarray(term.energy(0.0, states, args)) - energy0)
     results = {"steps": steps, "step": step, "final_time": final_time, "times": np.asarray(samples).tolist(),
                "runs": {"blanes_moan4": {"step": step, "seconds": splitting_seconds,
-                                         "energy_error": np.abs(np.asarray(term.energy(0.0, states, args)) - energy0).tolist()}}}
+                                         "energy_error": splitting_error.tolist()}}}
     print(f"energy: blanes_moan4 {steps} steps in {splitting_seconds:.2f} s", flush=True)
-    solvers = (("Tsit5", diffrax.Tsit5()),) if quick else (("Tsit5", diffrax.Tsit5()), ("Dopri8", diffrax.Dopri8()))
+    solvers = [("Tsit5", diffrax.Tsit5())] + ([] if quick else [("Dopri8", diffrax.Dopri8())])
     for name, solver in solvers:
         # The cost of a step of this solver, measured on a short run, sets its step for equal wall time.
         probe_steps = 2000
@@ -289,8 +296,9 @@ def batch(quick, repeats):
     momenta = rng.normal(size=(bodies, 3))
     attitudes = rng.normal(size=(bodies, 4))
     attitudes /= np.linalg.norm(attitudes, axis=-1, keepdims=True)
-    run = jax.jit(lambda y: diffrax.diffeqsolve(term, frbjax.RigidBodySplitting("blanes_moan6"), 0.0, steps * 0.1,
-                                                0.1, y, args=args, max_steps=steps + 10).ys)
+    solver = frbjax.RigidBodySplitting("blanes_moan6")
+    run = jax.jit(lambda y: diffrax.diffeqsolve(term, solver, 0.0, steps * 0.1, 0.1, y, args=args,
+                                                max_steps=steps + 10).ys)
     results = {"steps": steps, "method": "blanes_moan6", "free_flows_per_step": 15}
     for label, y0 in (("one_body", (jnp.asarray(momenta[:1]), jnp.asarray(attitudes[:1]))),
                       ("batch", (jnp.asarray(momenta), jnp.asarray(attitudes)))):

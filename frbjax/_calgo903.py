@@ -28,14 +28,14 @@ blanks, commas or line breaks (the files have one value per line; blank lines ar
 The drivers normalise ``Pi`` to unit length and multiply the step by ``|Pi|``: that is the motion of the
 given ``Pi`` over the step, which is what :class:`~frbjax.FreeRigidBody` computes directly.  The free
 examples (0, 2, 3, 4) evaluate the exact motion at every output time from the initial state in one
-vectorised call; example 1 composes the exact free flow with kicks step by step, as the driver does.
+vectorised call; example 1 composes the exact free flow with kicks step by step, as the driver does,
+through the public splitting integrator (:func:`~frbjax.splitting_trajectory`).
 All of it needs 64-bit JAX (``jax.config.update("jax_enable_x64", True)``).
 """
 
 from __future__ import annotations
 
 import dataclasses
-import functools
 import math
 import re
 
@@ -52,6 +52,9 @@ __all__ = [
     "Layout",
     "Problem",
     "Trajectory",
+    "example1_method",
+    "example1_program",
+    "example1_term",
     "format_output",
     "parse_input",
     "parse_output",

@@ -438,8 +438,8 @@ def test_matrix_helpers_round_trip():
     q = rng.normal(size=(5, 4))
     q /= np.linalg.norm(q, axis=-1, keepdims=True)
     matrices = np.asarray(frbjax.quaternion_to_matrix(q))
-    np.testing.assert_allclose(np.einsum("nij,nkj->nik", matrices, matrices), np.broadcast_to(np.eye(3), (5, 3, 3)),
-                               atol=1e-15)
+    np.testing.assert_allclose(np.einsum("nij,nkj->nik", matrices, matrices),
+                               np.broadcast_to(np.eye(3), (5, 3, 3)), atol=1e-15)
     back = np.asarray(frbjax.quaternion_from_matrix(matrices))
     np.testing.assert_allclose(np.abs(np.einsum("ni,ni->n", back, q)), 1, atol=1e-15)
 
