@@ -187,7 +187,7 @@ def test_unit_quaternion_and_vertical_momentum():
     assert np.abs(np.linalg.norm(attitudes, axis=-1) - 1).max() <= 4 * eps
     vertical = np.einsum("nj,nj->n", np.asarray(frbjax.quaternion_to_matrix(attitudes))[:, 2], momenta)
     initial = np.asarray(frbjax.quaternion_to_matrix(Y0[1]))[2] @ Y0[0]
-    # |L| ~ 2.2: the drift measured is ~3e-14 over the 2000 steps (12,000 free flows).
+    # |L| ~ 2.2: the drift measured is 3.0e-14 over the 2000 steps (12,000 free flows); |q| - 1: 2.2e-16.
     assert np.abs(vertical - initial).max() <= eps * steps * abs(initial)
 
 
@@ -215,7 +215,8 @@ def test_float32():
 
 def test_energy_bounded_where_tsit5_drifts():
     """50,000 steps of 0.1 (T = 5000): the energy error of blanes_moan4 over the last tenth stays
-    within 2x the first tenth's (measured ...), while Tsit5 at the same step drifts (measured 13x)."""
+    within 2x the first tenth's (measured 1.17x: 4.1e-9 then 4.8e-9), while Tsit5 at the same step,
+    as accurate at the start (3.3e-9), drifts (measured 14x: 4.8e-8)."""
     energy0 = float(TERM.energy(0.0, Y0, ARGS))
     ratios = {}
     for method in ("blanes_moan4", diffrax.Tsit5()):
