@@ -16,7 +16,8 @@ Three parts (``--parts``, default all), each writing JSON (and a PNG) into bench
   two neighbouring points; the JSON gives the fastest diffrax's time over the fastest splitting's.
 * ``energy`` (torqued_energy.json/png): the heavy top's energy error over 10^6 steps of
   blanes_moan4 (h = 0.1, T = 10^5) against Tsit5 and Dopri8 with fixed steps chosen so that each
-  costs about as much wall time as the splitting (their per-step cost measured first), at 1000 times.
+  costs about as much wall time as the splitting (their per-step cost measured first; at most 20x
+  the splitting's steps), at 1000 times.
 * ``batch`` (torqued_batch.json): 4096 heavy tops with different initial states against one body,
   blanes_moan6, microseconds per free flow per body.
 
@@ -278,7 +279,8 @@ def plot_energy(results, path):
         label = f"{name}: {run.get('steps', results['steps'])} steps, {run['seconds']:.1f} s"
         axis.loglog(times[1:], np.maximum(np.asarray(run["energy_error"])[1:], 1e-17), label=label)
     axis.set(xlabel="t", ylabel="|E(t) - E(0)|",
-             title=f"heavy top, energy error, equal wall time ({results['steps']} splitting steps)")
+             title=f"heavy top, energy error: {results['steps']} splitting steps; Runge-Kutta steps\n"
+                   "set for the same wall time (at most 20x as many)")
     axis.legend(fontsize=8)
     figure.tight_layout()
     figure.savefig(path, dpi=120)
