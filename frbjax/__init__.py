@@ -3,6 +3,11 @@
 - :class:`FreeRigidBody`: angular momentum, angular velocity, quaternion and rotation matrix at any
   times, for batches of bodies, under jit/vmap/grad.
 - :mod:`frbjax.special`: Jacobi elliptic functions and Legendre/Carlson elliptic integrals.
+- :class:`RigidBodyTerm`, :class:`RigidBodySplitting`, :func:`splitting_trajectory`: torqued bodies
+  (a potential or a body-frame torque) integrated by splitting methods built on the exact free flow,
+  inside ``diffrax.diffeqsolve`` or as a lean ``lax.scan``; :func:`quaternion_from_matrix` and
+  :func:`quaternion_to_matrix` for attitudes given as rotation matrices.  Imported on first use
+  (they need diffrax).
 - :func:`fit_attitude` (:mod:`frbjax.fit`): the torque-free motion (moments of inertia, angular
   velocity, attitude) that best explains observed attitudes; imported on first use (it needs
   optimistix).
@@ -13,9 +18,22 @@ The library never changes JAX's global configuration: enable float64 yourself
 
 from . import special
 from ._body import FreeRigidBody
+from ._quaternion import as_matrix as quaternion_to_matrix
+from ._quaternion import from_matrix as quaternion_from_matrix
 from ._sharding import batch_mesh, pad_batch, shard_batch, shard_bodies
 
-__all__ = ["AttitudeFit", "FreeRigidBody", "fit_attitude", "special"]
+__all__ = [
+    "SPLITTING_METHODS",
+    "AttitudeFit",
+    "FreeRigidBody",
+    "RigidBodySplitting",
+    "RigidBodyTerm",
+    "fit_attitude",
+    "quaternion_from_matrix",
+    "quaternion_to_matrix",
+    "special",
+    "splitting_trajectory",
+]
 
 
 def __getattr__(name):
@@ -24,5 +42,14 @@ def __getattr__(name):
         from . import fit
 
         return getattr(fit, name)
+    # The splitting integrators import diffrax (0.4 s): only users who integrate torques pay for it.
+    if name in ("RigidBodySplitting", "RigidBodyTerm", "splitting_trajectory"):
+        from . import _splitting
+
+        return getattr(_splitting, name)
+    if name == "SPLITTING_METHODS":
+        from ._splitting import METHODS
+
+        return METHODS
     raise AttributeError(f"module 'frbjax' has no attribute {name!r}")
 __version__ = "0.1.0"

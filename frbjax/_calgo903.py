@@ -28,14 +28,14 @@ blanks, commas or line breaks (the files have one value per line; blank lines ar
 The drivers normalise ``Pi`` to unit length and multiply the step by ``|Pi|``: that is the motion of the
 given ``Pi`` over the step, which is what :class:`~frbjax.FreeRigidBody` computes directly.  The free
 examples (0, 2, 3, 4) evaluate the exact motion at every output time from the initial state in one
-vectorised call; example 1 composes the exact free flow with kicks step by step, as the driver does.
+vectorised call; example 1 composes the exact free flow with kicks step by step, as the driver does,
+through the public splitting integrator (:func:`~frbjax.splitting_trajectory`).
 All of it needs 64-bit JAX (``jax.config.update("jax_enable_x64", True)``).
 """
 
 from __future__ import annotations
 
 import dataclasses
-import functools
 import math
 import re
 
@@ -52,13 +52,16 @@ __all__ = [
     "Layout",
     "Problem",
     "Trajectory",
+    "example1_method",
+    "example1_program",
+    "example1_term",
     "format_output",
     "parse_input",
     "parse_output",
     "read_input",
     "read_output",
     "solve",
-    "splitting_trajectory",
+    "splitting_trajectory_example1",
 ]
 
 # Tolerances of the consistency checks on the attitude read from a file (values carry ~15 digits).
@@ -438,55 +441,60 @@ def _stage_coefficients(a, b):
     return kicks, flows
 
 
-# Steps per call of the compiled splitting: one program serves every number of steps.
-SPLITTING_CHUNK = 100
-# The step program is large (the elliptic functions unroll their iterations): without LLVM's costly
-# optimisations it compiles about 30% faster and runs about 20% slower, a gain up to ~10,000 steps.
-_QUICK_COMPILE = {"xla_backend_optimization_level": 0, "xla_llvm_disable_expensive_passes": True}
+def example1_term(problem):
+    """The torqued body of example 1 as a :class:`~frbjax.RigidBodyTerm`, with ``args = u0``.
+
+    The driver's kick adds b h (u2, -u1, 0) to Pi with u = Q^T u0: the torque u x e3 of the potential
+    V(Q) = u0 . Q e3 (a heavy top with its centre of mass on the third body axis and u0 the weight).
+    """
+    from ._splitting import RigidBodyTerm
+
+    return RigidBodyTerm(problem["I"], potential=_example1_potential)
 
 
-@functools.partial(jax.jit, compiler_options=_QUICK_COMPILE)
-def _splitting_chunk(inertia, u0, kicks, flows, step, momentum, attitude):
-    """SPLITTING_CHUNK steps from (momentum, attitude); the states after each step."""
-
-    def stage(state, coefficients):
-        momentum, attitude = state
-        kick, flow = coefficients
-        u = quaternion.as_matrix(attitude).T @ u0
-        momentum = momentum + kick * step * jnp.stack([u[1], -u[0], jnp.zeros_like(u[0])])
-        body = FreeRigidBody(inertia, momentum, attitude)
-        return (body.angular_momentum(flow * step), body.quaternion(flow * step)), None
-
-    def one_step(state, _):
-        state, _ = jax.lax.scan(stage, state, (kicks, flows))
-        return state, state
-
-    _, states = jax.lax.scan(one_step, (momentum, attitude), None, length=SPLITTING_CHUNK)
-    return states
+def _example1_potential(t, attitude, u0):
+    return jnp.dot(u0, quaternion.as_matrix(attitude)[:, 2])
 
 
-def splitting_trajectory(problem, steps=None):
+def example1_method(problem):
+    """The file's splitting a1 b1 ... a8 ... b1 a1 as a :class:`~frbjax.RigidBodySplitting`."""
+    from ._splitting import RigidBodySplitting
+
+    kicks, flows = _stage_coefficients(problem["a"], problem["b"])
+    return RigidBodySplitting(kicks=(*kicks, 0.0), flows=flows, order=6)
+
+
+def example1_program(problem, steps):
+    """A compiled function (Pi, q) -> the states (Pi, q) at the ``steps + 1`` step times.
+
+    The body, step and u0 of the file are constants of the program (it serves this one problem).
+    """
+    from ._splitting import splitting_trajectory
+
+    term, method = example1_term(problem), example1_method(problem)
+    step, u0 = problem.step, jnp.asarray(problem["u0"])
+
+    def states(momentum, attitude):
+        _, states = splitting_trajectory(term, (momentum, attitude), dt=step, steps=steps, args=u0,
+                                         method=method)
+        return states
+
+    return jax.jit(states)
+
+
+def splitting_trajectory_example1(problem, steps=None):
     """Example 1: the torqued body by the Blanes-Moan splitting, ``steps`` steps (default: all).
 
     One step of size h is the palindrome a1 b1 a2 b2 ... a7 b7 a8 b7 a7 ... b2 a2 b1 a1: 15 exact free
-    flows (:class:`~frbjax.FreeRigidBody` from the current Pi and attitude over a_i h) and 14 kicks,
-    which leave the attitude alone and add b_i h (u2, -u1, 0) to Pi, with u = Q^T u0.  The attitude is
-    carried as a quaternion; the steps run in a compiled ``lax.scan``, SPLITTING_CHUNK steps a call.
+    flows and 14 kicks, which leave the attitude alone and add b_i h (u2, -u1, 0) to Pi, with
+    u = Q^T u0.  It runs through the public API: :func:`~frbjax.splitting_trajectory` with
+    :func:`example1_term` and :func:`example1_method` (:func:`example1_program`).
     """
     _require_x64()
     steps = problem.steps if steps is None else steps
-    kicks, flows = _stage_coefficients(problem["a"], problem["b"])
-    state = problem.initial_state()
-    momenta, attitudes = [], []
-    for _ in range(-(-steps // SPLITTING_CHUNK)):
-        chunk_momenta, chunk_attitudes = _splitting_chunk(
-            problem["I"], problem["u0"], kicks, flows, problem.step, *state)
-        state = (chunk_momenta[-1], chunk_attitudes[-1])
-        momenta.append(np.asarray(chunk_momenta))
-        attitudes.append(np.asarray(chunk_attitudes))
-    momenta = np.concatenate(momenta or [np.empty((0, 3))])[:steps]
-    attitudes = np.concatenate(attitudes or [np.empty((0, 4))])[:steps]
-    return _trajectory(problem, momenta, attitudes, steps)
+    momentum, attitude = problem.initial_state()
+    momenta, attitudes = example1_program(problem, steps)(momentum, attitude)
+    return _trajectory(problem, np.asarray(momenta)[1:], np.asarray(attitudes)[1:], steps)
 
 
 def _trajectory(problem, momenta, attitudes, steps):
@@ -504,12 +512,12 @@ def solve(problem, steps=None):
     """The driver's output records for a :class:`Problem`, as a :class:`Trajectory`.
 
     Free examples: the exact motion at t = n h for n = 0..NSTEPS (one step for examples 0 and 2),
-    evaluated from the initial state; ``NP`` is ignored.  Example 1: :func:`splitting_trajectory`.
+    evaluated from the initial state; ``NP`` is ignored.  Example 1: :func:`splitting_trajectory_example1`.
     ``steps`` limits the number of steps (default: what the driver takes).
     """
     _require_x64()
     if problem.layout.name == "example1":
-        return splitting_trajectory(problem, steps)
+        return splitting_trajectory_example1(problem, steps)
     steps = problem.steps if steps is None else steps
     momentum, attitude = problem.initial_state()
     times = np.arange(1, steps + 1) * problem.step

@@ -1,0 +1,461 @@
+"""Torqued rigid bodies by splitting (frbjax.RigidBodyTerm, RigidBodySplitting, splitting_trajectory).
+
+References no one here wrote, or that the method cannot fake:
+
+- diffrax's Dopri8 on the same ODE (dL/dt = L x Omega + tau, dq/dt = q (0, Omega)/2) at tight
+  tolerances: the error of every method falls with the step at the slope of its order;
+- the Fortran output of CALGO 903 example 1 (tests/data/calgo903/out_example1.dat), all 10,000 steps;
+- invariants the method cannot fake: |q| = 1, the vertical component of the spatial angular momentum
+  of a heavy top (the rotation about gravity is a symmetry), energy error bounded over long times
+  (where a Runge-Kutta method drifts), time reversibility of the symmetric methods;
+- central differences (Richardson-extrapolated, float64) of the integration for the derivatives.
+
+The heavy top: principal moments (1, 1.6, 2.3), weight 1 along -z, centre of mass chi = (0.05, 0.1,
+0.4) in the body; V(q) = weight (R(q) chi)_z.
+"""
+
+from __future__ import annotations
+
+import functools
+import pathlib
+import re
+
+import diffrax
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+import frbjax
+from frbjax import _calgo903 as calgo
+
+REPOSITORY = pathlib.Path(__file__).resolve().parents[1]
+DATA = REPOSITORY / "tests" / "data" / "calgo903"
+
+INERTIA = np.array([1.0, 1.6, 2.3])
+ARGS = {"weight": 1.0, "chi": np.array([0.05, 0.1, 0.4])}
+_Q0 = np.array([0.9, 0.3, -0.2, 0.1])
+Y0 = (np.array([0.3, 0.8, 2.0]), _Q0 / np.linalg.norm(_Q0))
+ORDERS = {"leapfrog": 2, "strang": 2, "yoshida4": 4, "blanes_moan4": 4, "blanes_moan6": 6}
+
+
+def heavy_top_potential(t, q, args):
+    return args["weight"] * (frbjax.quaternion_to_matrix(q)[2] @ args["chi"])
+
+
+TERM = frbjax.RigidBodyTerm(INERTIA, potential=heavy_top_potential)
+
+
+def state_error(y, reference):
+    return float(max(np.abs(np.asarray(y[0]) - np.asarray(reference[0])).max(),
+                     np.abs(np.asarray(y[1]) - np.asarray(reference[1])).max()))
+
+
+# One compiled program per solver, shared by the tests: everything but the solver and the shapes is an
+# argument (compiling the free flow takes seconds; the number of steps varies at run time).
+MAX_STEPS = 50_010
+
+
+@functools.cache
+def runner(solver):
+    @jax.jit
+    def run(y0, args, t0, t1, step):
+        solution = diffrax.diffeqsolve(TERM, solver, t0, t1, step, y0, args=args,
+                                       saveat=diffrax.SaveAt(steps=True), max_steps=MAX_STEPS)
+        return solution.ts, solution.ys, solution.stats["num_steps"]
+
+    return run
+
+
+def solve(method, t1, step, y0=Y0, args=ARGS, t0=0.0):
+    """(ts, (L, q)) after each step from t0 to t1 (``method``: a name or a diffrax solver)."""
+    solver = frbjax.RigidBodySplitting(method) if isinstance(method, str) else method
+    ts, ys, count = runner(solver)(y0, args, jnp.asarray(t0), jnp.asarray(t1), jnp.asarray(step))
+    count = int(count)
+    return np.asarray(ts[:count]), (np.asarray(ys[0][:count]), np.asarray(ys[1][:count]))
+
+
+def final(method, t1, step, **kwargs):
+    _, (momenta, attitudes) = solve(method, t1, step, **kwargs)
+    return momenta[-1], attitudes[-1]
+
+
+@functools.cache
+def dopri8(final_time, tolerance):
+    solution = diffrax.diffeqsolve(
+        TERM, diffrax.Dopri8(), 0.0, final_time, 0.01, Y0, args=ARGS, max_steps=1_000_000,
+        stepsize_controller=diffrax.PIDController(rtol=tolerance, atol=tolerance))
+    return solution.ys[0][-1], solution.ys[1][-1]
+
+
+def errors(method, steps, final_time, reference):
+    return np.array([state_error(final(method, final_time, h), reference) for h in steps])
+
+
+# ------------------------------------------------------------------------------------- orders
+
+# Steps where the error lies well above the reference's uncertainty and in the asymptotic regime.
+ORDER_STEPS = {"leapfrog": (0.04, 0.02, 0.01), "strang": (0.04, 0.02, 0.01),
+               "yoshida4": (0.08, 0.04, 0.02), "blanes_moan4": (0.2, 0.1, 0.05),
+               "blanes_moan6": (0.5, 0.35, 0.25)}
+
+
+@pytest.mark.parametrize("method", ORDERS)
+def test_order_against_dopri8(method):
+    """T = 20: the error against Dopri8 at 1e-14 falls at the slope of the order (within 0.3)."""
+    reference = dopri8(20.0, 1e-14)
+    # The reference is good to ~2e-13 (against Dopri8 at 1e-13), far below the errors measured.
+    assert state_error(dopri8(20.0, 1e-13), reference) < 1e-12
+    steps = np.array(ORDER_STEPS[method])
+    measured = errors(method, steps, 20.0, reference)
+    assert measured.min() > 1e-12
+    slope = np.polyfit(np.log(steps), np.log(measured), 1)[0]
+    assert abs(slope - ORDERS[method]) <= 0.3, (method, measured, slope)
+
+
+# (h, h/2) at T = 100.  Dopri8 at 1e-13 is itself good to ~3.5e-11 there (against 1e-14), which is the
+# size of blanes_moan6's error at h = 0.25 (measured 2.4e-9 at 0.5, 7.8e-11 at 0.25).
+LONG_STEPS = {"leapfrog": 0.02, "strang": 0.02, "yoshida4": 0.08, "blanes_moan4": 0.2, "blanes_moan6": 0.5}
+
+
+@pytest.mark.parametrize("method", ORDERS)
+def test_agreement_with_dopri8_at_t100(method):
+    """T = 100, Dopri8 at rtol = atol = 1e-13: halving the step divides the distance by 2^order
+    (within 2^0.3), down to the reference's own error (twice its distance from Dopri8 at 1e-14)."""
+    reference = dopri8(100.0, 1e-13)
+    uncertainty = state_error(reference, dopri8(100.0, 1e-14))
+    assert uncertainty < 1e-10
+    step, order = LONG_STEPS[method], ORDERS[method]
+    coarse, fine = errors(method, [step, step / 2], 100.0, reference)
+    assert coarse > 1e-9
+    assert coarse * 2.0 ** -(order + 0.3) <= fine <= coarse * 2.0 ** -(order - 0.3) + 2 * uncertainty, (
+        method, coarse, fine, uncertainty)
+
+
+# ------------------------------------------------------------------------------ CALGO example 1
+
+
+def example1_problem():
+    problem = calgo.read_input(DATA / "init_example1.dat")
+    return problem, calgo.read_output(DATA / "out_example1.dat", problem.layout)
+
+
+def test_calgo903_example1_all_steps_through_diffeqsolve():
+    """The named blanes_moan6 in diffeqsolve, a potential written here: out_example1.dat to 3e-10.
+
+    Measured 1.07e-10 over the 10,000 steps (gfortran itself reproduces the file to 2.3e-10).
+    """
+    problem, expected = example1_problem()
+    u0 = jnp.asarray(problem["u0"])
+
+    def potential(t, q, u0):  # V(Q) = u0 . Q e3: the kick adds h (u2, -u1, 0) with u = Q^T u0
+        return u0 @ frbjax.quaternion_to_matrix(q)[:, 2]
+
+    term = frbjax.RigidBodyTerm(problem["I"], potential=potential)
+    momentum, matrix = problem["Pi"], problem["Q"].reshape(3, 3).T
+    y0 = (jnp.asarray(momentum), frbjax.quaternion_from_matrix(jnp.asarray(matrix)))
+    solution = diffrax.diffeqsolve(
+        term, frbjax.RigidBodySplitting("blanes_moan6"), 0.0, problem["T"], jnp.asarray(problem.step),
+        y0, args=u0, saveat=diffrax.SaveAt(steps=True), max_steps=problem.steps)
+    assert solution.ys[0].shape == (problem.steps, 3)
+    np.testing.assert_allclose(solution.ts, expected.time[1:], rtol=0, atol=1e-9)
+    matrices = np.asarray(frbjax.quaternion_to_matrix(solution.ys[1]))
+    difference = max(np.abs(np.asarray(solution.ys[0]) - expected.momentum[1:]).max(),
+                     np.abs(matrices - expected.attitude[1:]).max())
+    assert difference <= 3e-10
+
+
+def test_calgo903_example1_all_steps_through_the_cli_path():
+    """frbjax run's example 1 (the file's coefficients, splitting_trajectory): measured 1.25e-10."""
+    problem, expected = example1_problem()
+    trajectory = calgo.solve(problem)
+    assert len(trajectory.time) == problem.steps + 1
+    difference = max(np.abs(trajectory.momentum - expected.momentum).max(),
+                     np.abs(trajectory.attitude - expected.attitude).max())
+    assert difference <= 3e-10
+
+
+# ---------------------------------------------------------------------------------- invariants
+
+
+def test_unit_quaternion_and_vertical_momentum():
+    """|q| = 1 to a few ulp at every step; the spatial L_z of the heavy top to roundoff x steps."""
+    _, (momenta, attitudes) = solve("blanes_moan4", 100.0, 0.05)
+    steps = len(momenta)
+    assert steps == 2000
+    eps = np.finfo(np.float64).eps
+    assert np.abs(np.linalg.norm(attitudes, axis=-1) - 1).max() <= 4 * eps
+    vertical = np.einsum("nj,nj->n", np.asarray(frbjax.quaternion_to_matrix(attitudes))[:, 2], momenta)
+    initial = np.asarray(frbjax.quaternion_to_matrix(Y0[1]))[2] @ Y0[0]
+    # |L| ~ 2.2: the drift measured is 3.0e-14 over the 2000 steps (12,000 free flows); |q| - 1: 2.2e-16.
+    assert np.abs(vertical - initial).max() <= eps * steps * abs(initial)
+
+
+def test_float32():
+    """float32 in, float32 out: |q| = 1 to a few float32 ulp; the motion follows float64's."""
+    y32 = tuple(x.astype(np.float32) for x in Y0)
+    term32 = frbjax.RigidBodyTerm(INERTIA.astype(np.float32), potential=heavy_top_potential)
+    args32 = jax.tree_util.tree_map(lambda x: np.asarray(x, np.float32), ARGS)
+    _, single = jax.jit(lambda y0, args: frbjax.splitting_trajectory(
+        term32, y0, dt=0.05, steps=2000, args=args, method="blanes_moan4"))(y32, args32)
+    assert single[0].dtype == np.float32 and single[1].dtype == np.float32
+    norms = np.linalg.norm(np.asarray(single[1], np.float64), axis=-1)
+    assert np.abs(norms - 1).max() <= 4 * np.finfo(np.float32).eps
+    momenta, attitudes = solve("blanes_moan4", 100.0, 0.05)[1]
+    # Over the first 200 steps (T = 10, 1200 free flows) measured 2.2e-5 (float32 eps 1.2e-7); later
+    # the top's own sensitivity to its initial state amplifies float32's rounding (6e-3 at T = 100).
+    assert state_error((single[0][1:201], single[1][1:201]), (momenta[:200], attitudes[:200])) < 6e-5
+    # diffeqsolve keeps float32 given float32 times (diffrax promotes the state to the times' dtype).
+    times = [np.float32(x) for x in (0.0, 10.0, 0.05)]
+    solution = diffrax.diffeqsolve(term32, frbjax.RigidBodySplitting("blanes_moan4"), *times, y32,
+                                   args=args32, max_steps=250)
+    assert solution.ys[0].dtype == np.float32 and solution.ys[1].dtype == np.float32
+    assert state_error((solution.ys[0][-1], solution.ys[1][-1]), (momenta[199], attitudes[199])) < 6e-5
+
+
+def test_energy_bounded_where_tsit5_drifts():
+    """50,000 steps of 0.1 (T = 5000): the energy error of blanes_moan4 over the last tenth stays
+    within 2x the first tenth's (measured 1.17x: 4.1e-9 then 4.8e-9), while Tsit5 at the same step,
+    as accurate at the start (3.3e-9), drifts (measured 14x: 4.8e-8)."""
+    energy0 = float(TERM.energy(0.0, Y0, ARGS))
+    ratios = {}
+    for method in ("blanes_moan4", diffrax.Tsit5()):
+        _, states = solve(method, 5000.0, 0.1)
+        assert len(states[0]) == 50_000
+        error = np.abs(np.asarray(TERM.energy(0.0, states, ARGS)) - energy0)
+        ratios[str(method)] = error[-5000:].max() / error[:5000].max()
+    splitting, runge_kutta = ratios.values()
+    assert splitting <= 2, ratios
+    assert runge_kutta >= 5, ratios
+
+
+@pytest.mark.parametrize("method", ["leapfrog", "blanes_moan6"])
+def test_time_reversible(method):
+    """A symmetric method run back from T returns to the initial state (to roundoff)."""
+    end = final(method, 10.0, 0.1)
+    assert state_error(end, Y0) > 0.1
+    back = final(method, 0.0, -0.1, y0=end, t0=10.0)
+    assert state_error(back, Y0) < 3e-13  # measured 1.4e-14 (leapfrog), 8.3e-14 (blanes_moan6)
+
+
+def test_no_torque_is_the_free_motion():
+    """Zero weight: the splitting is the exact free motion, and Tsit5 on the term agrees."""
+    exact = frbjax.FreeRigidBody(INERTIA, Y0[0], Y0[1])
+    expected = (exact.angular_momentum(3.0), exact.quaternion(3.0))
+    weightless = dict(ARGS, weight=0.0)
+    # Measured 4.6e-16 and 8.9e-16 (Tsit5 at 0.1: 7.8e-11, at 0.3: 2.5e-8: its order 5).
+    assert state_error(final("leapfrog", 3.0, 0.5, args=weightless), expected) < 3e-15
+    assert state_error(final(diffrax.Tsit5(), 3.0, 0.01, args=weightless), expected) < 5e-15
+
+
+def test_torque_of_the_potential():
+    """tau = -dV/dw for a small rotation Q exp(hat(w)) (central differences), and equal to the heavy
+    top's torque written by hand, -weight chi x (Q^T e_z)."""
+    q = Y0[1]
+    torque = np.asarray(TERM.body_torque(0.0, jnp.asarray(q), ARGS))
+    epsilon = 1e-6
+    numeric = []
+    for axis in np.eye(3):
+        turned = [frbjax.quaternion_from_matrix(
+            frbjax.quaternion_to_matrix(q) @ _rotation(sign * epsilon * axis)) for sign in (1, -1)]
+        values = [float(heavy_top_potential(0.0, x, ARGS)) for x in turned]
+        numeric.append(-(values[0] - values[1]) / (2 * epsilon))
+    np.testing.assert_allclose(torque, numeric, rtol=0, atol=5e-11)  # measured 1.1e-11
+    up = np.asarray(frbjax.quaternion_to_matrix(q))[2]  # e_z in the body frame
+    np.testing.assert_allclose(torque, -ARGS["weight"] * np.cross(ARGS["chi"], up), rtol=0, atol=1e-16)
+
+
+def _rotation(vector):
+    """exp(hat(vector)) by Rodrigues' formula."""
+    angle = np.linalg.norm(vector)
+    axis = vector / angle
+    hat = np.array([[0, -axis[2], axis[1]], [axis[2], 0, -axis[0]], [-axis[1], axis[0], 0]])
+    return np.eye(3) + np.sin(angle) * hat + (1 - np.cos(angle)) * hat @ hat
+
+
+def test_time_dependent_torque_keeps_the_order():
+    """A body-frame torque that turns with time: Yoshida's order 4 holds against Dopri8 (the kicks see
+    the time advanced by the free flows; kicks at the step's start would give order 1)."""
+    def torque(t, q, args):
+        return 0.3 * jnp.stack([jnp.cos(2 * t), jnp.sin(2 * t), 0.5 + 0 * t]) - args * q[1:]
+
+    term = frbjax.RigidBodyTerm(INERTIA, torque=torque)
+    reference = diffrax.diffeqsolve(term, diffrax.Dopri8(), 0.0, 5.0, 0.01, Y0, args=0.1, max_steps=100_000,
+                                    stepsize_controller=diffrax.PIDController(rtol=1e-13, atol=1e-13))
+    reference = (reference.ys[0][-1], reference.ys[1][-1])
+    run = jax.jit(lambda h: diffrax.diffeqsolve(term, frbjax.RigidBodySplitting("yoshida4"), 0.0, 5.0, h, Y0,
+                                                args=0.1, max_steps=10_000).ys)
+    measured = [state_error(tuple(y[-1] for y in run(jnp.asarray(h))), reference) for h in (0.1, 0.05)]
+    assert abs(np.log2(measured[0] / measured[1]) - 4) <= 0.3, measured
+
+
+# ------------------------------------------------------------------------------------ batches
+
+
+def test_batch_of_bodies_and_vmap():
+    """Leading dimensions: each body of a (2, 2) batch moves as it does alone; vmap agrees."""
+    rng = np.random.default_rng(3)
+    momenta = rng.normal(size=(2, 2, 3))
+    attitudes = rng.normal(size=(2, 2, 4))
+    attitudes /= np.linalg.norm(attitudes, axis=-1, keepdims=True)
+    _, (batched_momenta, batched_attitudes) = jax.jit(lambda y0: frbjax.splitting_trajectory(
+        TERM, y0, dt=0.1, steps=20, args=ARGS, method="leapfrog"))((momenta, attitudes))
+    assert batched_momenta.shape == (21, 2, 2, 3) and batched_attitudes.shape == (21, 2, 2, 4)
+    _, alone = solve("leapfrog", 2.0, 0.1, y0=(momenta[1, 0], attitudes[1, 0]))
+    assert state_error((batched_momenta[1:, 1, 0], batched_attitudes[1:, 1, 0]), alone) < 3e-15  # 8.9e-16
+    run = runner(frbjax.RigidBodySplitting("leapfrog"))
+    _, mapped, _ = jax.vmap(run, in_axes=(0, None, None, None, None))(
+        (momenta.reshape(4, 3), attitudes.reshape(4, 4)), ARGS, 0.0, 2.0, 0.1)
+    assert state_error((mapped[0][:, 19], mapped[1][:, 19]),
+                       (batched_momenta[-1].reshape(4, 3), batched_attitudes[-1].reshape(4, 4))) < 1e-14  # 2.7e-15
+
+
+# ---------------------------------------------------------------------------------- gradients
+
+
+def _final_value(inertia, momentum, attitude, chi, step, steps=1000):
+    """A scalar of the state after ``steps`` leapfrog steps: what the derivatives are taken of."""
+    term = frbjax.RigidBodyTerm(inertia, potential=heavy_top_potential)
+    args = {"weight": 1.0, "chi": chi}
+    solution = diffrax.diffeqsolve(term, frbjax.RigidBodySplitting("leapfrog"), 0.0, steps * step, step,
+                                   (momentum, attitude), args=args, max_steps=steps + 10)
+    momentum, attitude = solution.ys[0][-1], solution.ys[1][-1]
+    return momentum @ jnp.array([0.3, -0.5, 0.7]) + attitude @ jnp.array([0.2, 0.4, -0.1, 0.6])
+
+
+def _central_difference(function, x, direction, epsilon=1e-4):
+    """(4 D(eps/2) - D(eps)) / 3 with D the central difference: error O(eps^4)."""
+    def difference(e):
+        return (function(x + e * direction) - function(x - e * direction)) / (2 * e)
+    return (4 * difference(epsilon / 2) - difference(epsilon)) / 3
+
+
+def test_gradients_through_1000_steps():
+    """Reverse mode (diffeqsolve, RecursiveCheckpointAdjoint) and forward mode (splitting_trajectory)
+    against Richardson-extrapolated central differences, in every input: moments, initial L and q,
+    the potential's parameter chi, the step."""
+    inputs = [jnp.asarray(INERTIA), jnp.asarray(Y0[0]), jnp.asarray(Y0[1]), jnp.asarray(ARGS["chi"]),
+              jnp.asarray(0.01)]
+    value = jax.jit(_final_value)
+    gradients = jax.jit(jax.grad(_final_value, argnums=(0, 1, 2, 3, 4)))(*inputs)
+    rng = np.random.default_rng(0)
+    for index, gradient in enumerate(gradients):
+        direction = rng.normal(size=np.shape(inputs[index]))
+        direction = direction / np.linalg.norm(direction) if direction.ndim else np.asarray(1.0)
+
+        def along(x, index=index):
+            changed = list(inputs)
+            changed[index] = x
+            return float(value(*changed))
+
+        numeric = _central_difference(along, inputs[index], direction, 1e-4 if index != 4 else 1e-5)
+        # Measured |difference| <= 6e-10 (moments, L, q, chi; derivatives 0.12 to 8.2) and 1.3e-8 for
+        # the step (derivative -813): the differences' own error.
+        np.testing.assert_allclose(np.sum(np.asarray(gradient) * direction), numeric, rtol=1e-9, atol=1e-9)
+
+    # Forward mode through the lean scan: the same directional derivative in chi.
+    def final_lean(chi):
+        _, (momenta, attitudes) = frbjax.splitting_trajectory(
+            frbjax.RigidBodyTerm(inputs[0], potential=heavy_top_potential), (inputs[1], inputs[2]),
+            dt=0.01, steps=1000, args={"weight": 1.0, "chi": chi}, method="leapfrog")
+        return momenta[-1] @ jnp.array([0.3, -0.5, 0.7]) + attitudes[-1] @ jnp.array([0.2, 0.4, -0.1, 0.6])
+
+    direction = jnp.array([0.6, 0.0, -0.8])
+    _, tangent = jax.jit(lambda chi: jax.jvp(final_lean, (chi,), (direction,)))(inputs[3])
+    np.testing.assert_allclose(float(tangent), float(np.sum(gradients[3] * direction)), rtol=1e-10)
+
+
+# ---------------------------------------------------------------------------------- bad input
+
+
+def test_potential_must_return_a_scalar():
+    term = frbjax.RigidBodyTerm(INERTIA, potential=lambda t, q, args: q[1:])
+    with pytest.raises(ValueError, match="potential must return a scalar"):
+        frbjax.splitting_trajectory(term, Y0, dt=0.1, steps=2)
+    with pytest.raises(ValueError, match="potential must return a scalar"):
+        jax.jit(lambda y: diffrax.diffeqsolve(term, frbjax.RigidBodySplitting(), 0.0, 1.0, 0.1, y).ys)(Y0)
+
+
+def test_torque_must_have_shape_3():
+    term = frbjax.RigidBodyTerm(INERTIA, torque=lambda t, q, args: q)
+    with pytest.raises(ValueError, match=re.escape("torque must return the body-frame torque of one body, "
+                                                   "shape (3,), got shape (4,)")):
+        frbjax.splitting_trajectory(term, Y0, dt=0.1, steps=2)
+
+
+three_steps = jax.jit(lambda y0, step: frbjax.splitting_trajectory(TERM, y0, dt=step, steps=3, args=ARGS,
+                                                                    method="leapfrog"))
+
+
+@pytest.mark.parametrize("step", [0.0, -0.1, np.nan, np.inf])
+def test_bad_step(step):
+    with pytest.raises(ValueError, match="dt: the step must be a finite scalar > 0"):
+        frbjax.splitting_trajectory(TERM, Y0, dt=step, steps=3, args=ARGS)
+    _, states = three_steps(Y0, step)
+    assert np.all(np.isnan(states[0][1:])) and np.all(np.isnan(states[1][1:]))
+
+
+@pytest.mark.parametrize("which", [0, 1])
+def test_non_finite_state(which):
+    y0 = [np.array(x) for x in Y0]
+    y0[which][1] = np.nan
+    with pytest.raises(ValueError, match=re.escape(f"y0[{which}]")):
+        frbjax.splitting_trajectory(TERM, tuple(y0), dt=0.1, steps=3, args=ARGS)
+    _, states = three_steps(tuple(y0), 0.1)
+    assert np.all(np.isnan(states[0][1:])) and np.all(np.isnan(states[1][1:]))
+    solved = final("leapfrog", 0.3, 0.1, y0=tuple(y0))
+    assert np.all(np.isnan(solved[0])) and np.all(np.isnan(solved[1]))
+
+
+def test_bad_term_and_method():
+    with pytest.raises(ValueError, match="exactly one of potential"):
+        frbjax.RigidBodyTerm(INERTIA)
+    with pytest.raises(ValueError, match="exactly one of potential"):
+        frbjax.RigidBodyTerm(INERTIA, potential=heavy_top_potential, torque=lambda t, q, a: q[1:])
+    with pytest.raises(ValueError, match="inertia"):
+        frbjax.RigidBodyTerm([1.0, -2.0, 3.0], potential=heavy_top_potential)
+    with pytest.raises(ValueError, match="unknown splitting method 'rk4'"):
+        frbjax.RigidBodySplitting("rk4")
+    with pytest.raises(ValueError, match="flows: the coefficients must add up to 1"):
+        frbjax.RigidBodySplitting(kicks=[0.5, 0.5], flows=[0.9])
+    with pytest.raises(ValueError, match="one coefficient more"):
+        frbjax.RigidBodySplitting(kicks=[0.5, 0.5], flows=[0.5, 0.5])
+    with pytest.raises(RuntimeError, match="error estimates"):
+        diffrax.diffeqsolve(TERM, frbjax.RigidBodySplitting(), 0.0, 1.0, 0.1, Y0, args=ARGS,
+                            stepsize_controller=diffrax.PIDController(rtol=1e-6, atol=1e-6))
+
+
+def test_user_coefficients():
+    """Yoshida's triple jump written out by the user is the named yoshida4 (the CLI's example 1 runs
+    the file's own coefficient lists: test_calgo903_example1_all_steps_through_the_cli_path)."""
+    w1 = 1 / (2 - 2 ** (1 / 3))
+    w0 = 1 - 2 * w1
+    mine = frbjax.RigidBodySplitting(kicks=[w1 / 2, (w0 + w1) / 2, (w0 + w1) / 2, w1 / 2], flows=[w1, w0, w1])
+    named = frbjax.RigidBodySplitting("yoshida4")
+    np.testing.assert_allclose(mine.kicks, named.kicks, rtol=0, atol=1e-15)
+    np.testing.assert_allclose(mine.flows, named.flows, rtol=0, atol=1e-15)
+    assert named.order(None) == 4 and mine.order(None) is None
+
+
+def test_matrix_helpers_round_trip():
+    rng = np.random.default_rng(1)
+    q = rng.normal(size=(5, 4))
+    q /= np.linalg.norm(q, axis=-1, keepdims=True)
+    matrices = np.asarray(frbjax.quaternion_to_matrix(q))
+    np.testing.assert_allclose(np.einsum("nij,nkj->nik", matrices, matrices),
+                               np.broadcast_to(np.eye(3), (5, 3, 3)), atol=1e-15)
+    back = np.asarray(frbjax.quaternion_from_matrix(matrices))
+    np.testing.assert_allclose(np.abs(np.einsum("ni,ni->n", back, q)), 1, atol=1e-15)
+
+
+# --------------------------------------------------------------------------------- the guide
+
+
+def test_guide_examples_run():
+    """Every ```python block of docs/torqued.md runs, in order, in one namespace."""
+    text = (REPOSITORY / "docs" / "torqued.md").read_text()
+    blocks = re.findall(r"```python\n(.*?)```", text, flags=re.S)
+    assert blocks
+    namespace = {}
+    for block in blocks:
+        exec(compile(block, "docs/torqued.md", "exec"), namespace)
