@@ -14,8 +14,7 @@ def free_flow(inertia, angular_momentum, attitude, t):
 
     ``inertia`` (..., 3), ``angular_momentum`` (..., 3), ``attitude`` (..., 4) (wxyz, body to space) and
     ``t`` (scalar or (...)) broadcast over their leading dimensions.  Exact (the motion of
-    :class:`~frbjax.FreeRigidBody`); differentiable in every input.  The two evaluations share the
-    Jacobi functions of the phase (XLA's common-subexpression elimination merges them).
+    :class:`~frbjax.FreeRigidBody`); differentiable in every input.  Both come from one evaluation of
+    the motion (:meth:`~frbjax.FreeRigidBody.state`).
     """
-    body = FreeRigidBody(inertia, angular_momentum, attitude)
-    return body.angular_momentum(t), body.quaternion(t)
+    return FreeRigidBody(inertia, angular_momentum, attitude).state(t)

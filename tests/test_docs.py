@@ -92,7 +92,7 @@ def test_api_reference_names_every_public_function(site):
 def test_pages_have_examples():
     """The guides show code, and every page that does is run below."""
     with_examples = {str(page) for page in PAGES if python_blocks(page)}
-    for page in ("getting-started.md", "fitting.md", "interop.md", "calgo903.md", "index.md"):
+    for page in ("getting-started.md", "fitting.md", "interop.md", "calgo903.md", "torqued.md", "index.md"):
         assert page in with_examples, page
 
 

@@ -447,15 +447,3 @@ def test_matrix_helpers_round_trip():
     back = np.asarray(frbjax.quaternion_from_matrix(matrices))
     np.testing.assert_allclose(np.abs(np.einsum("ni,ni->n", back, q)), 1, atol=1e-15)
 
-
-# --------------------------------------------------------------------------------- the guide
-
-
-def test_guide_examples_run():
-    """Every ```python block of docs/torqued.md runs, in order, in one namespace."""
-    text = (REPOSITORY / "docs" / "torqued.md").read_text()
-    blocks = re.findall(r"```python\n(.*?)```", text, flags=re.S)
-    assert blocks
-    namespace = {}
-    for block in blocks:
-        exec(compile(block, "docs/torqued.md", "exec"), namespace)
