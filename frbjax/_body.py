@@ -14,6 +14,7 @@ from jaxtyping import Array, Float, Int
 from . import _quaternion as quaternion
 from ._fusion import materialise, sum_last, when_any
 from ._regimes import UNIFORM, classify, constants, evaluate
+from ._regimes import reference as regime_reference
 
 
 def working_frame(inertia, momentum):
@@ -207,9 +208,7 @@ def _construct(inertia, angular_momentum, attitude):
     # q(t) = q0 ⊗ P ⊗ conj(q̂(0)) ⊗ q̂(|L| t) ⊗ conj(P)  (docs/theory.md §8, "Matching the
     # initial state", with the phase folded into q̂; P is the working frame as a quaternion).
     frame_rotation = quaternion.from_matrix(permutation)
-    # q̂ at t = 0 from the evaluation itself (not from the given L): q(0) is the given attitude to
-    # rounding, and the phase's third-kind integral needs no R_J of its own.
-    reference, _ = evaluate(consts, jnp.zeros_like(norm))
+    reference = regime_reference(consts, unit_working)
     offset = quaternion.multiply(
         quaternion.multiply(attitude, frame_rotation), quaternion.conjugate(reference)
     )

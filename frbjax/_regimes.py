@@ -193,8 +193,7 @@ def constants(inertia, unit_momentum, regime):
     # every whole half-period, from R_J(0, mc, 1, 1 - n') (n' the characteristic of DLMF 19.7.8) by
     # Bulirsch's cel iteration (``rj_complete``: a square root and a quotient per step, where R_J's
     # duplication costs an R_C at every step).  Pi at the phase u0, for the attitude at t = 0, is the
-    # series' own value at u0 (``evaluate`` at tau = 0, see ``_body``): the same function as at every
-    # other time, so that the attitude at t = 0 is the given one to rounding.
+    # series' own value at u0 (``reference``): the same function as at every other time.
     one = jnp.ones_like(sn0)
     first_kind, _ = _rf_rj(
         jnp.concatenate([phase_x[None], series_x]),
@@ -278,6 +277,27 @@ def evaluate(consts, tau, attitude=True):
     partner = jnp.where(minor, l1, l3)
     psi = consts["precession"] * tau + orientation * (jnp.arctan2(l2, partner) - consts["alpha"] * third_kind)
     return _chart(psi, l1, l2, l3, minor), momentum
+
+
+def reference(consts, unit_momentum):
+    """q̂ at tau = 0: the chart of ``evaluate`` at u0, on the given unit angular momentum itself.
+
+    At tau = 0 the phase u0 lies in [-K, K] (cn0 >= 0 in the working frame), so the third-kind
+    integral needs no whole periods: the series' own value at u0 (``_series.third_kind_at``), so that
+    differences of psi between tau and 0 come from one function.
+    """
+    regime = consts["regime"]
+    minor = regime == MINOR
+    # Uniform rotation (L = 0 included) has stand-in constants of the major regime; its stand-in L too,
+    # so that nothing here is NaN (its result is not used).
+    uniform = (regime == UNIFORM)[..., None]
+    unit_momentum = jnp.where(uniform, jnp.asarray(_SAFE_MAJOR, unit_momentum.dtype), unit_momentum)
+    l1, l2, l3 = unit_momentum[..., 0], unit_momentum[..., 1], unit_momentum[..., 2]
+    partner = jnp.where(minor, l1, l3)
+    third_kind = _series.third_kind_at(consts["series"], consts["u0"])
+    orientation = jnp.where(minor, -1, 1)
+    psi = orientation * (jnp.arctan2(l2, partner) - consts["alpha"] * third_kind)
+    return _chart(psi, l1, l2, l3, minor)
 
 
 def _chart(psi, l1, l2, l3, minor):

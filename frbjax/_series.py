@@ -392,6 +392,45 @@ def _evaluate_complementary(data: SeriesData, reduced, exponentials):
     return sn_scaled, cn_scaled, real, imaginary
 
 
+def _multiples(sin_v, cos_v, count):
+    """(cos(k v), sin(k v)) for k = 1 .. count by the rotation recurrence."""
+    cosines, sines = [cos_v], [sin_v]
+    for _ in range(count - 1):
+        c, s = cosines[-1], sines[-1]
+        cosines.append(c * cos_v - s * sin_v)
+        sines.append(s * cos_v + c * sin_v)
+    return cosines, sines
+
+
+def _reduced_third_kind(data: SeriesData, reduced, sines, complementary_parts):
+    """The expanded integral from 0 to ``reduced`` (|u_r| <= K): u_r slope + A arg theta(...)."""
+    terms = data.rows.shape[-1]
+    _, _, third_cos, third_sin = jnp.moveaxis(data.rows, (-2, -1), (0, 1))
+    # Re theta_4(v + i alpha') = theta_4(i alpha') - 2 sum c_n sin^2(n v) (1 - cos 2nv = 2 sin^2 nv):
+    # the form 1 + sum c_n cos 2nv loses all digits where both are small (chi -> -infinity, v -> 0).
+    real = data.origin - 2 * sum(third_cos[j] * (sines[j] * sines[j]) for j in range(terms))
+    imaginary = -sum(third_sin[j] * sines[2 * j + 1] for j in range(terms))
+    _, _, real_c, imaginary_c = complementary_parts
+    real = jnp.where(data.complementary, real_c, real)
+    imaginary = jnp.where(data.complementary, imaginary_c, imaginary)
+    return reduced * data.slope + data.amplitude * jnp.arctan2(imaginary, real)
+
+
+def _angle(data: SeriesData, reduced):
+    half_angle = reduced * (np.pi / 2) / data.quarter
+    # Materialised: each is used by several outputs, whose fused loops would otherwise recompute it.
+    return materialise((reduced, jnp.sin(half_angle), jnp.cos(half_angle)))
+
+
+def third_kind_at(data: SeriesData, u):
+    """The expanded integral (``evaluate_series``' fourth output) at |u| <= K, alone: no Jacobi
+    functions (the attitude at the phase u0, where the body's own L gives them)."""
+    reduced, sin_v, cos_v = _angle(data, u)
+    _, sines = _multiples(sin_v, cos_v, 2 * data.rows.shape[-1])
+    parts = when_any(data.complementary, _complementary_part, _no_complementary_part, data, reduced)
+    return materialise(_reduced_third_kind(data, reduced, sines, parts))
+
+
 def evaluate_series(data: SeriesData, mc, u, third_kind=True):
     """(sn_r, cn_r, dn, third_kind_reduced, turns) at u from the per-body ``coefficients``.
 
@@ -400,28 +439,20 @@ def evaluate_series(data: SeriesData, mc, u, third_kind=True):
     integral (see ``coefficients``) from 0 to u_r: u_r slope + the periodic part.  The integral to u
     adds 2 turns times the complete one.
     """
-    rows, amplitude, origin, quarter = data.rows, data.amplitude, data.origin, data.quarter
+    rows, quarter = data.rows, data.quarter
     terms = rows.shape[-1]
     turns = jnp.where(data.periodic, jnp.round(u / (2 * quarter)), 0)
-    reduced = u - 2 * quarter * turns
-    half_angle = reduced * (np.pi / 2) / quarter
-    # Materialised: each is used by several outputs, whose fused loops would otherwise recompute it.
-    reduced, sin_v, cos_v = materialise((reduced, jnp.sin(half_angle), jnp.cos(half_angle)))
-    # cos(k v), sin(k v) for k = 1 .. 2 terms by the rotation recurrence.
-    cosines, sines = [cos_v], [sin_v]
-    for _ in range(2 * terms - 1):
-        c, s = cosines[-1], sines[-1]
-        cosines.append(c * cos_v - s * sin_v)
-        sines.append(s * cos_v + c * sin_v)
+    reduced, sin_v, cos_v = _angle(data, u - 2 * quarter * turns)
+    cosines, sines = _multiples(sin_v, cos_v, 2 * terms)
     # Term axis first, so that each term's coefficients are contiguous over the bodies.
-    odd_sin, odd_cos, third_cos, third_sin = jnp.moveaxis(rows, (-2, -1), (0, 1))
+    odd_sin, odd_cos, _, _ = jnp.moveaxis(rows, (-2, -1), (0, 1))
     # sn : cn = theta_1 : mc^(1/4) theta_2 (theta_4 cancels), or S : (mc/q')^(1/4) T4/2.
     sn_scaled = sum(odd_sin[j] * sines[2 * j] for j in range(terms))
     cn_scaled = sum(odd_cos[j] * cosines[2 * j] for j in range(terms))
     # The complementary series serves only the bodies next to the separatrix (about 1 in 20,000 random
     # ones): skipped for a batch that has none (``_fusion.when_any``).
-    sn_c, cn_c, real_c, imaginary_c = when_any(
-        data.complementary, _complementary_part, _no_complementary_part, data, reduced)
+    parts = when_any(data.complementary, _complementary_part, _no_complementary_part, data, reduced)
+    sn_c, cn_c, _, _ = parts
     complementary = data.complementary
     sn_scaled = jnp.where(complementary, sn_c, sn_scaled)
     cn_scaled = jnp.where(complementary, cn_c, cn_scaled)
@@ -433,12 +464,6 @@ def evaluate_series(data: SeriesData, mc, u, third_kind=True):
     dn = jnp.sqrt(cn_reduced * cn_reduced + mc * (sn_reduced * sn_reduced))
     if not third_kind:
         return (*materialise((sn_reduced, cn_reduced, dn)), None, turns)
-    # Re theta_4(v + i alpha') = theta_4(i alpha') - 2 sum c_n sin^2(n v) (1 - cos 2nv = 2 sin^2 nv):
-    # the form 1 + sum c_n cos 2nv loses all digits where both are small (chi -> -infinity, v -> 0).
-    real = origin - 2 * sum(third_cos[j] * (sines[j] * sines[j]) for j in range(terms))
-    imaginary = -sum(third_sin[j] * sines[2 * j + 1] for j in range(terms))
-    real = jnp.where(complementary, real_c, real)
-    imaginary = jnp.where(complementary, imaginary_c, imaginary)
-    reduced_integral = reduced * data.slope + amplitude * jnp.arctan2(imaginary, real)
+    reduced_integral = _reduced_third_kind(data, reduced, sines, parts)
     # Materialised: each output feeds several later fused loops, which would otherwise recompute it.
     return (*materialise((sn_reduced, cn_reduced, dn, reduced_integral)), turns)
