@@ -15,7 +15,8 @@ import re
 from mkdocs.structure.files import File
 
 ROOT = pathlib.Path(__file__).resolve().parents[1]
-FIGURES = ("stability.png", "throughput.png", "work_precision.png")
+FIGURES = ("stability.png", "throughput.png", "work_precision.png", "setup_cost.png", "torqued_work_precision.png",
+           "torqued_energy.png")
 HELP_MARKER = re.compile(r"<!-- frbjax-help:(?P<arguments>[^>]*)-->")
 
 

@@ -143,8 +143,8 @@ def example1_problem():
 def test_calgo903_example1_all_steps_through_diffeqsolve():
     """The named blanes_moan6 in diffeqsolve, a potential written here: out_example1.dat to 3e-10.
 
-    Measured 1.77e-10 over the 10,000 steps (gfortran itself reproduces the file to 2.3e-10: the
-    difference is rounding amplified by the motion over the run; 1.0e-12 after 1000 steps).
+    Measured 1.51e-10 over the 10,000 steps (gfortran itself reproduces the file to 2.3e-10: the
+    difference is rounding amplified by the motion over the run; 7e-13 after 1000 steps).
     """
     problem, expected = example1_problem()
     u0 = jnp.asarray(problem["u0"])
@@ -167,7 +167,7 @@ def test_calgo903_example1_all_steps_through_diffeqsolve():
 
 
 def test_calgo903_example1_all_steps_through_the_cli_path():
-    """frbjax run's example 1 (the file's coefficients, splitting_trajectory): measured 2.44e-10."""
+    """frbjax run's example 1 (the file's coefficients, splitting_trajectory): measured 2.05e-10."""
     problem, expected = example1_problem()
     trajectory = calgo.solve(problem)
     assert len(trajectory.time) == problem.steps + 1
