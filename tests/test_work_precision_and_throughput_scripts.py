@@ -10,15 +10,12 @@ from __future__ import annotations
 
 import json
 import math
-import os
-import subprocess
 import sys
-from pathlib import Path
 
 import jax
 import numpy as np
 
-ROOT = Path(__file__).resolve().parents[1]
+from _benchmark_runs import ROOT, finite_positive, run_quick  # noqa: E402
 sys.path.insert(0, str(ROOT / "benchmarks"))
 
 from _scipy_closed_form import ScipyFreeRigidBody  # noqa: E402
@@ -26,38 +23,21 @@ from _scipy_closed_form import ScipyFreeRigidBody  # noqa: E402
 from frbjax import FreeRigidBody  # noqa: E402
 
 
-def _run(script, output_dir, request):
-    env = dict(os.environ)
-    cache = getattr(request.config, "cache", None)
-    if cache is not None:
-        env.setdefault("JAX_COMPILATION_CACHE_DIR", str(cache.mkdir("jax-compilation-cache")))
-    proc = subprocess.run(
-        [sys.executable, str(ROOT / "benchmarks" / script), "--quick", "--output-dir", str(output_dir)],
-        cwd=ROOT, env=env, capture_output=True, text=True, timeout=1800,
-    )
-    assert proc.returncode == 0, proc.stdout + proc.stderr
-    return proc.stdout
-
-
-def _finite_positive(value):
-    return isinstance(value, (int, float)) and math.isfinite(value) and value > 0
-
-
 def test_work_precision_quick(tmp_path, request):
-    stdout = _run("work_precision.py", tmp_path, request)
+    stdout = run_quick("work_precision.py", tmp_path, request)
     result = json.loads((tmp_path / "work_precision.json").read_text())
     assert (tmp_path / "work_precision.png").stat().st_size > 0
     assert {(c["T"], c["kind"]) for c in result["cases"]} == {
         (10.0, "state"), (10.0, "dense"), (1000.0, "state"), (1000.0, "dense")}
     for case in result["cases"]:
         reference = case["reference"]
-        assert _finite_positive(reference["floor"]) and reference["floor"] < 1e-9, reference
+        assert finite_positive(reference["floor"]) and reference["floor"] < 1e-9, reference
         methods = {r["method"] for r in case["methods"]}
         assert methods == {"frbjax float64", "frbjax float32", "scipy closed form", "diffrax Tsit5",
                            "diffrax Dopri5", "diffrax Dopri8"}
         for row in case["methods"]:
             assert not row.get("skipped"), row
-            assert _finite_positive(row["time_s"]), row
+            assert finite_positive(row["time_s"]), row
             assert math.isfinite(row["max_error"]), row
         rows = {r["method"]: r for r in case["methods"]}
         # Loose sanity bounds (the quick batch holds 6 random bodies and 2 hard ones).
@@ -65,20 +45,20 @@ def test_work_precision_quick(tmp_path, request):
         assert rows["scipy closed form"]["max_error"] < 1e-9, rows["scipy closed form"]
         assert rows["frbjax float32"]["max_error"] < 1e-2, rows["frbjax float32"]
         assert case["frbjax_vs_scipy_closed_form_max_difference"] < 1e-10
-        assert _finite_positive(case["ratio_scipy_over_frbjax64"])
+        assert finite_positive(case["ratio_scipy_over_frbjax64"])
         assert math.isfinite(reference["floor_vs_mpmath_closed_form"])
         if case["T"] == 10.0:
             assert math.isfinite(reference["floor_vs_mpmath_odefun"])
         for row in case["methods"]:
             assert math.isfinite(row["max_error_vs_mpmath_subsample"]), row
     summary = result["summary"]
-    assert _finite_positive(summary["scipy_over_frbjax64_per_dense_sample_T10"])
-    assert _finite_positive(summary["frbjax64_ns_per_dense_sample_T10"])
+    assert finite_positive(summary["scipy_over_frbjax64_per_dense_sample_T10"])
+    assert finite_positive(summary["frbjax64_ns_per_dense_sample_T10"])
     assert "Key ratios" in stdout
 
 
 def test_throughput_quick(tmp_path, request):
-    stdout = _run("throughput.py", tmp_path, request)
+    stdout = run_quick("throughput.py", tmp_path, request)
     result = json.loads((tmp_path / "throughput.json").read_text())
     assert (tmp_path / "throughput.png").stat().st_size > 0
     for key in ("all_cores", "one_core"):
@@ -86,26 +66,26 @@ def test_throughput_quick(tmp_path, request):
         assert part["evaluation"], part
         for row in part["evaluation"]:
             for name in ("quaternion", "rotation_matrix", "angular_momentum"):
-                assert _finite_positive(row[f"{name}_ns_per_eval"]), row
-                assert _finite_positive(row[f"{name}_evals_per_s"]), row
-                assert _finite_positive(row[f"{name}_compile_s"]), row
-            assert _finite_positive(row["scipy_quaternion_ns_per_eval"]), row
+                assert finite_positive(row[f"{name}_ns_per_eval"]), row
+                assert finite_positive(row[f"{name}_evals_per_s"]), row
+                assert finite_positive(row[f"{name}_compile_s"]), row
+            assert finite_positive(row["scipy_quaternion_ns_per_eval"]), row
         for row in part["construction"]:
-            assert _finite_positive(row["ns_per_body"]), row
+            assert finite_positive(row["ns_per_body"]), row
     assert result["one_core"]["affinity"] == [result["one_core"]["affinity"][0]]
     assert "--xla_cpu_multi_thread_eigen=false" in result["one_core"]["xla_flags"]
     gradient = result["gradient"]
     assert gradient["gradient_finite"]
     for key in ("forward_s", "value_and_grad_s", "ratio_value_and_grad_over_forward", "forward_compile_s",
                 "value_and_grad_compile_s"):
-        assert _finite_positive(gradient[key]), gradient
+        assert finite_positive(gradient[key]), gradient
     # The smoke run skips the compilations with the fusion emitters off (the full run measures them).
     assert gradient["fusion_emitters_off"] is None
     for key, value in result["summary"].items():
         if key.endswith("_fusion_emitters_off"):
             assert value is None, (key, value)
         elif key not in ("targets", "largest_batch", "scipy_comparison_batch"):
-            assert _finite_positive(value), (key, value)
+            assert finite_positive(value), (key, value)
     assert "Summary" in stdout
 
 
