@@ -53,7 +53,7 @@ from work_precision import diffrax_function  # noqa: E402
 
 from frbjax import FreeRigidBody, fit_attitude  # noqa: E402
 
-# The figures of issue 13 before this work (one core, same machine class), for the plot and the JSON.
+# The figures of frbjax 0.1.0, before the constructor work (one core, same machine class).
 BEFORE = {
     "construction": 1367 / 115,
     "state_at_T": 233.0,
@@ -246,7 +246,7 @@ def plot(result, path):
     now = [distance(name, result["ratios"][name]) for name in names]
     positions = np.arange(len(names))
     figure, axes = plt.subplots(figsize=(9, 4.5))
-    axes.barh(positions + 0.2, before, height=0.4, color="0.75", label="before (issue 13)")
+    axes.barh(positions + 0.2, before, height=0.4, color="0.75", label="before (frbjax 0.1.0)")
     axes.barh(positions - 0.2, now, height=0.4, color="tab:blue", label="now")
     axes.axvline(1.0, color="k", lw=1)
     axes.set_xscale("log")

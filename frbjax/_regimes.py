@@ -91,8 +91,9 @@ def constants(inertia, unit_momentum, regime):
 
     # Around the major axis (around the minor axis): one set of formulas in the roles of the axes.
     # The pivot axis p is the one the quaternion chart is built on, J1 (J3), o the other extreme, J3
-    # (J1) (the one the orbit circles); g_p = g1 (g3) and g_o = g3 (g1) are their energy gaps, and gap_p = J3 - J2 (J2 - J1) and gap_o = J2 - J1
-    # (J3 - J2) the gaps of J2 from o and from p.  Then the regime's formulas (docs/theory.md §4) read
+    # (J1) (the one the orbit circles); g_p = g1 (g3) and g_o = g3 (g1) are their energy gaps, and
+    # gap_p = J3 - J2 (J2 - J1) and gap_o = J2 - J1 (J3 - J2) the gaps of J2 from o and from p.  Then
+    # the regime's formulas (docs/theory.md §4) read
     #   A_p = sqrt(J_p g_o/c), A2 = sqrt(J2 g_o/gap_p), A_o = sqrt(J_o g_p/c), B = sqrt(g_p gap_p/(J1 J2 J3)),
     #   m = g_o gap_o/(g_p gap_p), mc = c |g2|/(g_p gap_p), alpha = c/sqrt(J_p g_p gap_p J_o/J2),
     #   nu = -J_p g_o/(J_o g_p), precession 1/J_p,
