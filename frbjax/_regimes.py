@@ -34,7 +34,7 @@ import jax.numpy as jnp
 
 from . import _series
 from ._fusion import materialise
-from .special._carlson import _rf_rj
+from .special._carlson import _rf_unrolled
 from .special._legendre import (
     _LARGE_NEGATIVE_CHARACTERISTIC,
     pi_without_first_kind_from,
@@ -186,23 +186,20 @@ def constants(inertia, unit_momentum, regime):
     phase_y = jnp.where(reflected, mc, dn0_squared)
     phase_z = jnp.where(reflected, dn0_squared, jnp.ones_like(sn0))
     series_x, series_y, series_z = _series.integral_arguments(m, mc, nu)
-    # One duplication (``_rf_rj`` with ``third_kind_rows=0``: R_F alone) on five rows (x, y, z): the
-    # phase (u0), (0, mc, 1) (K(m)) and the series' a', b and K'.  Its twelve steps are unrolled (an R_F
-    # step is three square roots: little code, one fused pass) and always all taken, so that a body
-    # gets the same bits alone or in any batch; its JVP rule is a rolled loop.
+    # One duplication (``_rf_unrolled``: R_F alone) on five rows (x, y, z): the phase (u0), (0, mc, 1)
+    # (K(m)) and the series' a', b and K'.  Its twelve steps are unrolled (an R_F step is three square
+    # roots: little code, one fused pass) and always all taken, so that a body gets the same bits alone
+    # or in any batch; its JVP rule is a rolled loop.
     # The only third-kind integral of the constructor is the complete Pi(nu|m) (- K for nu >= -1) of
     # every whole half-period, from R_J(0, mc, 1, 1 - n') (n' the characteristic of DLMF 19.7.8) by
     # Bulirsch's cel iteration (``rj_complete``: a square root and a quotient per step, where R_J's
     # duplication costs an R_C at every step).  Pi at the phase u0, for the attitude at t = 0, is the
     # series' own value at u0 (``reference``): the same function as at every other time.
     one = jnp.ones_like(sn0)
-    first_kind, _ = _rf_rj(
+    first_kind = _rf_unrolled(
         jnp.concatenate([phase_x[None], series_x]),
         jnp.concatenate([phase_y[None], series_y]),
         jnp.concatenate([phase_z[None], series_z]),
-        jnp.stack(jnp.broadcast_arrays(one, one, one, one, one)),
-        False,
-        0,
     )
     *_, complete_parameter = third_kind_arguments(nu, one, jnp.zeros_like(cn0), m, mc)
     complete_rj = rj_complete(mc, complete_parameter)

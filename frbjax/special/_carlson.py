@@ -9,9 +9,7 @@ factor 4, and the seventh-order series errs by about the eighth power of that sp
 of steps per dtype (``_plan``: 12 in float64, enough for argument ratios down to 1e-300) keeps each
 function a straight-line XLA program.  The steps are unrolled, so that XLA fuses the whole evaluation
 into one vectorized pass over the points; the derivative rules use a rolled loop instead (one
-compiled step: compile time), and so does ``_rf_rj(..., rolled=True)`` for the rigid body's per-body
-constants, where compile time outweighs the cost of a rolled loop; that loop also ends as soon as
-every point has converged.  R_F and R_J of the same x, y, z share one loop (``_rf_rj``).  In R_J's
+compiled step: compile time).  R_F and R_J of the same x, y, z share one loop (``_rf_rj``).  In R_J's
 step, R_C(1, 1 + e_k) (Carlson 1995, eq. (2.19)) costs a square root and a polynomial; a logarithm
 only serves the points with 1 + e_k < 1/2.
 
@@ -63,33 +61,21 @@ def _plan(x):
     return (12, 2.0**-8) if is_double(x) else (7, 2.0**-5)
 
 
-def _duplicate(step, state, x, rolled=False, converged=None):
+def _duplicate(step, state, x, rolled=False):
     """Apply duplication ``step(state, q)`` (q = 4^-k at step k) ``_plan`` times; returns (state, 4^-N).
 
     Unrolled by default: XLA fuses the steps and the series into one vectorized pass over the points
     (a rolled loop writes the state to memory and back every step, several times slower).  The
-    derivative rules use ``rolled=True``: one compiled step instead of twelve (compile time).  With
-    ``converged(state, q, threshold)`` (rolled only) the loop stops as soon as every point's spread
-    is below the threshold of ``_plan``, where the series is as accurate as after all steps: values
-    only (a loop with a data-dependent end cannot be transposed), for the per-body integrals of the
-    rigid body, whose arguments rarely need all twelve steps.
+    derivative rules use ``rolled=True``: one compiled step instead of twelve (compile time).
     """
-    steps, threshold = _plan(x)
+    steps, _ = _plan(x)
     if rolled:
         def body(_, carry):
             quarter, state = carry
             return quarter / 4, step(state, quarter)
 
         start = (jnp.asarray(1.0, x.dtype), state)
-        if converged is None:
-            return lax.fori_loop(0, steps, body, start)[::-1]
-
-        def going_on(carry):
-            k, (quarter, state) = carry
-            return (k < steps) & ~jnp.all(converged(state, quarter, threshold))
-
-        _, result = lax.while_loop(going_on, lambda carry: (carry[0] + 1, body(None, carry[1])), (0, start))
-        return result[::-1]
+        return lax.fori_loop(0, steps, body, start)[::-1]
     quarter = 1.0
     for _ in range(steps):
         state = step(state, quarter)
@@ -328,19 +314,11 @@ def _log_above_one_jvp(primals, tangents):
     return _log_above_one(x), dx / x
 
 
-def _rf_rj_series(x, y, z, p, parameter_largest=False, rolled=False, early_exit=False, third_kind_rows=None):
-    """(R_F(x, y, z), R_J(x, y, z, p)) from one duplication of x, y, z (the same for both); with
-    ``early_exit`` (and ``rolled``) the loop ends where every point has converged (``_duplicate``).
-
-    With ``third_kind_rows`` = k, R_J is computed for the first k rows (leading axis) only: the other
-    rows duplicate x, y, z for R_F alone, without R_J's costlier terms (R_C at every step)."""
-    def rows(argument):
-        return argument if third_kind_rows is None else argument[:third_kind_rows]
-
-    x_j, y_j, z_j, p = rows(x), rows(y), rows(z), rows(p)
-    mean0 = (x_j + y_j + z_j + 2 * p) / 5
-    dx0, dy0, dz0 = mean0 - x_j, mean0 - y_j, mean0 - z_j
-    px0, py0, pz0 = p - x_j, p - y_j, p - z_j
+def _rf_rj_series(x, y, z, p, parameter_largest=False, rolled=False):
+    """(R_F(x, y, z), R_J(x, y, z, p)) from one duplication of x, y, z (the same for both)."""
+    mean0 = (x + y + z + 2 * p) / 5
+    dx0, dy0, dz0 = mean0 - x, mean0 - y, mean0 - z
+    px0, py0, pz0 = p - x, p - y, p - z
     # e_k < 0 (an odd number of arguments above p) is decided by the inputs alone.
     negative = (px0 < 0) ^ (py0 < 0) ^ (pz0 < 0)
     mean_f0 = (x + y + z) / 3
@@ -349,7 +327,6 @@ def _rf_rj_series(x, y, z, p, parameter_largest=False, rolled=False, early_exit=
     def step(state, quarter):
         x, y, z, p, mean, mean_f, correction = state
         lam, (sx, sy, sz) = _lambda(x, y, z, _sqrt_for(rolled))
-        sx, sy, sz, lam_j = rows(sx), rows(sy), rows(sz), rows(lam)
         sp = _sqrt_for(rolled)(p)
         ix, iy, iz = 1 / (sp + sx), 1 / (sp + sy), 1 / (sp + sz)
         # e_k = 4^{-3k} (p-x)(p-y)(p-z) / d_k^2 (Carlson 1995, eq. (2.19)), d_k = (sp+sx)(sp+sy)(sp+sz),
@@ -376,21 +353,11 @@ def _rf_rj_series(x, y, z, p, parameter_largest=False, rolled=False, early_exit=
                 w = (1 + e) + lax.stop_gradient(w - (1 + e))
             rc = _rc_one_plus_rolled(w) if rolled else _rc_one_plus(w)
         correction = correction + (quarter * rc) * (ix * iy * iz)
-        x, y, z, p = (x + lam) / 4, (y + lam) / 4, (z + lam) / 4, (p + lam_j) / 4
-        return x, y, z, p, (mean + lam_j) / 4, (mean_f + lam) / 4, correction
-
-    # Carlson (1995): the series' arguments are (A_0 - x_0)/(4^k A_k) and the like (see below).
-    spread = jnp.maximum(jnp.maximum(jnp.abs(dx0), jnp.abs(dy0)),
-                         jnp.maximum(jnp.abs(dz0), jnp.abs(mean0 - p)))
-    spread_f = jnp.maximum(jnp.maximum(jnp.abs(fx0), jnp.abs(fy0)), jnp.abs(mean_f0 - z))
-
-    def converged(state, quarter, threshold):
-        mean, mean_f = state[4], state[5]
-        return jnp.all(quarter * spread <= threshold * mean) & jnp.all(quarter * spread_f <= threshold * mean_f)
+        x, y, z, p = (x + lam) / 4, (y + lam) / 4, (z + lam) / 4, (p + lam) / 4
+        return x, y, z, p, (mean + lam) / 4, (mean_f + lam) / 4, correction
 
     state = (x, y, z, p, mean0, mean_f0, jnp.zeros_like(mean0))
-    (x, y, z, p, mean, mean_f, correction), quarter = _duplicate(
-        step, state, x, rolled, converged if early_exit else None)
+    (x, y, z, p, mean, mean_f, correction), quarter = _duplicate(step, state, x, rolled)
     scale = quarter / mean
     big_x, big_y, big_z = dx0 * scale, dy0 * scale, dz0 * scale
     big_p = -(big_x + big_y + big_z) / 2
@@ -485,17 +452,9 @@ def _jvp_from_partials(function, primals, tangents, may_vanish):
         return value, jax.tree.map(jnp.zeros_like, value)
     value, partials = _value_and_partials(function, primals, varying)
 
-    def rows_of(argument, partial):
-        # An output computed on the leading rows of the arguments only (``_rf_rj``'s
-        # ``third_kind_rows``) takes the tangents of those rows.
-        if partial.ndim > 1 and jnp.ndim(argument) == partial.ndim - 1 and argument.shape[0] != partial.shape[1]:
-            return argument[: partial.shape[1]]
-        return argument
-
     def tangent(partial):
-        return sum(_masked(rows_of(tangents[i], partial), rows_of(primals[i], partial), partial[k])
-                   if i in may_vanish else partial[k] * rows_of(tangents[i], partial)
-                   for k, i in enumerate(varying))
+        return sum(_masked(tangents[i], primals[i], partial[k]) if i in may_vanish
+                   else partial[k] * tangents[i] for k, i in enumerate(varying))
 
     return value, jax.tree.map(tangent, partials)
 
@@ -519,18 +478,29 @@ def _rj_jvp(primals, tangents):
     return _jvp_from_partials(_rj_rolled, primals, tangents, (0, 1, 2))
 
 
-@functools.partial(jax.custom_jvp, nondiff_argnums=(4, 5))
-def _rf_rj(x, y, z, p, rolled=False, third_kind_rows=None):
-    """(R_F(x, y, z), R_J(x, y, z, p)) from one duplication loop; ``rolled``: a rolled loop that ends
-    where every point has converged (values; the rule's loop has all steps); ``third_kind_rows``: R_J
-    of the first rows only (``_rf_rj_series``)."""
-    return _rf_rj_series(x, y, z, p, rolled=rolled, early_exit=rolled, third_kind_rows=third_kind_rows)
+@jax.custom_jvp
+def _rf_unrolled(x, y, z):
+    """R_F with every duplication step taken and unrolled (one fused pass, the same bits for a point
+    in any batch), its JVP rule from the partials of a rolled loop (like ``_rf_rj``'s): for the rigid
+    body's several R_F of one stacked call."""
+    return _rf_series(x, y, z)
+
+
+@functools.partial(_rf_unrolled.defjvp, symbolic_zeros=True)
+def _rf_unrolled_jvp(primals, tangents):
+    return _jvp_from_partials(lambda a, b, c: _rf_series(a, b, c, True), primals, tangents, (0, 1, 2))
+
+
+@jax.custom_jvp
+def _rf_rj(x, y, z, p):
+    """(R_F(x, y, z), R_J(x, y, z, p)) from one duplication loop."""
+    return _rf_rj_series(x, y, z, p)
 
 
 @functools.partial(_rf_rj.defjvp, symbolic_zeros=True)
-def _rf_rj_jvp(rolled, third_kind_rows, primals, tangents):
+def _rf_rj_jvp(primals, tangents):
     # Both partial derivatives from one rolled duplication loop (its tangent, as for R_J alone).
-    series = lambda a, b, c, d: _rf_rj_series(a, b, c, d, rolled=True, third_kind_rows=third_kind_rows)  # noqa: E731
+    series = lambda a, b, c, d: _rf_rj_series(a, b, c, d, rolled=True)  # noqa: E731
     return _jvp_from_partials(series, primals, tangents, (0, 1, 2))
 
 
