@@ -2,6 +2,7 @@
 
 - :class:`FreeRigidBody`: angular momentum, angular velocity, quaternion and rotation matrix at any
   times, for batches of bodies, under jit/vmap/grad.
+- :func:`free_flow`: the state (L(t), q(t)) of bodies each at one time, without per-body setup.
 - :mod:`frbjax.special`: Jacobi elliptic functions and Legendre/Carlson elliptic integrals.
 - :class:`RigidBodyTerm`, :class:`RigidBodySplitting`, :func:`splitting_trajectory`: torqued bodies
   (a potential or a body-frame torque) integrated by splitting methods built on the exact free flow,
@@ -18,6 +19,7 @@ The library never changes JAX's global configuration: enable float64 yourself
 
 from . import special
 from ._body import FreeRigidBody
+from ._free_flow import free_flow
 from ._quaternion import as_matrix as quaternion_to_matrix
 from ._quaternion import from_matrix as quaternion_from_matrix
 from ._sharding import batch_mesh, pad_batch, shard_batch, shard_bodies
@@ -29,6 +31,7 @@ __all__ = [
     "RigidBodySplitting",
     "RigidBodyTerm",
     "fit_attitude",
+    "free_flow",
     "quaternion_from_matrix",
     "quaternion_to_matrix",
     "special",

@@ -13,7 +13,7 @@ from jaxtyping import Array, Float, Int
 
 from . import _quaternion as quaternion
 from ._fusion import materialise, sum_last, when_any
-from ._regimes import UNIFORM, classify, constants, evaluate
+from ._regimes import UNIFORM, classify, constants, evaluate, evaluate_once, orbit_constants
 from ._regimes import reference as regime_reference
 
 
@@ -166,9 +166,9 @@ def _validate(inertia, angular_momentum, attitude):
             raise ValueError("attitude must be a non-zero quaternion")
 
 
-@jax.jit
-def _construct(inertia, angular_momentum, attitude):
-    """The fields of a FreeRigidBody (see its docstring) from validated inputs, as one jitted program."""
+def _prepare(inertia, angular_momentum, attitude):
+    """Broadcast, checked (NaN for invalid bodies) and normalised inputs and the working frame:
+    (inertia, angular_momentum, attitude, valid, permutation, sorted inertia, unit L, |L|, regime)."""
     dtype = jnp.result_type(inertia, angular_momentum, float)
     if attitude is None:
         attitude = jnp.zeros(inertia.shape[:-1] + (4,), dtype).at[..., 0].set(1)
@@ -203,6 +203,15 @@ def _construct(inertia, angular_momentum, attitude):
     norm = jnp.where(moving, norm, 0)
 
     regime = classify(sorted_inertia, unit_working, norm)
+    return inertia, angular_momentum, attitude, valid, permutation, sorted_inertia, unit_working, norm, regime
+
+
+@jax.jit
+def _construct(inertia, angular_momentum, attitude):
+    """The fields of a FreeRigidBody (see its docstring) from validated inputs, as one jitted program."""
+    (inertia, angular_momentum, attitude, valid, permutation, sorted_inertia, unit_working, norm,
+     regime) = _prepare(inertia, angular_momentum, attitude)
+    dtype = inertia.dtype
     consts = constants(sorted_inertia, unit_working, regime)
 
     # q(t) = q0 ⊗ P ⊗ conj(q̂(0)) ⊗ q̂(|L| t) ⊗ conj(P)  (docs/theory.md §8, "Matching the
@@ -233,6 +242,45 @@ def _construct(inertia, angular_momentum, attitude):
         _constants=consts,
         _attitude_map=attitude_map,
     )
+
+
+def _uniform_attitude(uniform, inertia, momentum, attitude, t, moving):
+    """``moving`` where the body does not rotate uniformly, q0 ⊗ exp(t Omega0 / 2) where it does."""
+
+    def with_uniform(moving):
+        omega = momentum / inertia
+        spin = quaternion.exp_pure(omega * jnp.broadcast_to(t, uniform.shape)[..., None])
+        return jnp.where(uniform[..., None], quaternion.multiply(attitude, spin), moving)
+
+    # Most batches have no uniformly rotating body: then its trigonometry is not evaluated at all.
+    return when_any(uniform, with_uniform, lambda moving: moving, moving)
+
+
+def motion_once(inertia, angular_momentum, attitude, t, with_attitude=True):
+    """(L(t), q(t)) (q None unless ``with_attitude``) of bodies evaluated at one time each.
+
+    The one-time path (``_regimes.evaluate_once``): the per-body constants are elementwise formulas,
+    the motion one Jacobi evaluation, one R_J and an arctangent, and no theta series.  ``t`` must
+    broadcast to the bodies' batch shape without adding dimensions.
+    """
+    (inertia, angular_momentum, attitude, _, permutation, sorted_inertia, unit_working, norm,
+     regime) = _prepare(inertia, angular_momentum, attitude)
+    t = jnp.asarray(t, inertia.dtype)
+    tau = norm * t
+    orbit = orbit_constants(sorted_inertia, unit_working, regime)
+    unit_momentum, chart_start, chart_now = evaluate_once(orbit, unit_working, tau, with_attitude)
+    uniform = regime == UNIFORM
+    moving = norm[..., None] * _apply(permutation, unit_momentum)
+    momentum = jnp.where(uniform[..., None], jnp.broadcast_to(angular_momentum, moving.shape), moving)
+    if not with_attitude:
+        return momentum, None
+    # q = q0 ⊗ P ⊗ conj(q̂(0)) ⊗ q̂(tau) ⊗ conj(P) (docs/theory.md §8), where P ⊗ (w, v) ⊗ conj(P) =
+    # (w, P v): the working-frame rotation conj(q̂(0)) ⊗ q̂(tau) with its axis taken to body axes.
+    # Materialised: each component of a product would otherwise recompute its factors (see _fusion).
+    change = materialise(quaternion.multiply(quaternion.conjugate(chart_start), chart_now))
+    change = jnp.concatenate([change[..., :1], _apply(permutation, change[..., 1:])], -1)
+    moving = _normalised(materialise(quaternion.multiply(attitude, change)))
+    return momentum, _uniform_attitude(uniform, inertia, angular_momentum, attitude, t, moving)
 
 
 def _compiled(method):
@@ -333,17 +381,18 @@ class FreeRigidBody(eqx.Module):
         # Three products and the chart leave |q| - 1 at up to ~20 ulp; renormalising costs little and
         # keeps |q| = 1 and rotation_matrix (which assumes it) at the ulp level.
         moving = _normalised(materialise(moving))
-        uniform = self._uniform()
+        uniform = jnp.broadcast_to(self._uniform(), tau.shape)
+        # Uniform rotation about a principal direction (or L = 0): q(t) = q0 ⊗ exp(t Omega0 / 2).
+        return _uniform_attitude(uniform, self.inertia, self.initial_angular_momentum, self.initial_attitude,
+                                 t, moving)
 
-        def with_uniform(moving):
-            # Uniform rotation about a principal direction (or L = 0): q(t) = q0 ⊗ exp(t Omega0 / 2).
-            omega = self.initial_angular_momentum / self.inertia
-            spin = quaternion.exp_pure(omega * jnp.broadcast_to(t, tau.shape)[..., None])
-            fixed = quaternion.multiply(self.initial_attitude, spin)
-            return jnp.where(uniform[..., None], fixed, moving)
+    def _one_time(self, t):
+        """Whether ``t`` gives each body one time (adds no dimension): then the one-time path is taken."""
+        batch = self.momentum_norm.shape
+        return jnp.broadcast_shapes(batch, jnp.shape(t)) == batch
 
-        # Most batches have no uniformly rotating body: then its trigonometry is not evaluated at all.
-        return when_any(uniform, with_uniform, lambda moving: moving, moving)
+    def _once(self, t, with_attitude=True):
+        return motion_once(self.inertia, self.initial_angular_momentum, self.initial_attitude, t, with_attitude)
 
     # ------------------------------------------------------------------------------------- public
 
@@ -353,6 +402,8 @@ class FreeRigidBody(eqx.Module):
 
         Evaluates only the Jacobi functions: no elliptic integral of the third kind.
         """
+        if self._one_time(t):
+            return self._once(t, with_attitude=False)[0]
         t, tau = self._time(t)
         unit_working, _ = evaluate(self._constants, tau, attitude=False)
         return self._momentum_from(unit_working)
@@ -365,6 +416,8 @@ class FreeRigidBody(eqx.Module):
     @_compiled
     def quaternion(self, t) -> Float[Array, "... 4"]:
         """Attitude q(t) (w, x, y, z), body to space, continuous in t, equal to the attitude at t = 0."""
+        if self._one_time(t):
+            return self._once(t)[1]
         t, tau = self._time(t)
         particular, _ = evaluate(self._constants, tau)
         return self._attitude_from(t, tau, particular)
@@ -376,6 +429,8 @@ class FreeRigidBody(eqx.Module):
         The same values as the two methods (bit for bit), at the cost of ``quaternion`` alone: the
         Jacobi functions that give the attitude give L too.
         """
+        if self._one_time(t):
+            return self._once(t)
         t, tau = self._time(t)
         particular, unit_working = evaluate(self._constants, tau)
         return self._momentum_from(unit_working), self._attitude_from(t, tau, particular)

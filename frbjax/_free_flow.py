@@ -1,20 +1,46 @@
-"""The exact torque-free flow over one time: the building block of the splitting integrators.
+"""The exact torque-free flow over one time per body: the state after time t, without a per-body series.
 
-Every free flow of :mod:`frbjax._splitting` goes through :func:`free_flow`, so that a cheaper
-one-shot evaluation of the free motion replaces it here alone.
+:func:`free_flow` is the one-shot entry point: the state (L(t), q(t)) of bodies each evaluated at one
+time.  It is the path :class:`~frbjax.FreeRigidBody` takes itself when ``t`` gives each body one time,
+and every free flow of the splitting integrators (:mod:`frbjax._splitting`) goes through it.
 """
 
 from __future__ import annotations
 
-from ._body import FreeRigidBody
+import jax
+import jax.numpy as jnp
+from jaxtyping import Array, Float
+
+from ._body import _validate, motion_once
 
 
-def free_flow(inertia, angular_momentum, attitude, t):
-    """(L(t), q(t)) of the free body that has body angular momentum L and attitude q at time 0.
+@jax.jit
+def _free_flow(inertia, angular_momentum, attitude, t):
+    batch = jnp.broadcast_shapes(inertia.shape[:-1], angular_momentum.shape[:-1], attitude.shape[:-1], t.shape)
+    inertia, angular_momentum = (jnp.broadcast_to(a, batch + (3,)) for a in (inertia, angular_momentum))
+    return motion_once(inertia, angular_momentum, jnp.broadcast_to(attitude, batch + (4,)), t)
 
-    ``inertia`` (..., 3), ``angular_momentum`` (..., 3), ``attitude`` (..., 4) (wxyz, body to space) and
-    ``t`` (scalar or (...)) broadcast over their leading dimensions.  Exact (the motion of
-    :class:`~frbjax.FreeRigidBody`); differentiable in every input.  Both come from one evaluation of
-    the motion (:meth:`~frbjax.FreeRigidBody.state`).
+
+def free_flow(inertia, angular_momentum, attitude, t) -> tuple[Float[Array, "... 3"], Float[Array, "... 4"]]:
+    r"""(L(t), q(t)) of the free bodies with body angular momentum L and attitude q at time 0.
+
+    ``inertia`` (..., 3) (principal moments, any order, > 0), ``angular_momentum`` (..., 3),
+    ``attitude`` (..., 4) (w, x, y, z, body to space) and ``t`` (...) broadcast together; every
+    element of the broadcast shape is one body at one time.  The values are those of
+    ``FreeRigidBody(inertia, angular_momentum, attitude).state(t)`` (to rounding), computed without
+    the per-body data that pays off only over many times (docs/theory.md §11): the Jacobi functions at
+    the phase u0 + B|L|t follow from the given L and from sn, cn, dn(B|L|t) by the addition theorem
+    (DLMF 22.8.1-22.8.3), and the change of the third-kind integral from one
+    :math:`\Pi(n; \mathrm{am}\, v_r|m)` at the reduced argument and an arctangent (the addition
+    theorem of Jacobi's third kind).  Use it for one step of a splitting method or the state at a
+    final time; for a body at many times, build a :class:`~frbjax.FreeRigidBody` once.
+
+    Exact in every regime, differentiable in every input (forward and reverse mode, any order),
+    jit-compiled once per shape and dtype when called eagerly, and composable with ``jit``, ``vmap``
+    and ``grad``.  Invalid inputs raise ValueError as in :class:`~frbjax.FreeRigidBody` (NaN under
+    tracing).
     """
-    return FreeRigidBody(inertia, angular_momentum, attitude).state(t)
+    _validate(inertia, angular_momentum, attitude)
+    inertia, angular_momentum, attitude = (jnp.asarray(a) for a in (inertia, angular_momentum, attitude))
+    dtype = jnp.result_type(inertia, angular_momentum, float)
+    return _free_flow(inertia, angular_momentum, attitude, jnp.asarray(t, dtype))

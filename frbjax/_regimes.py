@@ -33,10 +33,12 @@ from __future__ import annotations
 import jax.numpy as jnp
 
 from . import _series
-from ._fusion import materialise
+from ._fusion import materialise, when_any
 from .special._carlson import _rf_unrolled
+from .special._jacobi import _ellipj, _half_periods, _quarter_period
 from .special._legendre import (
     _LARGE_NEGATIVE_CHARACTERISTIC,
+    pi_without_first_kind,
     pi_without_first_kind_from,
     rj_complete,
     third_kind_arguments,
@@ -85,8 +87,11 @@ def classify(inertia, unit_momentum, momentum_norm):
     return jnp.where(uniform, UNIFORM, code)
 
 
-def constants(inertia, unit_momentum, regime):
-    """Per-body constants of the regime's exact solution (docs/theory.md §4-5), as a dict of arrays."""
+def orbit_constants(inertia, unit_momentum, regime):
+    """The elementwise per-body constants of the regime's exact solution (docs/theory.md §4-5): no
+    elliptic integral.  A dict of arrays: amplitude (..., 3), rate B, m, mc, alpha, nu, precession,
+    without_first_kind, regime, the point (sn0, cn0) (unit, stand-ins outside the elliptic regimes)
+    and the separatrix phase u0 (stand-ins outside it)."""
     is_major, is_minor, is_sep = regime == MAJOR, regime == MINOR, regime == SEPARATRIX
 
     # Around the major axis (around the minor axis): one set of formulas in the roles of the axes.
@@ -160,13 +165,27 @@ def constants(inertia, unit_momentum, regime):
     swapped_rate = jnp.where(is_minor, 1 / inertia[..., 0], 1 / inertia[..., 2])
     out["precession"] = jnp.where(out["without_first_kind"], swapped_rate, out["precession"])
 
+    # The point (sn0, cn0) of the phase, with stand-ins outside the elliptic regimes.
+    out["sn0"], out["cn0"] = _unit_point(jnp.where(is_elliptic, sn_scaled, 0.6), jnp.where(is_elliptic, cn_scaled, 0.8))
+    out["separatrix_u0"] = separatrix_u0
+    out["regime"] = regime
+    return out
+
+
+def constants(inertia, unit_momentum, regime):
+    """Per-body constants of the regime's exact solution (docs/theory.md §4-5), as a dict of arrays:
+    ``orbit_constants`` and the elliptic integrals of the theta series (``_series``)."""
+    out = orbit_constants(inertia, unit_momentum, regime)
+    is_minor, is_sep = regime == MINOR, regime == SEPARATRIX
+    is_elliptic = (regime == MAJOR) | is_minor
+    separatrix_u0 = out.pop("separatrix_u0")
+    sn0, cn0 = out.pop("sn0"), out.pop("cn0")
     # The elliptic integrals of the constructor, all from one duplication loop (below).  Bodies outside
     # the elliptic regimes (separatrix, uniform rotation) get harmless stand-ins (their results are not
     # used).
     nu = jnp.where(is_elliptic, out["nu"], -0.5)
     m = jnp.where(is_elliptic, out["m"], 0.5)
     mc = jnp.where(is_elliptic, out["mc"], 0.5)
-    sn0, cn0 = _unit_point(jnp.where(is_elliptic, sn_scaled, 0.6), jnp.where(is_elliptic, cn_scaled, 0.8))
     # Materialised: the integrals below and their derivatives would otherwise each recompute the
     # regime formulas above inside their own fused loops (see _fusion), in the gradient most of all.
     nu, m, mc, sn0, cn0 = materialise((nu, m, mc, sn0, cn0))
@@ -211,7 +230,6 @@ def constants(inertia, unit_momentum, regime):
     out["u0"] = jnp.where(is_sep, separatrix_u0, elliptic_u0)
     complete_third_kind = pi_without_first_kind_from(nu, one, jnp.zeros_like(cn0), m, mc, complete_rj)
     out["third_kind_complete"] = complete_third_kind
-    out["regime"] = regime
     # The theta series (``_series``) of every body: Pi(nu; am u|m) - u (nu >= -1) or Pi(nu; am u|m)
     # (nu < -1) on a reduced argument, in the nome q or (next to the separatrix) in the complementary
     # nome q'.  Unlike a Fourier series, whose terms fall like rho^n (rho -> 1 as nu -> -infinity),
@@ -298,8 +316,151 @@ def reference(consts, unit_momentum):
     return _chart(psi, l1, l2, l3, minor)
 
 
+def evaluate_once(orbit, unit_momentum, tau, attitude=True):
+    """The motion at one unit-|L| time tau per body from ``orbit_constants`` alone: no theta series.
+
+    Returns (unit L(tau), q̂(0), q̂(tau)) in the working frame, the charts with psi counted from
+    tau = 0 (so that q = q0 ⊗ P ⊗ conj(q̂(0)) ⊗ q̂(tau) ⊗ conj(P)), or (unit L(tau), None, None) when
+    ``attitude`` is false.  For a body evaluated at one time, the series' per-body data (five R_F,
+    the complete Pi, the coefficients) cost more than the motion itself; here (docs/theory.md §11):
+
+    - the phase u0 is never formed: with v = B tau, the Jacobi functions at u0 + v follow from those
+      at u0 (the given L: sn0, cn0) and at v (``special.ellipj``) by the addition theorem
+      (DLMF 22.8.1-22.8.3, denominator 1 - m sn0^2 sn_v^2 = cn0^2 + sn0^2 dn_v^2 without cancellation);
+    - the third kind f(u) = Pi(n; am u|m) obeys f(u0 + v) - f(u0) = f(v) - G(u0, v) with the
+      elementary addition term (Jacobi's addition theorem for his Pi(u, a) at the imaginary a with
+      m sn^2 a = n, Whittaker and Watson 22.74)
+          G = A atan2(sqrt(-n (m - n)(1 - n)) sn0 sn_v sn_w, 1 - n sn_w^2 + n sn0 sn_v cn_w dn_w),
+      A = sqrt(-n / ((1 - n)(m - n))), w = u0 + v (the real part stays positive: checked on 3e6
+      random points, both sides of the separatrix, n from -1e-8 to -1e8);
+    - f(v) = 2 j Pi(n|m) + f(v_r) (DLMF 19.2.10) with v = 2 j K + v_r, |v_r| <= K: one R_J at the
+      reduced point (``pi_without_first_kind``) and, only for a batch where some v spans a half
+      period, the complete Pi by cel.
+    F is additive (F(am u) = u), so the same G serves Pi - F (nu >= -1, see ``orbit_constants``).
+    On the separatrix L and psi are elementary in u = u0 + B tau (docs/theory.md §5).
+    """
+    regime = orbit["regime"]
+    minor, separatrix = regime == MINOR, regime == SEPARATRIX
+    elliptic = (regime == MAJOR) | minor
+    m = jnp.where(elliptic, orbit["m"], 0.5)
+    mc = jnp.where(elliptic, orbit["mc"], 0.5)
+    nu = jnp.where(elliptic, orbit["nu"], -0.5)
+    sn0, cn0 = orbit["sn0"], orbit["cn0"]
+    dn0 = jnp.sqrt(cn0 * cn0 + mc * (sn0 * sn0))
+    v = jnp.where(elliptic, orbit["rate"] * tau, 0)
+    # Materialised: the Jacobi functions' fused loops would otherwise each recompute the constants.
+    m, mc, nu, sn0, cn0, dn0, v = materialise((m, mc, nu, sn0, cn0, dn0, v))
+    # Materialised here and below: each value feeds several outputs, whose fused loops would otherwise
+    # each recompute it (see _fusion).
+    sn_v, cn_v, dn_v, _ = materialise(_ellipj(v, m, mc))
+    # DLMF 22.8.1-22.8.3 at u0 + v as increments over (sn0, cn0, dn0), which vanish at v = 0 and are
+    # O(v) without cancellation: then L(tau) = l + A (increments) returns the given l exactly at
+    # tau = 0, and over a short step it changes by the increments alone, whose rounding is relative to
+    # them.  (Formed as sn(u0 + v) - sn0 instead, the rounding of a few ulp of |l| had a bias that
+    # accumulated over the many short steps of a splitting method.)  With sn0^2 + cn0^2 = 1:
+    #   1 - m sn0^2 sn_v^2 = D = cn0^2 + sn0^2 dn_v^2,
+    #   D (sn_w - sn0) = cn0 dn0 sn_v - sn0 ((1 - cn_v dn_v) - sn0^2 (1 - dn_v^2)),
+    #   D (cn_w - cn0) = -cn0 ((1 - cn_v) - sn0^2 (1 - dn_v^2)) - sn0 dn0 sn_v dn_v,
+    #   dn_w - dn0 = ((cn_w - cn0)(cn_w + cn0) + mc (sn_w - sn0)(sn_w + sn0))/(dn_w + dn0),
+    # with 1 - cn_v = sn_v^2/(1 + cn_v) (cn_v > 0) and 1 - dn_v = m sn_v^2/(1 + dn_v).
+    # The numerators cancel to O(1) rounding where D is small (next to the saddle: cn0 and dn_v both
+    # small), so there (D < 1/4), and for longer steps, the increments come from the direct form,
+    # D sn_w = sn0 cn_v dn_v + cn0 dn0 sn_v and D cn_w = cn0 cn_v - sn0 dn0 sn_v dn_v (products of the
+    # small factors themselves, normalised so that sn^2 + cn^2 = 1 to an ulp).
+    sn_v_squared = sn_v * sn_v
+    one_minus_cn = jnp.where(cn_v > 0, sn_v_squared / (1 + jnp.abs(cn_v)), 1 - cn_v)
+    one_minus_dn = m * sn_v_squared / (1 + dn_v)
+    one_minus_dn_squared = one_minus_dn * (1 + dn_v)
+    one_minus_cn_dn = one_minus_cn + cn_v * one_minus_dn
+    sn0_squared = sn0 * sn0
+    denominator = cn0 * cn0 + sn0_squared * (dn_v * dn_v)
+    # Increments for short steps (sn_v^2 <= 1/4, |v| below about K/3), where the bias mattered; the
+    # normalised direct form elsewhere keeps |L| and the energy to an ulp over long times.
+    incremental = (denominator >= 0.25) & (sn_v_squared <= 0.25)
+    sn_change = (cn0 * dn0 * sn_v - sn0 * (one_minus_cn_dn - sn0_squared * one_minus_dn_squared)) / denominator
+    cn_change = (-cn0 * (one_minus_cn - sn0_squared * one_minus_dn_squared) - sn0 * dn0 * sn_v * dn_v) / denominator
+    sn_direct = (sn0 * cn_v * dn_v + sn_v * cn0 * dn0) / denominator
+    cn_direct = (cn0 * cn_v - sn0 * dn0 * sn_v * dn_v) / denominator
+    norm = jnp.sqrt(sn_direct * sn_direct + cn_direct * cn_direct)
+    sn_w = jnp.where(incremental, sn0 + sn_change, sn_direct / norm)
+    cn_w = jnp.where(incremental, cn0 + cn_change, cn_direct / norm)
+    sn_change, cn_change = jnp.where(incremental, sn_change, sn_w - sn0), jnp.where(incremental, cn_change, cn_w - cn0)
+    dn_w = jnp.sqrt(cn_w * cn_w + mc * (sn_w * sn_w))
+    # dn_w^2 - dn0^2 = (cn_w^2 - cn0^2) + mc (sn_w^2 - sn0^2): the rounding of sn_change enters scaled by
+    # mc, so that dn keeps its precision where dn_w + dn0 is as small as sqrt(mc) (next to the saddle).
+    dn_change = (cn_change * (cn_w + cn0) + mc * sn_change * (sn_w + sn0)) / (dn_w + dn0)
+    u = jnp.where(separatrix, orbit["separatrix_u0"] + orbit["rate"] * tau, 0)
+
+    def on_separatrix(u, sn_w, cn_w, dn_w, momentum):
+        # sn = tanh u, cn = dn = sech u = 2 e/(1 + e^2), e = exp(-|u|) (no overflow).
+        decay = jnp.exp(-jnp.abs(u))
+        sech = 2 * decay / (1 + decay * decay)
+        values = jnp.stack([sech, jnp.tanh(u), sech], -1)
+        momentum = jnp.where(separatrix[..., None], orbit["amplitude"] * values, momentum)
+        return (jnp.where(separatrix, jnp.tanh(u), sn_w), jnp.where(separatrix, sech, cn_w),
+                jnp.where(separatrix, sech, dn_w), momentum)
+
+    # L = l + A (increments) in the elliptic regimes (minor: (A1 dn, A2 sn, A3 cn)), A (sn, cn, dn)(w)
+    # itself where the direct form was taken.
+    changes = jnp.stack([jnp.where(minor, dn_change, cn_change), sn_change, jnp.where(minor, cn_change, dn_change)], -1)
+    values = jnp.stack([jnp.where(minor, dn_w, cn_w), sn_w, jnp.where(minor, cn_w, dn_w)], -1)
+    momentum = jnp.where(incremental[..., None], unit_momentum + orbit["amplitude"] * changes,
+                         orbit["amplitude"] * values)
+    momentum = jnp.where(elliptic[..., None], momentum, unit_momentum)
+    # Batches without a body on the separatrix (almost all) skip its hyperbolic functions.
+    sn_w, cn_w, dn_w, momentum = when_any(separatrix, on_separatrix, lambda u, *w: w, u, sn_w, cn_w, dn_w, momentum)
+    sn_w, cn_w, dn_w, momentum = materialise((sn_w, cn_w, dn_w, momentum))
+    if not attitude:
+        return momentum, None, None
+
+    quarter = _quarter_period(mc)
+    turns, _ = _half_periods(v, mc, quarter)
+    parity = 1 - 2 * jnp.mod(turns, 2)
+    reduced = materialise(pi_without_first_kind(nu, parity * sn_v, parity * cn_v, m, mc))
+
+    def whole_turns(turns, nu, m, mc):
+        one = jnp.ones_like(m)
+        *_, complete_parameter = third_kind_arguments(nu, one, jnp.zeros_like(m), m, mc)
+        complete = pi_without_first_kind_from(nu, one, jnp.zeros_like(m), m, mc, rj_complete(mc, complete_parameter))
+        return 2 * turns * complete
+
+    periods = when_any(turns != 0, whole_turns, lambda turns, *_: jnp.zeros_like(turns), turns, nu, m, mc)
+    minus_nu = -nu
+    addition_scale = jnp.sqrt(minus_nu * (m + minus_nu) * (1 + minus_nu))
+    addition_amplitude = jnp.sqrt(minus_nu) / jnp.sqrt((1 + minus_nu) * (m + minus_nu))
+    addition = addition_amplitude * jnp.arctan2(
+        addition_scale * sn0 * sn_v * sn_w, 1 + minus_nu * (sn_w * sn_w) - minus_nu * sn0 * sn_v * cn_w * dn_w)
+    third_kind_change = periods + reduced - addition
+
+    # Uniform rotation has stand-in constants of the major regime: its stand-in L too (unused), at both
+    # times, so that nothing here is NaN.
+    uniform = (regime == UNIFORM)[..., None]
+    safe = jnp.asarray(_SAFE_MAJOR, unit_momentum.dtype)
+    unit_momentum = jnp.where(uniform, safe, unit_momentum)
+    l1, l2, l3 = unit_momentum[..., 0], unit_momentum[..., 1], unit_momentum[..., 2]
+    k1, k2, k3 = (jnp.where(uniform, safe, momentum)[..., k] for k in range(3))
+    orientation = jnp.where(minor, -1, 1)
+    # atan2(L2, L_o)(tau) - atan2(L2, L_o)(0) as one arctangent: L_o = L3 (L1 in the minor regime) is
+    # A_o dn > 0 at both times, so both angles lie in (-pi/2, pi/2) and their difference in (-pi, pi).
+    partner, partner_start = jnp.where(minor, k1, k3), jnp.where(minor, l1, l3)
+    angle_change = jnp.arctan2(k2 * partner_start - partner * l2, partner * partner_start + k2 * l2)
+    psi_elliptic = orientation * (angle_change - orbit["alpha"] * third_kind_change)
+
+    def on_separatrix_angle(u, psi):
+        # psi = tau/J2 + 2 arctan(delta tanh(u/2)) (docs/theory.md §5), delta = alpha.
+        u0 = jnp.where(separatrix, orbit["separatrix_u0"], 0)
+        delta = orbit["alpha"]
+        bounded = 2 * (jnp.arctan(delta * jnp.tanh(u / 2)) - jnp.arctan(delta * jnp.tanh(u0 / 2)))
+        return jnp.where(separatrix, bounded, psi)
+
+    psi = when_any(separatrix, on_separatrix_angle, lambda u, psi: psi, u, psi_elliptic)
+    psi = orbit["precession"] * tau + psi
+    return momentum, _chart(None, l1, l2, l3, minor), _chart(psi, k1, k2, k3, minor)
+
+
 def _chart(psi, l1, l2, l3, minor):
-    """q̂ = exp(psi/2 about the spatial axis) ⊗ (the rotation taking that axis to l), docs/theory.md §5.
+    """q̂ = exp(psi/2 about the spatial axis) ⊗ (the rotation taking that axis to l), docs/theory.md §5
+    (psi None: psi = 0).
 
     The chart is built on 1 + L1 in the major axis regime and on the separatrix (1 + L1 >= 1 - A1 > 0),
     on 1 + L3 in the minor axis regime (1 + L3 >= 1 - A3 > 0).  Both are one formula: with the pivot
@@ -311,10 +472,14 @@ def _chart(psi, l1, l2, l3, minor):
     pivot = jnp.where(minor, l3, l1)
     first = jnp.where(minor, l2, l3)
     second = jnp.where(minor, l1, l2)
-    # Materialised once: each of the four outputs below would otherwise recompute psi (and the whole
-    # evaluation behind it) in its own fused loop (see _fusion).
-    half_cos, half_sin, pivot, first, second = materialise(
-        (jnp.cos(psi / 2), jnp.sin(psi / 2), pivot, first, second))
+    if psi is None:
+        # psi = 0 (the chart at the start of ``evaluate_once``).
+        half_cos, half_sin = jnp.ones_like(pivot), jnp.zeros_like(pivot)
+    else:
+        # Materialised once: each of the four outputs below would otherwise recompute psi (and the
+        # whole evaluation behind it) in its own fused loop (see _fusion).
+        half_cos, half_sin, pivot, first, second = materialise(
+            (jnp.cos(psi / 2), jnp.sin(psi / 2), pivot, first, second))
     base = 1 + pivot
     root, inverse = jnp.sqrt(base / 2), 1 / jnp.sqrt(2 * base)
     scalar = half_cos * root

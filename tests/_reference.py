@@ -277,17 +277,30 @@ def separatrix_distance(inertia, momentum, dps=50):
 CHUNK = 8192
 
 
-def evaluate(inertia, momentum, attitude, times, quantities=("angular_momentum", "quaternion")):
+PATHS = ("one_time", "series")
+
+
+def evaluate(inertia, momentum, attitude, times, quantities=("angular_momentum", "quaternion"), path="one_time"):
     """frbjax's values for a batch of N bodies, each at its own K times: arrays (N, K, ...).
 
-    Every (body, time) pair is evaluated as its own unbatched body built inside ``jax.vmap``, op by op
-    (no jit: a jit of the attitude takes over a minute to compile on CPU), in chunks of CHUNK pairs
-    padded to that size, so that a test session compiles each op for one shape only.
+    ``path="one_time"``: every (body, time) pair is evaluated as its own unbatched body at one time
+    (FreeRigidBody's one-time path) built inside ``jax.vmap``, op by op (no jit: a jit of the attitude
+    takes over a minute to compile on CPU), in chunks of CHUNK pairs padded to that size, so that a
+    test session compiles each op for one shape only.  ``path="series"``: every body is evaluated at
+    its K times at once (the per-body theta series), under ``jax.vmap`` over the bodies.
     """
     from frbjax import FreeRigidBody
 
     inertia, momentum, attitude, times = (np.asarray(a) for a in (inertia, momentum, attitude, times))
     n, k = times.shape
+    if path == "series":
+        def body_at_times(inertia, momentum, attitude, times):
+            body = FreeRigidBody(inertia, momentum, attitude)
+            return tuple(getattr(body, name)(times) for name in quantities)
+
+        values = jax.vmap(body_at_times)(*(jnp.asarray(a) for a in (inertia, momentum, attitude, times)))
+        return tuple(np.asarray(v) for v in values)
+    assert path == "one_time", path
     pairs = [np.repeat(a, k, axis=0) for a in (inertia, momentum, attitude)] + [times.reshape(-1)]
     total = n * k
     padded = -(-total // CHUNK) * CHUNK

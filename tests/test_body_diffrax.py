@@ -248,7 +248,7 @@ TOLERANCE = {
 }
 
 
-def measure(rtol=RTOL, atol=ATOL, seed=SEED):
+def measure(rtol=RTOL, atol=ATOL, seed=SEED, path="one_time"):
     """Per-body errors (N, K) of L (relative to |L(0)|), q and R, and the per-body data."""
     families, inertia, momentum, attitude, times = stack(build_cases(seed))
     L_ref, q_ref, _ = ref.integrate_quaternion(inertia, momentum, attitude, times, rtol=rtol, atol=atol)
@@ -256,7 +256,7 @@ def measure(rtol=RTOL, atol=ATOL, seed=SEED):
         inertia, momentum, ref.matrix_of(attitude), times, rtol=rtol, atol=atol
     )
     L, q, R = ref.evaluate(
-        inertia, momentum, attitude, times, ("angular_momentum", "quaternion", "rotation_matrix")
+        inertia, momentum, attitude, times, ("angular_momentum", "quaternion", "rotation_matrix"), path
     )
     scale = np.linalg.norm(momentum, axis=-1)
     scale = np.where(scale > 0, scale, 1.0)[:, None]
@@ -267,9 +267,9 @@ def measure(rtol=RTOL, atol=ATOL, seed=SEED):
     return data, error_L, error_q, error_R
 
 
-@pytest.fixture(scope="module")
-def measured():
-    return measure()
+@pytest.fixture(scope="module", params=ref.PATHS)
+def measured(request):
+    return measure(path=request.param)
 
 
 def test_families_are_as_intended():

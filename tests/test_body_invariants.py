@@ -59,25 +59,33 @@ RANDOM_TOLERANCE = dict(
     matrix_of_quaternion=1.2e-15,  # measured 5.6e-16 (rotation_matrix against the matrix of quaternion)
     orthogonality=4e-15,  # measured 2.0e-15 (R^T R - 1; not a targeted invariant)
 )
+# The one-time path (addition theorems, docs/theory.md §11) over the same bodies and times: the
+# energy and the spatial momentum come out a few tenths of an ulp less exact than from the series
+# (measured 1.9e-15, 4.3e-15 and 4.3e-15); the other invariants within the tolerances above.
+ONE_TIME_TOLERANCE_CHANGES = dict(energy=2.5e-15, spatial_momentum_R=5.5e-15, spatial_momentum_q=5.5e-15)
 
 
-@pytest.fixture(scope="module")
-def random_motion():
+@pytest.fixture(scope="module", params=ref.PATHS)
+def random_motion(request):
     rng = np.random.default_rng(SEED)
     inertia, momentum, attitude = random_bodies(rng, 64)
     tau = 10.0 ** rng.uniform(-3, 4, (64, 32)) * rng.choice([-1.0, 1.0], (64, 32))
     times = tau / np.linalg.norm(momentum, axis=-1)[:, None]
     L, q, R = ref.evaluate(
-        inertia, momentum, attitude, times, ("angular_momentum", "quaternion", "rotation_matrix")
+        inertia, momentum, attitude, times, ("angular_momentum", "quaternion", "rotation_matrix"), request.param
     )
-    return inertia, momentum, attitude, L, q, R
+    return inertia, momentum, attitude, L, q, R, request.param
 
 
 @pytest.mark.parametrize("invariant", sorted(RANDOM_TOLERANCE))
 def test_invariants_random_bodies(random_motion, invariant):
-    errors = invariant_errors(*random_motion)
-    assert np.isfinite(random_motion[4]).all()
-    assert errors[invariant] <= RANDOM_TOLERANCE[invariant], f"{invariant}: {errors[invariant]:.2e}"
+    *motion, path = random_motion
+    errors = invariant_errors(*motion)
+    assert np.isfinite(motion[4]).all()
+    tolerance = RANDOM_TOLERANCE[invariant]
+    if path == "one_time":
+        tolerance = ONE_TIME_TOLERANCE_CHANGES.get(invariant, tolerance)
+    assert errors[invariant] <= tolerance, f"{invariant}: {errors[invariant]:.2e}"
 
 
 # --------------------------------------------------------------------------------------------------
@@ -121,8 +129,8 @@ SPECIAL_TOLERANCE = {
 }
 
 
-@pytest.fixture(scope="module")
-def special_motion():
+@pytest.fixture(scope="module", params=ref.PATHS)
+def special_motion(request):
     rng = np.random.default_rng(SEED + 1)
     rows = [(family, np.array(i, float), np.array(l, float)) for family, items in special_bodies().items()
             for i, l in items]
@@ -132,7 +140,7 @@ def special_motion():
     tau = 10.0 ** rng.uniform(-2, 3, (len(rows), 16)) * rng.choice([-1.0, 1.0], (len(rows), 16))
     times = tau / np.linalg.norm(momentum, axis=-1)[:, None]
     L, q, R = ref.evaluate(
-        inertia, momentum, attitude, times, ("angular_momentum", "quaternion", "rotation_matrix")
+        inertia, momentum, attitude, times, ("angular_momentum", "quaternion", "rotation_matrix"), request.param
     )
     return families, (inertia, momentum, attitude, L, q, R)
 
@@ -404,6 +412,11 @@ def test_bodies_n_at_times_t_by_1(count):
     _compare(got, [np.swapaxes(e, 0, 1) for e in expected], (len(times), count))
 
 
+# One time per body takes the one-time path, the loop (t of shape (1,)) the per-body series: the two
+# agree to rounding (measured 1.3e-15 in L relative to |L| and 1.8e-15 in q and R here).
+ONE_TIME_TOLERANCE = 3e-15
+
+
 @pytest.mark.parametrize("count", [5, 3])
 def test_one_time_per_body(count):
     """Bodies of batch shape (N,) at t of shape (N,): one time each, shape (N, ...)."""
@@ -411,8 +424,12 @@ def test_one_time_per_body(count):
 
     (inertia, momentum, attitude, times), expected = _loop(count, per_body_time=True)
     body = FreeRigidBody(inertia, momentum, attitude)
-    got = [getattr(body, name)(times[:count]) for name in NAMES]
-    _compare(got, [e[:, 0] for e in expected], (count,))
+    got = [np.asarray(getattr(body, name)(times[:count])) for name in NAMES]
+    scales = (np.linalg.norm(momentum, axis=-1)[:, None], 1.0, 1.0)
+    for value, want, name, scale in zip(got, expected, NAMES, scales):
+        assert value.shape == (count,) + want.shape[2:], name
+        error = np.abs(value - want[:, 0]).reshape(count, -1).max(-1) / np.ravel(scale)
+        assert error.max() <= ONE_TIME_TOLERANCE, (name, error.max())
 
 
 def test_jit_and_vmap():

@@ -55,9 +55,10 @@ def load():
 CASES = load()
 
 
-@pytest.fixture(scope="module")
-def frbjax_values():
-    """frbjax at every reference time, all cases in one vmapped evaluation (times padded to one K)."""
+@pytest.fixture(scope="module", params=ref.PATHS)
+def frbjax_values(request):
+    """frbjax at every reference time, all cases in one vmapped evaluation (times padded to one K), by
+    each of FreeRigidBody's paths (one time per body; the per-body series at many times)."""
     names = list(CASES)
     k = max(len(CASES[n]["times"]) for n in names)
     pad = lambda t: np.concatenate([t, np.full(k - len(t), t[-1])])  # noqa: E731
@@ -65,7 +66,7 @@ def frbjax_values():
         np.stack([CASES[n][key] for n in names]) for key in ("inertia", "momentum", "attitude")
     )
     times = np.stack([pad(CASES[n]["times"]) for n in names])
-    L, q = ref.evaluate(inertia, momentum, attitude, times)
+    L, q = ref.evaluate(inertia, momentum, attitude, times, path=request.param)
     return {n: (L[i, : len(CASES[n]["times"])], q[i, : len(CASES[n]["times"])]) for i, n in enumerate(names)}
 
 

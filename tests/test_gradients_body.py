@@ -84,12 +84,21 @@ FORWARD_OPTIONS = {"xla_cpu_use_fusion_emitters": False}
 FAST_COMPILE_OPTIONS = {"xla_cpu_use_fusion_emitters": False, "xla_backend_optimization_level": 0}
 
 
-def outputs(x):
+# FreeRigidBody's two paths (both checked at every point): a body at one time (the one-time path)
+# and at an array of times (the per-body series), here the one time as an array of shape (1,).
+PATHS = ("one_time", "series")
+
+
+def _at(method, t, path):
+    return method(t) if path == "one_time" else method(t[None])[0]
+
+
+def outputs(x, path="one_time"):
     """y = (L, Omega, q, R row-major) at time t from x = (I (3), L (3), q0 (4), t)."""
     body = FreeRigidBody(x[:3], x[3:6], x[6:10])
     t = x[10]
-    q = body.quaternion(t)
-    return jnp.concatenate([body.angular_momentum(t), body.angular_velocity(t), q,
+    q = _at(body.quaternion, t, path)
+    return jnp.concatenate([_at(body.angular_momentum, t, path), _at(body.angular_velocity, t, path), q,
                             quaternion.as_matrix(q).reshape(-1)])
 
 
@@ -110,28 +119,28 @@ def _compile(function, options, *args):
     return lowered.compile(compiler_options=options) if jax.default_backend() == "cpu" else lowered.compile()
 
 
-def _forward_one(x):
-    jacobian, values = jax.jacfwd(lambda y: (lambda out: (out, out))(outputs(y)), has_aux=True)(x)
+def _forward_one(x, path):
+    jacobian, values = jax.jacfwd(lambda y: (lambda out: (out, out))(outputs(y, path)), has_aux=True)(x)
     return values, jacobian
 
 
 @functools.cache
-def forward_program():
+def forward_program(path="one_time"):
     """(values (P, 19), Jacobian (P, 19, 11)) of points x (P, 11), by forward mode."""
     x = jnp.asarray(references()[2])
-    return _compile(jax.vmap(_forward_one), FORWARD_OPTIONS, x)
+    return _compile(jax.vmap(functools.partial(_forward_one, path=path)), FORWARD_OPTIONS, x)
 
 
 @functools.cache
-def forward():
-    values, jacobian = forward_program()(jnp.asarray(references()[2]))
+def forward(path="one_time"):
+    values, jacobian = forward_program(path)(jnp.asarray(references()[2]))
     return np.asarray(values), np.asarray(jacobian)
 
 
 @functools.cache
-def reverse():
+def reverse(path="one_time"):
     x = jnp.asarray(references()[2])
-    return np.asarray(_compile(jax.vmap(jax.jacrev(outputs)), FAST_COMPILE_OPTIONS, x)(x))
+    return np.asarray(_compile(jax.vmap(jax.jacrev(functools.partial(outputs, path=path))), FAST_COMPILE_OPTIONS, x)(x))
 
 
 def column_errors(automatic, reference):
@@ -169,31 +178,33 @@ def _check(mode, automatic):
     assert not bad, f"{mode}: relative column errors above {TOL} ({TOL_NEXT_TO_SEPARATRIX} at 1e-6 from the separatrix): {bad}"
 
 
-def test_forward_mode_matches_mpmath():
+@pytest.mark.parametrize("path", PATHS)
+def test_forward_mode_matches_mpmath(path):
     """jax.jacfwd (and the values) at every point against the 32-digit references."""
     _, _, _, values_reference, _ = references()
-    values, jacobian = forward()
+    values, jacobian = forward(path)
     error = np.max(np.abs(values - values_reference))
     print(f"\nvalues: worst absolute error {error:.1e}")
     assert error < 1e-14  # measured 2.1e-15
     _check("jacfwd", jacobian)
 
 
-def test_reverse_mode_matches_mpmath():
+@pytest.mark.parametrize("path", PATHS)
+def test_reverse_mode_matches_mpmath(path):
     """jax.jacrev: finite at every point (no NaN from untaken branches), right where smooth."""
-    _check("jacrev", reverse())
+    _check("jacrev", reverse(path))
 
 
 # ------------------------------------------------------------------------------ second derivatives
 
 
-def _time_second_derivative(x):
+def _time_second_derivative(x, path):
     """d^2 y/dt^2 by forward over forward in t."""
     body = FreeRigidBody(x[:3], x[3:6], x[6:10])
 
     def in_time(t):
-        q = body.quaternion(t)
-        return jnp.concatenate([body.angular_momentum(t), body.angular_velocity(t), q,
+        q = _at(body.quaternion, t, path)
+        return jnp.concatenate([_at(body.angular_momentum, t, path), _at(body.angular_velocity, t, path), q,
                                 quaternion.as_matrix(q).reshape(-1)])
 
     one = jnp.ones_like(x[10])
@@ -219,13 +230,14 @@ def _time_second_derivative_reference(values, inertia):
     return np.concatenate([dd_momentum, dd_momentum / inertia, ddq, ddr], -1)
 
 
-def test_second_derivatives():
+@pytest.mark.parametrize("path", PATHS)
+def test_second_derivatives(path):
     """d^2 y/dt^2 (forward over forward) at every point (the branch points' formulas are exact in t)
     against the equations of motion applied to the 32-digit values.
 
     The Hessian in I, L and t: test_hessian_matches_mpmath."""
     names, kinds, x, values, _ = references()
-    program = _compile(jax.vmap(_time_second_derivative), FAST_COMPILE_OPTIONS, x)
+    program = _compile(jax.vmap(functools.partial(_time_second_derivative, path=path)), FAST_COMPILE_OPTIONS, x)
     second = np.asarray(program(jnp.asarray(x)))
     assert np.all(np.isfinite(second))
     reference = _time_second_derivative_reference(values, x[:, :3])
@@ -271,7 +283,8 @@ def _hessian_references():
     return names, x, np.array(data["attitude"]), values, hessians
 
 
-def test_hessian_matches_mpmath():
+@pytest.mark.parametrize("path", PATHS)
+def test_hessian_matches_mpmath(path):
     """The Hessian of (L(t), q(t)) with respect to (I, L, t) at generic points of both regimes and next
     to the separatrix, against 32-digit second differences; error per output k:
     max |H_k - H_k,ref| / max |H_k,ref| over the 7 x 7 block.
@@ -283,7 +296,7 @@ def test_hessian_matches_mpmath():
 
     def motion(point):
         body = FreeRigidBody(point[:3], point[3:6], jnp.asarray(attitude))
-        return jnp.concatenate([body.angular_momentum(point[6]), body.quaternion(point[6])])
+        return jnp.concatenate([_at(body.angular_momentum, point[6], path), _at(body.quaternion, point[6], path)])
 
     program = _compile(jax.vmap(jax.hessian(motion)), FAST_COMPILE_OPTIONS, x)
     hessian = np.asarray(program(jnp.asarray(x)))

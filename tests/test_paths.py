@@ -1,0 +1,98 @@
+"""FreeRigidBody's two paths agree: one time per body (the one-time path, ``frbjax.free_flow``) and
+many times per body (the per-body theta series).
+
+Both paths are also checked on their own against the 30-digit references, diffrax and the gradient
+references (``tests/_reference.PATHS`` parametrises those tests); here they are compared with each
+other on random bodies and on every family of special bodies, values and derivatives.
+"""
+
+from __future__ import annotations
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+import _reference as ref
+from test_body_invariants import random_bodies, special_bodies
+
+# Measured over 256 random bodies and the special families at 8 times each, |tau| = |L| t up to 100:
+# L (relative to |L|) 6.1e-16 max(1, |tau|), q 1.0e-15 max(1, |tau|) (rounding grows with the periods).
+VALUE_TOLERANCE = 1.5e-15
+# Derivatives at 24 random bodies, |tau| up to 30, relative to each column: measured 1.3e-13.
+DERIVATIVE_TOLERANCE = 2e-13
+
+
+def _bodies(seed, count):
+    rng = np.random.default_rng(seed)
+    inertia, momentum, attitude = random_bodies(rng, count)
+    rows = [(np.array(i, float), np.array(l, float)) for items in special_bodies().values() for i, l in items]
+    inertia = np.concatenate([inertia, np.stack([r[0] for r in rows])])
+    momentum = np.concatenate([momentum, np.stack([r[1] for r in rows])])
+    attitude = np.concatenate([attitude, ref.random_attitudes(rng, len(rows))])
+    return rng, inertia, momentum, attitude
+
+
+def test_values_agree():
+    from frbjax import FreeRigidBody, free_flow
+
+    rng, inertia, momentum, attitude = _bodies(5, 256)
+    tau = 10.0 ** rng.uniform(-3, 2, (len(inertia), 8)) * rng.choice([-1.0, 1.0], (len(inertia), 8))
+    norm = np.linalg.norm(momentum, axis=-1)
+    times = tau / np.where(norm > 0, norm, 1)[:, None]
+    series = jax.jit(lambda i, l, q, t: FreeRigidBody(i[:, None], l[:, None], q[:, None]).state(t))
+    L_series, q_series = series(inertia, momentum, attitude, times)
+    L_once, q_once = free_flow(inertia[:, None], momentum[:, None], attitude[:, None], times)
+    assert L_once.shape == L_series.shape and q_once.shape == q_series.shape
+    scale = np.where(norm > 0, norm, 1)[:, None]
+    allowed = VALUE_TOLERANCE * np.maximum(1, np.abs(tau))
+    error_L = np.abs(np.asarray(L_once - L_series)).max(-1) / scale
+    error_q = np.abs(np.asarray(q_once - q_series)).max(-1)
+    assert (error_L <= allowed).all(), (error_L / allowed).max()
+    assert (error_q <= allowed).all(), (error_q / allowed).max()
+    # FreeRigidBody at one time per body takes the same path as free_flow.
+    body = FreeRigidBody(inertia[:, None], momentum[:, None], attitude[:, None])
+    L_body, q_body = jax.jit(lambda b, t: b.state(t))(
+        FreeRigidBody(np.broadcast_to(inertia[:, None], times.shape + (3,)),
+                      np.broadcast_to(momentum[:, None], times.shape + (3,)),
+                      np.broadcast_to(attitude[:, None], times.shape + (4,))), times)
+    assert np.abs(np.asarray(L_body - L_once)).max() <= 4 * np.finfo(float).eps * norm.max()
+    assert np.abs(np.asarray(q_body - q_once)).max() <= 4 * np.finfo(float).eps
+    assert body.quaternion(times).shape == times.shape + (4,)
+
+
+def _state(x, series):
+    from frbjax import FreeRigidBody
+
+    body = FreeRigidBody(x[:3], x[3:6], x[6:10])
+    t = x[10]
+    momentum, attitude = (v[0] for v in body.state(t[None])) if series else body.state(t)
+    return jnp.concatenate([momentum, attitude])
+
+
+def test_derivatives_agree_and_are_finite():
+    """Generic bodies: the same Jacobian from both paths.  Special bodies (spheres, principal axes, the
+    separatrix): finite on both (their one-sided derivatives are conventions; test_gradients_body)."""
+    rng, inertia, momentum, attitude = _bodies(6, 24)
+    tau = 10.0 ** rng.uniform(-2, 1.5, len(inertia)) * rng.choice([-1.0, 1.0], len(inertia))
+    norm = np.linalg.norm(momentum, axis=-1)
+    x = np.concatenate([inertia, momentum, attitude, (tau / np.where(norm > 0, norm, 1))[:, None]], -1)
+    once = np.asarray(jax.jit(jax.vmap(jax.jacfwd(lambda x: _state(x, False))))(x))
+    series = np.asarray(jax.jit(jax.vmap(jax.jacfwd(lambda x: _state(x, True))))(x))
+    assert np.isfinite(once).all() and np.isfinite(series).all()
+    scale = np.maximum(np.abs(series[:24]).max(1, keepdims=True), 1)
+    error = np.abs(once[:24] - series[:24]) / scale
+    assert error.max() <= DERIVATIVE_TOLERANCE, error.max()
+
+
+def test_free_flow_checks_and_broadcasts():
+    from frbjax import free_flow
+
+    with pytest.raises(ValueError, match="inertia"):
+        free_flow([1.0, -2.0, 3.0], [1.0, 0.0, 0.0], [1.0, 0.0, 0.0, 0.0], 1.0)
+    momentum, attitude = free_flow(np.array([1.0, 2.0, 3.0]), np.array([0.3, 0.2, 0.9]),
+                                   np.array([1.0, 0.0, 0.0, 0.0]), np.linspace(0, 1, 5))
+    assert momentum.shape == (5, 3) and attitude.shape == (5, 4)
+    # At t = 0 the given state, to rounding (measured 1.2e-16).
+    np.testing.assert_allclose(np.asarray(momentum[0]), [0.3, 0.2, 0.9], rtol=0, atol=2.5e-16)
+    np.testing.assert_allclose(np.asarray(attitude[0]), [1.0, 0.0, 0.0, 0.0], rtol=0, atol=2.5e-16)
