@@ -214,21 +214,17 @@ def constants(inertia, unit_momentum, regime):
     # Bulirsch's cel iteration (``rj_complete``: a square root and a quotient per step, where R_J's
     # duplication costs an R_C at every step).  Pi at the phase u0, for the attitude at t = 0, is the
     # series' own value at u0 (``reference``): the same function as at every other time.
-    one = jnp.ones_like(sn0)
     first_kind = _rf_unrolled(
         jnp.concatenate([phase_x[None], series_x]),
         jnp.concatenate([phase_y[None], series_y]),
         jnp.concatenate([phase_z[None], series_z]),
     )
-    *_, complete_parameter = third_kind_arguments(nu, one, jnp.zeros_like(cn0), m, mc)
-    complete_rj = rj_complete(mc, complete_parameter)
-    first_kind, complete_rj = materialise((first_kind, complete_rj))
+    first_kind, complete_third_kind = materialise((first_kind, _complete_third_kind(nu, m, mc)))
     quarter, phase_integral = first_kind[1], first_kind[0]
     sign = jnp.where(sn0 < 0, -1.0, 1.0).astype(sn0.dtype)
     remaining_phase = cn0 * phase_integral  # K - |u0| where reflected
     elliptic_u0 = jnp.where(reflected, sign * (quarter - remaining_phase), sn0 * phase_integral)
     out["u0"] = jnp.where(is_sep, separatrix_u0, elliptic_u0)
-    complete_third_kind = pi_without_first_kind_from(nu, one, jnp.zeros_like(cn0), m, mc, complete_rj)
     out["third_kind_complete"] = complete_third_kind
     # The theta series (``_series``) of every body: Pi(nu; am u|m) - u (nu >= -1) or Pi(nu; am u|m)
     # (nu < -1) on a reduced argument, in the nome q or (next to the separatrix) in the complementary
@@ -253,6 +249,15 @@ def constants(inertia, unit_momentum, regime):
     # coefficients, the tail of the complete Pi) into the evaluation's loops over
     # bodies and times, and recomputes them at every time and for each output that uses them.
     return materialise(out)
+
+
+def _complete_third_kind(nu, m, mc):
+    """Pi(nu|m) - K(m) (nu >= -1) or Pi(nu|m) (nu < -1): the integral of ``pi_without_first_kind``
+    over a half period, its R_J(0, mc, 1, 1 - n') (n' the characteristic of DLMF 19.7.8) by Bulirsch's
+    cel iteration (``rj_complete``)."""
+    one, zero = jnp.ones_like(m), jnp.zeros_like(m)
+    *_, complete_parameter = third_kind_arguments(nu, one, zero, m, mc)
+    return pi_without_first_kind_from(nu, one, zero, m, mc, rj_complete(mc, complete_parameter))
 
 
 def _unit_point(sn_scaled, cn_scaled):
@@ -384,7 +389,6 @@ def evaluate_once(orbit, unit_momentum, tau, attitude=True):
     norm = jnp.sqrt(sn_direct * sn_direct + cn_direct * cn_direct)
     sn_w = jnp.where(incremental, sn0 + sn_change, sn_direct / norm)
     cn_w = jnp.where(incremental, cn0 + cn_change, cn_direct / norm)
-    sn_change, cn_change = jnp.where(incremental, sn_change, sn_w - sn0), jnp.where(incremental, cn_change, cn_w - cn0)
     dn_w = jnp.sqrt(cn_w * cn_w + mc * (sn_w * sn_w))
     # dn_w^2 - dn0^2 = (cn_w^2 - cn0^2) + mc (sn_w^2 - sn0^2): the rounding of sn_change enters scaled by
     # mc, so that dn keeps its precision where dn_w + dn0 is as small as sqrt(mc) (next to the saddle).
@@ -401,7 +405,7 @@ def evaluate_once(orbit, unit_momentum, tau, attitude=True):
                 jnp.where(separatrix, sech, dn_w), momentum)
 
     # L = l + A (increments) in the elliptic regimes (minor: (A1 dn, A2 sn, A3 cn)), A (sn, cn, dn)(w)
-    # itself where the direct form was taken.
+    # itself where the direct form was taken (there the increments are not used).
     changes = jnp.stack([jnp.where(minor, dn_change, cn_change), sn_change, jnp.where(minor, cn_change, dn_change)], -1)
     values = jnp.stack([jnp.where(minor, dn_w, cn_w), sn_w, jnp.where(minor, cn_w, dn_w)], -1)
     momentum = jnp.where(incremental[..., None], unit_momentum + orbit["amplitude"] * changes,
@@ -419,10 +423,7 @@ def evaluate_once(orbit, unit_momentum, tau, attitude=True):
     reduced = materialise(pi_without_first_kind(nu, parity * sn_v, parity * cn_v, m, mc))
 
     def whole_turns(turns, nu, m, mc):
-        one = jnp.ones_like(m)
-        *_, complete_parameter = third_kind_arguments(nu, one, jnp.zeros_like(m), m, mc)
-        complete = pi_without_first_kind_from(nu, one, jnp.zeros_like(m), m, mc, rj_complete(mc, complete_parameter))
-        return 2 * turns * complete
+        return 2 * turns * _complete_third_kind(nu, m, mc)
 
     periods = when_any(turns != 0, whole_turns, lambda turns, *_: jnp.zeros_like(turns), turns, nu, m, mc)
     minus_nu = -nu
