@@ -25,7 +25,13 @@ Three parts (``--parts``, default all), each writing JSON (and a PNG) into bench
 blanes_moan6 and Dopri8 at two points each, 10^3 energy steps against Tsit5, 8 bodies).  The numbers
 are wall times on the machine that runs the script; say which when quoting.
 
+``--single-kernel-loops`` runs everything (diffrax's solvers too) with the XLA setting of the
+``frbjax`` command (``frbjax.cli.single_kernel_loops``: a small loop compiled as one kernel, so that
+one body's step costs its arithmetic rather than the dispatch of its kernels) and writes
+``torqued_*_single_kernel_loops.*``.
+
 Usage: python benchmarks/torqued.py [--quick] [--parts work_precision energy batch] [--output-dir DIR]
+       [--single-kernel-loops]
 """
 
 from __future__ import annotations
@@ -326,22 +332,33 @@ def main(argv=None):
                         choices=["work_precision", "energy", "batch"])
     parser.add_argument("--repeats", type=int, default=3)
     parser.add_argument("--output-dir", type=Path, default=RESULTS)
+    parser.add_argument("--single-kernel-loops", action="store_true",
+                        help="compile small loops as one kernel, as the frbjax command does (every "
+                             "method, diffrax's too); results go to torqued_*_single_kernel_loops.*")
     args = parser.parse_args(argv)
     args.output_dir.mkdir(parents=True, exist_ok=True)
+    suffix = ""
+    if args.single_kernel_loops:
+        from frbjax.cli import single_kernel_loops
+
+        if not single_kernel_loops():
+            parser.error("XLA_FLAGS already sets --xla_backend_extra_options, or JAX has started")
+        suffix = "_single_kernel_loops"
     machine = {"device": str(jax.devices()[0]), "platform": platform.platform(), "jax": jax.__version__,
                "diffrax": diffrax.__version__, "cpus_visible": len(os.sched_getaffinity(0)),
-               "quick": args.quick}
+               "quick": args.quick, "xla_flags": os.environ.get("XLA_FLAGS", "")}
     if "work_precision" in args.parts:
         results = dict(work_precision(args.quick, args.repeats), machine=machine)
-        (args.output_dir / "torqued_work_precision.json").write_text(json.dumps(results, indent=1) + "\n")
-        plot_work_precision(results, args.output_dir / "torqued_work_precision.png")
+        path = args.output_dir / f"torqued_work_precision{suffix}.json"
+        path.write_text(json.dumps(results, indent=1) + "\n")
+        plot_work_precision(results, args.output_dir / f"torqued_work_precision{suffix}.png")
     if "energy" in args.parts:
         results = dict(energy(args.quick, args.repeats), machine=machine)
-        (args.output_dir / "torqued_energy.json").write_text(json.dumps(results) + "\n")
-        plot_energy(results, args.output_dir / "torqued_energy.png")
+        (args.output_dir / f"torqued_energy{suffix}.json").write_text(json.dumps(results) + "\n")
+        plot_energy(results, args.output_dir / f"torqued_energy{suffix}.png")
     if "batch" in args.parts:
         results = dict(batch(args.quick, args.repeats), machine=machine)
-        (args.output_dir / "torqued_batch.json").write_text(json.dumps(results, indent=1) + "\n")
+        (args.output_dir / f"torqued_batch{suffix}.json").write_text(json.dumps(results, indent=1) + "\n")
 
 
 if __name__ == "__main__":
