@@ -355,7 +355,12 @@ class FreeRigidBody(eqx.Module):
         _validate(inertia, angular_momentum, attitude)
         inertia = jnp.asarray(inertia)
         angular_momentum = jnp.asarray(angular_momentum)
-        attitude = None if attitude is None else jnp.asarray(attitude)
+        if attitude is None:
+            # The identity as an array (numpy: no eager operation), so that bodies built with and
+            # without an attitude share one compiled constructor.
+            attitude = np.zeros(inertia.shape[:-1] + (4,), jnp.result_type(inertia, angular_momentum, float))
+            attitude[..., 0] = 1
+        attitude = jnp.asarray(attitude)
         # One compiled program (cached by shape and dtype): called eagerly, construction is a single
         # dispatch instead of hundreds of eager operations; under the caller's jit it is inlined.
         for name, value in _construct(inertia, angular_momentum, attitude).items():

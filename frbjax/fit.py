@@ -122,7 +122,9 @@ def _model(theta, reference, times, time_scale):
     omega = theta[2:5] / time_scale
     attitude = quaternion.multiply(reference, quaternion.exp_pure(theta[5:8]))
     body = FreeRigidBody(inertia, inertia * omega, attitude)
-    return body.quaternion(times), body.angular_velocity(times)
+    # One evaluation gives both (``state``): the Jacobi functions behind q(t) give L(t) too.
+    momentum, attitude_t = body.state(times)
+    return attitude_t, momentum / inertia
 
 
 def _attitude_residual(q_model, q_observed):
@@ -266,6 +268,15 @@ def _normalised_inertia(p):
 
 
 _make_body = eqx.filter_jit(FreeRigidBody)
+
+
+def _fitted_body(inertia, angular_momentum, attitude):
+    """The fitted FreeRigidBody.  Built as any body is (its constructor is one compiled program, cached
+    by shapes: a body built earlier in the session has compiled it already); a fit that ended
+    non-finite gets the NaN body of a construction under jit (eager construction would raise)."""
+    if np.all(np.isfinite(angular_momentum)) and np.all(np.isfinite(attitude)) and np.any(attitude != 0):
+        return FreeRigidBody(inertia, angular_momentum, attitude)
+    return _make_body(inertia, angular_momentum, attitude)
 
 
 # XLA:CPU compiles the solver about a quarter faster, and runs it as fast, with the fusion emitters
@@ -439,39 +450,41 @@ def fit_attitude(
         jnp.asarray(masks, dtype), jnp.asarray(_LOSSES[loss], jnp.int32), scale_in, rtol=float(rtol),
         atol=float(atol), max_steps=int(max_steps))
 
-    # Back to physical parameters (Omega in 1/time).
+    # Back to physical parameters (Omega in 1/time).  The rest is numpy on the solver's outputs (one
+    # transfer each): eager JAX operations would each compile a small program on a first call.
+    out = {key: np.asarray(value) for key, value in out.items()}
     unscale = np.ones(8)
     unscale[2:5] = 1.0 / time_scale
-    theta_physical = np.asarray(out["theta"], float) * unscale
-    covariance = np.asarray(out["covariance"], float) * unscale[:, None] * unscale[None, :]
+    theta_physical = out["theta"].astype(float) * unscale
+    covariance = out["covariance"].astype(float) * unscale[:, None] * unscale[None, :]
     inertia, d_inertia = _normalised_inertia(theta_physical)
     inertia_covariance = d_inertia @ covariance @ d_inertia.T
     omega0 = out["omega0"]
-    attitude0 = out["attitude0"]
-    attitude0 = jnp.where(attitude0[0] < 0, -attitude0, attitude0)
-    inertia = jnp.asarray(inertia, dtype)
-    body = _make_body(inertia, inertia * omega0, attitude0)
+    attitude0 = -out["attitude0"] if out["attitude0"][0] < 0 else out["attitude0"]
+    inertia = inertia.astype(dtype)
+    body = _fitted_body(inertia, inertia * omega0, attitude0)
     unsort = np.argsort(order)
     residuals = out["residuals"][unsort]
     if angular_velocity_data is None:
-        w_residuals = jnp.zeros_like(residuals)
+        w_residuals = np.zeros_like(residuals)
     else:
         w_residuals = out["gyro_residuals"][unsort]
-    costs, oks, best, scale = out["costs"], out["oks"], out["best"], out["scale"]
+    costs, oks, best = out["costs"], out["oks"], int(out["best"])
+    as_float = functools.partial(jnp.asarray, dtype=dtype)
     return AttitudeFit(
-        inertia=inertia,
-        angular_velocity=omega0,
-        attitude=attitude0,
+        inertia=as_float(inertia),
+        angular_velocity=as_float(omega0),
+        attitude=as_float(attitude0),
         body=body,
-        parameters=jnp.asarray(theta_physical, dtype),
-        covariance=jnp.asarray(covariance, dtype),
-        inertia_covariance=jnp.asarray(inertia_covariance, dtype),
-        residuals=residuals,
-        angular_velocity_residuals=w_residuals,
-        cost=costs[best],
-        success=oks[best],
-        start_costs=costs,
-        start_success=oks,
-        reference_time=jnp.asarray(t_ref, dtype),
-        loss_scale=scale,
+        parameters=as_float(theta_physical),
+        covariance=as_float(covariance),
+        inertia_covariance=as_float(inertia_covariance),
+        residuals=as_float(residuals),
+        angular_velocity_residuals=as_float(w_residuals),
+        cost=as_float(costs[best]),
+        success=jnp.asarray(oks[best]),
+        start_costs=as_float(costs),
+        start_success=jnp.asarray(oks),
+        reference_time=as_float(t_ref),
+        loss_scale=as_float(out["scale"]),
     )
