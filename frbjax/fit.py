@@ -85,7 +85,8 @@ class AttitudeFit(eqx.Module):
     - ``angular_velocity`` (3,): body angular velocity at t = 0;
     - ``attitude`` (4,): attitude (w, x, y, z; w >= 0) at t = 0;
     - ``body``: the fitted :class:`FreeRigidBody` (moments ``inertia``, angular momentum
-      ``inertia * angular_velocity``, attitude ``attitude``);
+      ``inertia * angular_velocity``, attitude ``attitude``), built when asked for (a property: a fit
+      whose caller wants the parameters alone does not compile the constructor);
     - ``parameters`` (8,): theta = (log I2/I1, log I3/I1, Omega(t_ref), delta) of the module docstring;
     - ``covariance`` (8, 8): covariance of ``parameters``, (J^T J)^-1 s^2, s^2 = 2 cost / (m - 8);
     - ``inertia_covariance`` (3, 3): the same propagated to ``inertia`` (rank 2);
@@ -99,7 +100,6 @@ class AttitudeFit(eqx.Module):
     inertia: Float[Array, "3"]
     angular_velocity: Float[Array, "3"]
     attitude: Float[Array, "4"]
-    body: FreeRigidBody
     parameters: Float[Array, "8"]
     covariance: Float[Array, "8 8"]
     inertia_covariance: Float[Array, "3 3"]
@@ -111,6 +111,12 @@ class AttitudeFit(eqx.Module):
     start_success: Array
     reference_time: Float[Array, ""]
     loss_scale: Float[Array, ""]
+
+    @property
+    def body(self) -> FreeRigidBody:
+        """The fitted FreeRigidBody, built on each access (one dispatch of the cached constructor)."""
+        inertia = np.asarray(self.inertia)
+        return _fitted_body(inertia, inertia * np.asarray(self.angular_velocity), np.asarray(self.attitude))
 
 
 # ------------------------------------------------------------------------------------ the model
@@ -271,9 +277,9 @@ _make_body = eqx.filter_jit(FreeRigidBody)
 
 
 def _fitted_body(inertia, angular_momentum, attitude):
-    """The fitted FreeRigidBody.  Built as any body is (its constructor is one compiled program, cached
-    by shapes: a body built earlier in the session has compiled it already); a fit that ended
-    non-finite gets the NaN body of a construction under jit (eager construction would raise)."""
+    """The fitted FreeRigidBody (numpy inputs).  Built as any body is (its constructor is one compiled
+    program, cached by shapes); a fit that ended non-finite gets the NaN body of a construction under
+    jit (eager construction would raise)."""
     if np.all(np.isfinite(angular_momentum)) and np.all(np.isfinite(attitude)) and np.any(attitude != 0):
         return FreeRigidBody(inertia, angular_momentum, attitude)
     return _make_body(inertia, angular_momentum, attitude)
@@ -462,7 +468,6 @@ def fit_attitude(
     omega0 = out["omega0"]
     attitude0 = -out["attitude0"] if out["attitude0"][0] < 0 else out["attitude0"]
     inertia = inertia.astype(dtype)
-    body = _fitted_body(inertia, inertia * omega0, attitude0)
     unsort = np.argsort(order)
     residuals = out["residuals"][unsort]
     if angular_velocity_data is None:
@@ -475,7 +480,6 @@ def fit_attitude(
         inertia=as_float(inertia),
         angular_velocity=as_float(omega0),
         attitude=as_float(attitude0),
-        body=body,
         parameters=as_float(theta_physical),
         covariance=as_float(covariance),
         inertia_covariance=as_float(inertia_covariance),

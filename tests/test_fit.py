@@ -225,3 +225,13 @@ def test_attitude_residual_ignores_quaternion_sign():
     flipped = np.asarray(_attitude_residual(jnp.asarray(-q_model), jnp.asarray(q_obs)))
     assert np.array_equal(plus, minus) and np.array_equal(plus, flipped)
 
+
+
+def test_fitted_body_of_a_non_finite_fit_is_nan_not_an_error():
+    """``AttitudeFit.body`` of a fit that ended non-finite: the NaN body (as under jit), no exception."""
+    from frbjax.fit import _fitted_body
+
+    body = _fitted_body(np.array([0.5, 0.8, 1.0]), np.array([np.nan, 0.0, 0.0]), np.array([1.0, 0, 0, 0]))
+    assert np.all(np.isnan(np.asarray(body.quaternion(np.linspace(0.0, 1.0, 3)))))
+    finite = _fitted_body(np.array([0.5, 0.8, 1.0]), np.array([0.1, 0.7, 0.0]), np.array([1.0, 0, 0, 0]))
+    assert np.all(np.isfinite(np.asarray(finite.quaternion(np.linspace(0.0, 1.0, 3)))))
