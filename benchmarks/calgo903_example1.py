@@ -99,14 +99,14 @@ def main(argv=None):
         "xla_runtime": runtime,
     }
     if not args.default_runtime:
-        results["xla_default"] = _default_runtime(argv_steps(args), environment)
+        results["xla_default"] = _default_runtime(_argv_steps(args), environment)
     for key, value in results.items():
         print(f"{key:28s} {value}")
     args.output_dir.mkdir(parents=True, exist_ok=True)
     (args.output_dir / "calgo903_example1.json").write_text(json.dumps(results, indent=2) + "\n")
 
 
-def argv_steps(args):
+def _argv_steps(args):
     return (["--quick"] if args.quick else []) + ([] if args.steps is None else ["--steps", str(args.steps)])
 
 

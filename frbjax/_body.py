@@ -166,12 +166,15 @@ def _validate(inertia, angular_momentum, attitude):
             raise ValueError("attitude must be a non-zero quaternion")
 
 
+def _working_dtype(inertia, angular_momentum):
+    """The floating dtype of a body's computation (that of its moments and L, at least float)."""
+    return jnp.result_type(inertia, angular_momentum, float)
+
+
 def _prepare(inertia, angular_momentum, attitude):
     """Broadcast, checked (NaN for invalid bodies) and normalised inputs and the working frame:
     (inertia, angular_momentum, attitude, valid, permutation, sorted inertia, unit L, |L|, regime)."""
-    dtype = jnp.result_type(inertia, angular_momentum, float)
-    if attitude is None:
-        attitude = jnp.zeros(inertia.shape[:-1] + (4,), dtype).at[..., 0].set(1)
+    dtype = _working_dtype(inertia, angular_momentum)
     attitude = jnp.asarray(attitude, dtype)
     inertia = inertia.astype(dtype)
     angular_momentum = angular_momentum.astype(dtype)
@@ -358,7 +361,7 @@ class FreeRigidBody(eqx.Module):
         if attitude is None:
             # The identity as an array (numpy: no eager operation), so that bodies built with and
             # without an attitude share one compiled constructor.
-            attitude = np.zeros(inertia.shape[:-1] + (4,), jnp.result_type(inertia, angular_momentum, float))
+            attitude = np.zeros(inertia.shape[:-1] + (4,), _working_dtype(inertia, angular_momentum))
             attitude[..., 0] = 1
         attitude = jnp.asarray(attitude)
         # One compiled program (cached by shape and dtype): called eagerly, construction is a single

@@ -11,7 +11,7 @@ import jax
 import jax.numpy as jnp
 from jaxtyping import Array, Float
 
-from ._body import _validate, motion_once
+from ._body import _validate, _working_dtype, motion_once
 
 
 @jax.jit
@@ -42,5 +42,5 @@ def free_flow(inertia, angular_momentum, attitude, t) -> tuple[Float[Array, "...
     """
     _validate(inertia, angular_momentum, attitude)
     inertia, angular_momentum, attitude = (jnp.asarray(a) for a in (inertia, angular_momentum, attitude))
-    dtype = jnp.result_type(inertia, angular_momentum, float)
+    dtype = _working_dtype(inertia, angular_momentum)
     return _free_flow(inertia, angular_momentum, attitude, jnp.asarray(t, dtype))

@@ -277,12 +277,13 @@ _make_body = eqx.filter_jit(FreeRigidBody)
 
 
 def _fitted_body(inertia, angular_momentum, attitude):
-    """The fitted FreeRigidBody (numpy inputs).  Built as any body is (its constructor is one compiled
-    program, cached by shapes); a fit that ended non-finite gets the NaN body of a construction under
-    jit (eager construction would raise)."""
-    if np.all(np.isfinite(angular_momentum)) and np.all(np.isfinite(attitude)) and np.any(attitude != 0):
+    """The fitted FreeRigidBody.  Built as any body is (its constructor is one compiled program, cached
+    by shapes); a fit that ended non-finite, which the eager constructor rejects, gets the NaN body of
+    a construction under jit."""
+    try:
         return FreeRigidBody(inertia, angular_momentum, attitude)
-    return _make_body(inertia, angular_momentum, attitude)
+    except ValueError:
+        return _make_body(inertia, angular_momentum, attitude)
 
 
 # XLA:CPU compiles the solver about a quarter faster, and runs it as fast, with the fusion emitters

@@ -226,7 +226,6 @@ def test_attitude_residual_ignores_quaternion_sign():
     assert np.array_equal(plus, minus) and np.array_equal(plus, flipped)
 
 
-
 def test_fitted_body_of_a_non_finite_fit_is_nan_not_an_error():
     """``AttitudeFit.body`` of a fit that ended non-finite: the NaN body (as under jit), no exception."""
     from frbjax.fit import _fitted_body
