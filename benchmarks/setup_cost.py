@@ -21,6 +21,9 @@ process pins itself to CPU 0 and runs XLA single-threaded before JAX starts), fl
 * ``gpu_construction``: construction per body at 10^6 bodies on the default device, only where JAX
   has a GPU; target <= 2 ns.
 
+The one-body and compile rows also record the XLA kernels of each program (``kernels``: fused loops,
+conditionals, while loops), which set its compile time and one-body latency (docs/performance.md).
+
 Usage: python benchmarks/setup_cost.py [--quick] [--output-dir DIR]
 Writes setup_cost.json and setup_cost.png into benchmarks/results/ (or --output-dir).
 """
@@ -76,6 +79,16 @@ TARGETS = {
 }
 
 
+def kernels(compiled):
+    """XLA's kernels of a compiled CPU program: fused loops, conditionals and while loops (every
+    branch and loop body included).  XLA:CPU compiles each fused loop separately (about 15 ms each on
+    this machine class, whatever its size) and launches each one per call, so that the count, rather
+    than the arithmetic, sets compile time and one-body latency."""
+    text = compiled.as_text()
+    return {"fusions": text.count(" fusion("), "conditionals": text.count(" conditional("),
+            "while_loops": text.count(" while(")}
+
+
 def best_time(call, repeats, min_total=0.2):
     """throughput.best_time of an already compiled call (the first call, which compiles, is not timed)."""
     jax.block_until_ready(call())
@@ -122,7 +135,8 @@ def one_body(options, rng):
     trivial = jax.jit(lambda i, m, a, t: a * t + jnp.sum(i * m))
     motion_s = best_time(lambda: motion(inertia, momentum, attitude, t), max(options.repeats, 200), min_total=0.5)
     trivial_s = best_time(lambda: trivial(inertia, momentum, attitude, t), max(options.repeats, 200), min_total=0.5)
-    return {"frbjax_us": motion_s * 1e6, "trivial_jit_us": trivial_s * 1e6, "ratio": motion_s / trivial_s}
+    return {"frbjax_us": motion_s * 1e6, "trivial_jit_us": trivial_s * 1e6, "ratio": motion_s / trivial_s,
+            "frbjax_kernels": kernels(motion.lower(inertia, momentum, attitude, t).compile())}
 
 
 def eager(options, rng):
@@ -155,9 +169,10 @@ def compile_times(options, rng):
 
     row = {"bodies": n, "times": k}
     for name, loss in (("frbjax", frbjax_loss), ("diffrax_dopri8", diffrax_loss)):
-        _, forward_s = compile_time(loss, inertia, momentum)
-        _, both_s = compile_time(jax.value_and_grad(loss, argnums=(0, 1)), inertia, momentum)
+        forward, forward_s = compile_time(loss, inertia, momentum)
+        both, both_s = compile_time(jax.value_and_grad(loss, argnums=(0, 1)), inertia, momentum)
         row[f"{name}_forward_s"], row[f"{name}_value_and_grad_s"] = forward_s, both_s
+        row[f"{name}_forward_kernels"], row[f"{name}_value_and_grad_kernels"] = kernels(forward), kernels(both)
     row["ratio_forward"] = row["frbjax_forward_s"] / row["diffrax_dopri8_forward_s"]
     row["ratio_value_and_grad"] = row["frbjax_value_and_grad_s"] / row["diffrax_dopri8_value_and_grad_s"]
     return row

@@ -20,6 +20,11 @@ def test_setup_cost_quick(tmp_path, request):
     for name, ratio in result["ratios"].items():
         assert finite_positive(ratio), name
     assert result["met"]["eager"]
+    # The kernel counts that explain the compile and one-body rows are recorded for both programs.
+    compile_row = result["rows"]["compile"]
+    for name in ("frbjax_forward", "frbjax_value_and_grad", "diffrax_dopri8_forward", "diffrax_dopri8_value_and_grad"):
+        assert compile_row[f"{name}_kernels"]["fusions"] > 0, name
+    assert result["rows"]["one_body"]["frbjax_kernels"]["fusions"] > 0
     assert result["rows"]["state_at_T"]["diffrax_ok"]
     assert result["rows"]["state_at_T"]["max_difference"] < 1e-10
     # No GPU on the CI machines: the row is absent there rather than made up.
