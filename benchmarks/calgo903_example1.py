@@ -8,15 +8,16 @@ flows in all.  This script runs it the way ``frbjax run init_example1.dat`` does
 - the time to compile the step program and the best of three runs of all the steps (compilation
   excluded), to compare with the Fortran driver's 0.21 s (gfortran -O2, one core; run this script
   under ``taskset -c 0`` for one core);
-- both with the XLA setting the ``frbjax`` command uses (``frbjax.cli.single_kernel_loops``: the loop
-  over steps compiled as one kernel) and, in a second process, with XLA's defaults (every step runs
-  its some hundred kernels one by one), so that the JSON has both;
+- both with XLA's default flags as a user's own script has them: the loop over steps is one kernel
+  through the library's one-kernel regions (``frbjax._kernel``), and, in a second process with
+  ``FRBJAX_ONE_KERNEL=0``, as XLA's ordinary kernels (every step runs its some hundred kernels one by
+  one), so that the JSON has both;
 - the maximum difference from out_example1.dat over Pi and Q, after 1000 steps and at the end
   (gfortran reproduces that file only to 2.3e-10).
 
 Usage: ``python benchmarks/calgo903_example1.py [--steps N] [--quick] [--output-dir DIR]
-[--default-runtime]``; writes ``calgo903_example1.json`` there (default benchmarks/results).
-``--default-runtime`` measures XLA's defaults only (no second process).
+[--no-one-kernel]``; writes ``calgo903_example1.json`` there (default benchmarks/results).
+``--no-one-kernel`` measures the ordinary kernels only (no second process).
 """
 
 from __future__ import annotations
@@ -37,7 +38,6 @@ jax.config.update("jax_enable_x64", True)
 import numpy as np  # noqa: E402
 
 from frbjax import _calgo903 as calgo  # noqa: E402
-from frbjax.cli import single_kernel_loops  # noqa: E402
 
 REPOSITORY = pathlib.Path(__file__).resolve().parents[1]
 DATA = REPOSITORY / "tests" / "data" / "calgo903"
@@ -51,14 +51,13 @@ def main(argv=None):
     parser.add_argument("--steps", type=int, default=None, help="steps to run (default: all 10,000)")
     parser.add_argument("--quick", action="store_true", help=f"smoke test: {QUICK_STEPS} steps, one run")
     parser.add_argument("--output-dir", type=pathlib.Path, default=RESULTS)
-    parser.add_argument("--default-runtime", action="store_true",
-                        help="XLA's default settings only (not those of the frbjax command)")
+    parser.add_argument("--no-one-kernel", action="store_true",
+                        help="XLA's ordinary kernels only (FRBJAX_ONE_KERNEL=0; no second process)")
     args = parser.parse_args(argv)
-    runtime, environment = "xla_default", dict(os.environ)
-    if not args.default_runtime:
-        if not single_kernel_loops():
-            parser.error("XLA_FLAGS already sets --xla_backend_extra_options, or JAX has started")
-        runtime = "single_kernel_loops (as the frbjax command)"
+    if args.no_one_kernel:
+        os.environ["FRBJAX_ONE_KERNEL"] = "0"
+    environment = dict(os.environ)
+    runtime = "ordinary_kernels" if args.no_one_kernel else "one_kernel_regions"
 
     problem = calgo.read_input(DATA / "init_example1.dat")
     expected = calgo.read_output(DATA / "out_example1.dat", problem.layout)
@@ -97,9 +96,10 @@ def main(argv=None):
         "max_error_all_steps": error(steps + 1),
         "device": str(jax.devices()[0]),
         "xla_runtime": runtime,
+        "xla_flags": os.environ.get("XLA_FLAGS", ""),
     }
-    if not args.default_runtime:
-        results["xla_default"] = _default_runtime(_argv_steps(args), environment)
+    if not args.no_one_kernel:
+        results["ordinary_kernels"] = _ordinary_kernels(_argv_steps(args), environment)
     for key, value in results.items():
         print(f"{key:28s} {value}")
     args.output_dir.mkdir(parents=True, exist_ok=True)
@@ -110,10 +110,10 @@ def _argv_steps(args):
     return (["--quick"] if args.quick else []) + ([] if args.steps is None else ["--steps", str(args.steps)])
 
 
-def _default_runtime(extra, environment):
-    """This script in a second process with XLA's defaults (XLA_FLAGS is read once per process)."""
+def _ordinary_kernels(extra, environment):
+    """This script in a second process without one-kernel regions (read once per process)."""
     with tempfile.TemporaryDirectory() as folder:
-        subprocess.run([sys.executable, __file__, "--default-runtime", "--output-dir", folder, *extra],
+        subprocess.run([sys.executable, __file__, "--no-one-kernel", "--output-dir", folder, *extra],
                        check=True, stdout=subprocess.DEVNULL, env=environment)
         other = json.loads((pathlib.Path(folder) / "calgo903_example1.json").read_text())
     keys = ("compile_seconds", "run_seconds", "microseconds_per_free_flow", "ratio_to_fortran",

@@ -3,14 +3,21 @@
 Every row pairs frbjax with its peer or its own floor, both measured in this run, on one core (the
 process pins itself to CPU 0 and runs XLA single-threaded before JAX starts), float64:
 
+* ``prebuilt_scalar_time``: 16384 prebuilt bodies evaluated at one scalar time per call (a scene
+  drawn frame by frame) against the same bodies at a times axis of length 1 (their series); target
+  ratio <= 1.25 (a prebuilt body always evaluates through its series).
+* ``prebuilt_vmap_rows``: ``jax.vmap`` of ``body.quaternion`` over 128 rows of per-body times against
+  the same times as one (128, N) array; target ratio <= 1.25.
 * ``construction``: build + one evaluation per body (16384 random bodies, one time each, one jitted
-  program: FreeRigidBody's one-time path) against one evaluation of the prebuilt bodies (their
-  theta series); target ratio <= 3.
-* ``state_at_T``: the state (L, q) at T = 10 of 1024 random bodies, construction included, against
+  program: ``frbjax.free_flow``, the one-shot entry point) against one evaluation of the prebuilt
+  bodies (their theta series); target ratio <= 3.
+* ``state_at_T``: the state (L, q) at T = 10 of 1024 random bodies by ``free_flow``, against
   diffrax Dopri8 at rtol = atol = 1e-12 (vmapped, benchmarks/work_precision.py's solve); target
   diffrax / frbjax >= 500 (stretch 1000).
-* ``one_body``: jitted ``FreeRigidBody(I, L, q).quaternion(t)`` for one body and one time against a
-  trivial jitted function of the same four arguments (JAX's dispatch); target ratio <= 2.
+* ``one_body``: jitted ``free_flow(I, L, q, t)`` (the one-shot entry point, a one-kernel region) for
+  one body and one time against a trivial jitted function of the same four arguments (JAX's
+  dispatch); target ratio <= 2; with its compile time and that of its gradient (targets 1 s, 3 s),
+  and the same figures for ``FreeRigidBody(I, L, q).quaternion(t)`` (series prepared).
 * ``eager``: ``FreeRigidBody(I, L, q).quaternion(t)`` at 1000 times without jit, second call, against
   the same under jit; target ratio <= 10; the first eager call (compilation included) is reported.
 * ``compile``: compile time of a quaternion loss over 1000 bodies x 100 common times, forward and
@@ -55,13 +62,18 @@ from throughput import best_time as _best_time  # noqa: E402
 from throughput import bodies, compile_time  # noqa: E402
 from work_precision import diffrax_function  # noqa: E402
 
-from frbjax import FreeRigidBody, fit_attitude  # noqa: E402
+from frbjax import FreeRigidBody, fit_attitude, free_flow  # noqa: E402
 
 # The figures of frbjax 0.1.0, before the constructor work (one core, same machine class).
 BEFORE = {
+    "prebuilt_scalar_time": 385 / 107,
+    "prebuilt_vmap_rows": 210 / 130,
     "construction": 1367 / 115,
     "state_at_T": 233.0,
     "one_body": 21.1 / 5.2,
+    "one_body_compile": 2.6,
+    "one_body_gradient_compile": 8.2,
+    "calgo903_example1": 0.72 / 0.21,
     "eager": 693 / 0.11,
     "compile_forward": 3.3 / 1.5,
     "compile_value_and_grad": 11.5 / 5.1,
@@ -69,9 +81,14 @@ BEFORE = {
 }
 # Targets: a ratio at most this (or, for state_at_T, at least this).
 TARGETS = {
+    "prebuilt_scalar_time": 1.25,
+    "prebuilt_vmap_rows": 1.25,
     "construction": 3.0,
     "state_at_T": 500.0,
     "one_body": 2.0,
+    "one_body_compile": 1.0,
+    "one_body_gradient_compile": 3.0,
+    "calgo903_example1": 1.0,
     "eager": 10.0,
     "compile_forward": 1.0,
     "compile_value_and_grad": 1.0,
@@ -95,16 +112,37 @@ def best_time(call, repeats, min_total=0.2):
     return _best_time(call, repeats, min_total)
 
 
+def prebuilt(options, rng):
+    n = 1024 if options.quick else 16384
+    rows = 128
+    inertia, momentum, attitude = (jnp.asarray(a) for a in bodies(rng, n))
+    body = jax.jit(FreeRigidBody)(inertia, momentum, attitude)
+    scalar_time = jnp.asarray(12.5)
+    along_axis = jax.jit(lambda body, t: body.quaternion(t[None]))
+    at_scalar = jax.jit(lambda body, t: body.quaternion(t))
+    floor_s = best_time(lambda: along_axis(body, scalar_time), options.repeats)
+    scalar_s = best_time(lambda: at_scalar(body, scalar_time), options.repeats)
+    small = jax.tree_util.tree_map(lambda a: a[: n // 16], body)
+    times = jnp.asarray(rng.uniform(0, 100, (rows, n // 16)))
+    mapped = jax.jit(jax.vmap(lambda body, t: body.quaternion(t), in_axes=(None, 0)))
+    array = jax.jit(lambda body, t: body.quaternion(t))
+    mapped_s = best_time(lambda: mapped(small, times), options.repeats)
+    array_s = best_time(lambda: array(small, times), options.repeats)
+    return {"bodies": n, "series_ns": floor_s / n * 1e9, "scalar_time_ns": scalar_s / n * 1e9,
+            "ratio_scalar_time": scalar_s / floor_s, "vmap_rows": rows, "vmap_bodies": n // 16,
+            "vmap_ns": mapped_s / (rows * n // 16) * 1e9, "array_ns": array_s / (rows * n // 16) * 1e9,
+            "ratio_vmap_rows": mapped_s / array_s}
+
+
 def construction(options, rng):
     n = 1024 if options.quick else 16384
     inertia, momentum, attitude = (jnp.asarray(a) for a in bodies(rng, n))
     t = jnp.asarray(rng.uniform(0, 100, n))
     build = jax.jit(FreeRigidBody)
     built = build(inertia, momentum, attitude)
-    # The floor: one evaluation of each prebuilt body through its series (t with a times axis of
-    # length 1; t of the batch shape would take the one-time path, as ``both`` does).
-    evaluate = jax.jit(lambda body, t: body.quaternion(t[None]))
-    both = jax.jit(lambda i, m, a, t: FreeRigidBody(i, m, a).quaternion(t))
+    # The floor: one evaluation of each prebuilt body through its series.
+    evaluate = jax.jit(lambda body, t: body.quaternion(t))
+    both = jax.jit(lambda i, m, a, t: free_flow(i, m, a, t)[1])
     evaluation_s = best_time(lambda: evaluate(built, t), options.repeats)
     both_s = best_time(lambda: both(inertia, momentum, attitude, t), options.repeats)
     return {"bodies": n, "evaluation_ns": evaluation_s / n * 1e9, "construction_and_evaluation_ns": both_s / n * 1e9,
@@ -115,7 +153,7 @@ def state_at_final_time(options, rng):
     n = 128 if options.quick else 1024
     inertia, momentum, attitude = (jnp.asarray(a) for a in bodies(rng, n))
     final = jnp.asarray([10.0])
-    frbjax_state = jax.jit(lambda i, m, a, t: FreeRigidBody(i, m, a).state(t[0]))
+    frbjax_state = jax.jit(lambda i, m, a, t: free_flow(i, m, a, t[0]))
     dopri8 = diffrax_function("Dopri8")
     frbjax_s = best_time(lambda: frbjax_state(inertia, momentum, attitude, final), options.repeats)
     diffrax_s = best_time(lambda: dopri8(inertia, momentum, attitude, final, 1e-12), 3)
@@ -131,15 +169,41 @@ def state_at_final_time(options, rng):
 def one_body(options, rng):
     inertia, momentum, attitude = (jnp.asarray(a[0]) for a in bodies(rng, 1))
     t = jnp.asarray(3.0)
-    motion = jax.jit(lambda i, m, a, t: FreeRigidBody(i, m, a).quaternion(t))
     trivial = jax.jit(lambda i, m, a, t: a * t + jnp.sum(i * m))
-    motion_s = best_time(lambda: motion(inertia, momentum, attitude, t), max(options.repeats, 200), min_total=0.5)
     trivial_s = best_time(lambda: trivial(inertia, momentum, attitude, t), max(options.repeats, 200), min_total=0.5)
-    # The kernels from a second compile: jit does not expose the executable it runs, and timing a
-    # jax.stages.Compiled instead adds about 3 us of Python dispatch (10.6 against 7.8 us for the
-    # trivial function), which would bias the ratio.
-    return {"frbjax_us": motion_s * 1e6, "trivial_jit_us": trivial_s * 1e6, "ratio": motion_s / trivial_s,
-            "frbjax_kernels": kernels(motion.lower(inertia, momentum, attitude, t).compile())}
+    row = {"trivial_jit_us": trivial_s * 1e6}
+    programs = {"free_flow": lambda i, m, a, t: free_flow(i, m, a, t)[1],
+                "FreeRigidBody": lambda i, m, a, t: FreeRigidBody(i, m, a).quaternion(t)}
+    for name, function in programs.items():
+        # Compile times first (a later compile of the same program is a cache hit), and the kernels
+        # from that compile: jit does not expose the executable it runs, and timing a
+        # jax.stages.Compiled instead adds about 3 us of Python dispatch.
+        compiled, compile_s = compile_time(function, inertia, momentum, attitude, t)
+        _, gradient_s = compile_time(
+            jax.grad(lambda i, m, a, t: jnp.sum(function(i, m, a, t)), argnums=(0, 1)), inertia, momentum, attitude, t)
+        motion = jax.jit(function)
+        motion_s = best_time(lambda: motion(inertia, momentum, attitude, t), max(options.repeats, 200), min_total=0.5)
+        row[name] = {"us": motion_s * 1e6, "ratio": motion_s / trivial_s, "compile_s": compile_s,
+                     "gradient_compile_s": gradient_s,
+                     "kernels": kernels(compiled)}
+    row["ratio"] = row["free_flow"]["ratio"]
+    return row
+
+
+def calgo903_example1(options, rng):
+    """Example 1 with XLA's default flags (one-kernel regions) against the Fortran driver's 0.21 s."""
+    from calgo903_example1 import DATA, FORTRAN_SECONDS
+
+    from frbjax import _calgo903 as calgo
+
+    problem = calgo.read_input(DATA / "init_example1.dat")
+    steps = 1000 if options.quick else problem.steps
+    program = calgo.example1_program(problem, steps)
+    momentum, attitude = problem.initial_state()
+    seconds = best_time(lambda: program(momentum, attitude), 3, min_total=0.0)
+    return {"steps": steps, "seconds": seconds, "fortran_seconds": FORTRAN_SECONDS * steps / problem.steps,
+            "ratio": seconds / (FORTRAN_SECONDS * steps / problem.steps),
+            "xla_flags": os.environ.get("XLA_FLAGS", "")}
 
 
 def eager(options, rng):
@@ -212,17 +276,24 @@ def main(argv=None):
     options = parser.parse_args(argv)
     rng = np.random.default_rng(options.seed)
     rows = {}
-    for name, measure in (("construction", construction), ("state_at_T", state_at_final_time),
-                          ("one_body", one_body), ("eager", eager), ("compile", compile_times)):
+    for name, measure in (("prebuilt", prebuilt), ("construction", construction),
+                          ("state_at_T", state_at_final_time), ("one_body", one_body),
+                          ("calgo903_example1", calgo903_example1), ("eager", eager),
+                          ("compile", compile_times)):
         rows[name] = measure(options, rng)
         print(name, json.dumps(rows[name]), flush=True)
     rows["fit_first_call"] = fit_first_call(options, rng, rows["compile"]["diffrax_dopri8_value_and_grad_s"])
     print("fit_first_call", json.dumps(rows["fit_first_call"]), flush=True)
     rows["gpu_construction"] = gpu_construction(options, rng)
     ratios = {
+        "prebuilt_scalar_time": rows["prebuilt"]["ratio_scalar_time"],
+        "prebuilt_vmap_rows": rows["prebuilt"]["ratio_vmap_rows"],
         "construction": rows["construction"]["ratio"],
         "state_at_T": rows["state_at_T"]["ratio"],
         "one_body": rows["one_body"]["ratio"],
+        "one_body_compile": rows["one_body"]["free_flow"]["compile_s"],
+        "one_body_gradient_compile": rows["one_body"]["free_flow"]["gradient_compile_s"],
+        "calgo903_example1": rows["calgo903_example1"]["ratio"],
         "eager": rows["eager"]["ratio"],
         "compile_forward": rows["compile"]["ratio_forward"],
         "compile_value_and_grad": rows["compile"]["ratio_value_and_grad"],

@@ -25,9 +25,9 @@ Three parts (``--parts``, default all), each writing JSON (and a PNG) into bench
 blanes_moan6 and Dopri8 at two points each, 10^3 energy steps against Tsit5, 8 bodies).  The numbers
 are wall times on the machine that runs the script; say which when quoting.
 
-``--single-kernel-loops`` runs everything (diffrax's solvers too) with the XLA setting of the
-``frbjax`` command (``frbjax.cli.single_kernel_loops``: a small loop compiled as one kernel, so that
-one body's step costs its arithmetic rather than the dispatch of its kernels) and writes
+``--single-kernel-loops`` runs everything (diffrax's solvers too) with XLA's small-loop threshold
+raised for the whole process through XLA_FLAGS (a small loop compiled as one kernel, so that one
+body's step costs its arithmetic rather than the dispatch of its kernels) and writes
 ``torqued_*_single_kernel_loops.*``.
 
 Usage: python benchmarks/torqued.py [--quick] [--parts work_precision energy batch] [--output-dir DIR]
@@ -333,16 +333,19 @@ def main(argv=None):
     parser.add_argument("--repeats", type=int, default=3)
     parser.add_argument("--output-dir", type=Path, default=RESULTS)
     parser.add_argument("--single-kernel-loops", action="store_true",
-                        help="compile small loops as one kernel, as the frbjax command does (every "
+                        help="compile small loops as one kernel for the whole process (every "
                              "method, diffrax's too); results go to torqued_*_single_kernel_loops.*")
     args = parser.parse_args(argv)
     args.output_dir.mkdir(parents=True, exist_ok=True)
     suffix = ""
     if args.single_kernel_loops:
-        from frbjax.cli import single_kernel_loops
-
-        if not single_kernel_loops():
-            parser.error("XLA_FLAGS already sets --xla_backend_extra_options, or JAX has started")
+        # XLA's small-loop threshold raised to 64 MiB for this whole process (diffrax's loops too),
+        # read once, when JAX starts its backend (this script has computed nothing yet).
+        flags = os.environ.get("XLA_FLAGS", "")
+        if "xla_backend_extra_options" in flags:
+            parser.error("XLA_FLAGS already sets --xla_backend_extra_options")
+        option = f"--xla_backend_extra_options=xla_cpu_small_while_loop_byte_threshold={1 << 26}"
+        os.environ["XLA_FLAGS"] = f"{flags} {option}".strip()
         suffix = "_single_kernel_loops"
     machine = {"device": str(jax.devices()[0]), "platform": platform.platform(), "jax": jax.__version__,
                "diffrax": diffrax.__version__, "cpus_visible": len(os.sched_getaffinity(0)),

@@ -315,8 +315,15 @@ class FreeRigidBody(eqx.Module):
     dL/dt = L x Omega, dR/dt = R hat(Omega), Omega = L / I, exactly: L through Jacobi elliptic functions,
     the attitude through the elliptic integral of the third kind (Celledoni, Fassò, Säfström and Zanna,
     "The exact computation of the free rigid body motion and its use in splitting methods", SIAM J. Sci.
-    Comput. 30 (2008); derivation in docs/theory.md).  Everything per body (regime, phase, the
-    particular solution at the phase) is computed once here; evaluations at many times reuse it.
+    Comput. 30 (2008); derivation in docs/theory.md).
+
+    Which path an evaluation takes follows what has been paid for, not the shape of ``t``: the
+    constructor always prepares each body's series (regime, phase, the theta series of the Jacobi
+    functions and of the third-kind integral, the particular solution at the phase), and every method
+    evaluates through them, at any ``t`` (a scalar for the whole batch, one time per body, a times
+    axis, inside ``jax.vmap`` or ``lax.map`` over rows of times).  Bodies that are evaluated once
+    and never again (the state at a final time, one step of a splitting method) should not pay for
+    the series: :func:`frbjax.free_flow` is that one-shot entry point (docs/theory.md §11).
 
     Invalid inputs: wrong trailing shapes or leading shapes that do not broadcast raise ValueError,
     always (shapes are static, under jit too).  With concrete inputs (not JAX tracers) the values are
@@ -394,14 +401,6 @@ class FreeRigidBody(eqx.Module):
         return _uniform_attitude(uniform, self.inertia, self.initial_angular_momentum, self.initial_attitude,
                                  t, moving)
 
-    def _one_time(self, t):
-        """Whether ``t`` gives each body one time (adds no dimension): then the one-time path is taken."""
-        batch = self.momentum_norm.shape
-        return jnp.broadcast_shapes(batch, jnp.shape(t)) == batch
-
-    def _once(self, t, with_attitude=True):
-        return motion_once(self.inertia, self.initial_angular_momentum, self.initial_attitude, t, with_attitude)
-
     # ------------------------------------------------------------------------------------- public
 
     @_compiled
@@ -410,8 +409,6 @@ class FreeRigidBody(eqx.Module):
 
         Evaluates only the Jacobi functions: no elliptic integral of the third kind.
         """
-        if self._one_time(t):
-            return self._once(t, with_attitude=False)[0]
         t, tau = self._time(t)
         unit_working, _ = evaluate(self._constants, tau, attitude=False)
         return self._momentum_from(unit_working)
@@ -424,8 +421,6 @@ class FreeRigidBody(eqx.Module):
     @_compiled
     def quaternion(self, t) -> Float[Array, "... 4"]:
         """Attitude q(t) (w, x, y, z), body to space, continuous in t, equal to the attitude at t = 0."""
-        if self._one_time(t):
-            return self._once(t)[1]
         t, tau = self._time(t)
         particular, _ = evaluate(self._constants, tau)
         return self._attitude_from(t, tau, particular)
@@ -437,8 +432,6 @@ class FreeRigidBody(eqx.Module):
         The same values as the two methods (bit for bit), at the cost of ``quaternion`` alone: the
         Jacobi functions that give the attitude give L too.
         """
-        if self._one_time(t):
-            return self._once(t)
         t, tau = self._time(t)
         particular, unit_working = evaluate(self._constants, tau)
         return self._momentum_from(unit_working), self._attitude_from(t, tau, particular)

@@ -12,13 +12,20 @@ import jax.numpy as jnp
 from jaxtyping import Array, Float
 
 from ._body import _validate, _working_dtype, motion_once
+from ._kernel import one_kernel
+
+
+@one_kernel
+def _state_once(inertia, angular_momentum, attitude, t):
+    return motion_once(inertia, angular_momentum, attitude, t)
 
 
 @jax.jit
 def _free_flow(inertia, angular_momentum, attitude, t):
     batch = jnp.broadcast_shapes(inertia.shape[:-1], angular_momentum.shape[:-1], attitude.shape[:-1], t.shape)
     inertia, angular_momentum = (jnp.broadcast_to(a, batch + (3,)) for a in (inertia, angular_momentum))
-    return motion_once(inertia, angular_momentum, jnp.broadcast_to(attitude, batch + (4,)), t)
+    # One body (or a few): one kernel (frbjax._kernel); a batch: XLA's fused loops.
+    return _state_once(inertia, angular_momentum, jnp.broadcast_to(attitude, batch + (4,)), t)
 
 
 def free_flow(inertia, angular_momentum, attitude, t) -> tuple[Float[Array, "... 3"], Float[Array, "... 4"]]:

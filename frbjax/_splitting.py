@@ -43,6 +43,7 @@ from jaxtyping import Array, Float
 
 from . import _quaternion as quaternion
 from ._free_flow import free_flow
+from ._kernel import one_kernel
 
 __all__ = ["METHODS", "RigidBodySplitting", "RigidBodyTerm", "splitting_trajectory"]
 
@@ -301,7 +302,10 @@ class RigidBodySplitting(diffrax.AbstractSolver):
     def step(self, terms, t0, t1, y0, args, solver_state, made_jump):
         del solver_state, made_jump
         term, direction = _unwrap(terms)
-        y1 = self.advance(term, direction * t0, direction * (t1 - t0), y0, args)
+        # A step of one body (or a few) as one kernel (frbjax._kernel): diffrax's loop then launches
+        # one kernel per step for it instead of some hundred.
+        advance = one_kernel(lambda t, h, y: self.advance(term, t, h, y, args))
+        y1 = advance(direction * t0, direction * (t1 - t0), y0)
         return y1, None, dict(y0=y0, y1=y1), None, diffrax.RESULTS.successful
 
     def func(self, terms, t0, y0, args):
@@ -393,10 +397,15 @@ def splitting_trajectory(term, y0, *, dt, steps, t0=0.0, args=None, method="blan
     dt = _checked_step(dt).astype(dtype)
     t0 = jnp.asarray(t0, dtype)
 
-    def one_step(state, n):
-        state = solver.advance(term, t0 + n * dt, dt, state, args)
-        return state, state
+    def trajectory(y0, dt, t0):
+        def one_step(state, n):
+            state = solver.advance(term, t0 + n * dt, dt, state, args)
+            return state, state
 
-    _, (momenta, attitudes) = jax.lax.scan(one_step, y0, jnp.arange(steps, dtype=dtype))
+        return jax.lax.scan(one_step, y0, jnp.arange(steps, dtype=dtype))[1]
+
+    # One body (or a few): the whole loop over steps as one kernel (frbjax._kernel), the speed that
+    # XLA reaches for small loops, without a process-wide flag.
+    momenta, attitudes = one_kernel(trajectory)(y0, dt, t0)
     ts = t0 + dt * jnp.arange(steps + 1, dtype=dtype)
     return ts, (jnp.concatenate([y0[0][None], momenta]), jnp.concatenate([y0[1][None], attitudes]))

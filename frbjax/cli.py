@@ -5,10 +5,10 @@
 motion of :class:`frbjax.FreeRigidBody`.  ``frbjax demo`` shows the Dzhanibekov effect: a T-handle spun
 almost about its middle axis flips over and over, with the period predicted by the elliptic integral K.
 
-This is an application, not the library: it enables 64-bit JAX and a persistent compilation cache,
-and, when it starts JAX itself, compiles small loops (one body stepping in time) as single kernels
-(:func:`single_kernel_loops`).  JAX and matplotlib are imported when a command needs them, so that
-``--help`` answers at once.
+This is an application, not the library: it enables 64-bit JAX and a persistent compilation cache.
+It leaves XLA's flags alone: one body stepping in time runs as one kernel through the library's own
+one-kernel regions (:mod:`frbjax._kernel`).  JAX and matplotlib are imported when a command needs
+them, so that ``--help`` answers at once.
 """
 
 from __future__ import annotations
@@ -60,9 +60,9 @@ environment:
   FRBJAX_CACHE_DIR  where compiled XLA programs are kept between runs (default:
                     $XDG_CACHE_HOME/frbjax or ~/.cache/frbjax; empty: no cache).  JAX's own
                     JAX_COMPILATION_CACHE_DIR takes precedence.
-  XLA_FLAGS         passed to XLA; unless it sets --xla_backend_extra_options itself, this
-                    command adds one that compiles each small loop as one kernel (one body
-                    stepping in time: example 1 runs about 6 times faster)."""
+  FRBJAX_ONE_KERNEL 0: compile one body's steps as XLA's ordinary kernels instead of one
+                    kernel (frbjax._kernel; for comparison, example 1 then runs about 6 times
+                    slower)."""
 
 
 # --------------------------------------------------------------------------------------------- parser
@@ -124,46 +124,8 @@ def main(argv=None):
 # ----------------------------------------------------------------------------------------- utilities
 
 
-SINGLE_KERNEL_LOOP_BYTES = 1 << 26
-
-
-def single_kernel_loops():
-    """Ask XLA's CPU compiler to emit every loop touching under 64 MiB per iteration as one kernel.
-
-    XLA's CPU runtime runs a compiled program as a sequence of kernels ("thunks"), and a loop as its
-    body's sequence once per iteration: for one body stepping in time (CALGO 903 example 1, a
-    splitting method, an integrator) each step then costs the dispatch of some hundred small
-    kernels, not their arithmetic.  XLA hoists a *small* loop (bytes accessed per iteration under
-    ``xla_cpu_small_while_loop_byte_threshold``, by default 1 KiB) into one kernel compiled whole.
-    This raises that threshold to 64 MiB through XLA_FLAGS, which XLA reads when JAX starts its CPU
-    backend: so only before the first computation, and never where XLA_FLAGS already sets
-    ``--xla_backend_extra_options`` (the user's choice stands).  Returns whether it did.
-
-    An application's choice for its own process, made by the ``frbjax`` command; the library never
-    sets it (importing frbjax changes no configuration).  Other programs can set the same flag.
-    """
-    flags = os.environ.get("XLA_FLAGS", "")
-    if "xla_backend_extra_options" in flags or _jax_backend_started():
-        return False
-    option = f"--xla_backend_extra_options=xla_cpu_small_while_loop_byte_threshold={SINGLE_KERNEL_LOOP_BYTES}"
-    os.environ["XLA_FLAGS"] = f"{flags} {option}".strip()
-    return True
-
-
-def _jax_backend_started():
-    """Whether JAX has created its backends (and read XLA_FLAGS); True when that cannot be told."""
-    try:
-        from jax._src import xla_bridge
-
-        return bool(xla_bridge.backends_are_initialized())
-    except (ImportError, AttributeError):
-        return True
-
-
 def _configure_jax():
-    """64-bit JAX, small loops as single kernels if JAX has not started yet, and a persistent
-    compilation cache unless one is set already or disabled."""
-    single_kernel_loops()
+    """64-bit JAX and a persistent compilation cache unless one is set already or disabled."""
     import jax
 
     jax.config.update("jax_enable_x64", True)

@@ -284,12 +284,12 @@ def evaluate(inertia, momentum, attitude, times, quantities=("angular_momentum",
     """frbjax's values for a batch of N bodies, each at its own K times: arrays (N, K, ...).
 
     ``path="one_time"``: every (body, time) pair is evaluated as its own unbatched body at one time
-    (FreeRigidBody's one-time path) built inside ``jax.vmap``, op by op (no jit: a jit of the attitude
+    (the one-shot path, ``frbjax.free_flow``) inside ``jax.vmap``, op by op (no jit: a jit of the attitude
     takes over a minute to compile on CPU), in chunks of CHUNK pairs padded to that size, so that a
     test session compiles each op for one shape only.  ``path="series"``: every body is evaluated at
     its K times at once (the per-body theta series), under ``jax.vmap`` over the bodies.
     """
-    from frbjax import FreeRigidBody
+    from frbjax import FreeRigidBody, free_flow, quaternion_to_matrix
 
     inertia, momentum, attitude, times = (np.asarray(a) for a in (inertia, momentum, attitude, times))
     n, k = times.shape
@@ -307,8 +307,10 @@ def evaluate(inertia, momentum, attitude, times, quantities=("angular_momentum",
     pairs = [np.concatenate([a, np.repeat(a[:1], padded - total, axis=0)]) for a in pairs]
 
     def one(inertia, momentum, attitude, time):
-        body = FreeRigidBody(inertia, momentum, attitude)
-        return tuple(getattr(body, name)(time) for name in quantities)
+        momentum_at, attitude_at = free_flow(inertia, momentum, attitude, time)
+        values = dict(angular_momentum=momentum_at, angular_velocity=momentum_at / inertia, quaternion=attitude_at,
+                      rotation_matrix=quaternion_to_matrix(attitude_at))
+        return tuple(values[name] for name in quantities)
 
     batched = jax.vmap(one)
     chunks = [

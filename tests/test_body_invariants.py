@@ -412,8 +412,8 @@ def test_bodies_n_at_times_t_by_1(count):
     _compare(got, [np.swapaxes(e, 0, 1) for e in expected], (len(times), count))
 
 
-# One time per body takes the one-time path, the loop (t of shape (1,)) the per-body series: the two
-# agree to rounding (measured 1.3e-15 in L relative to |L| and 1.8e-15 in q and R here).
+# One time per body (t of shape (N,)) and the loop (t of shape (1,)) both evaluate the bodies' series
+# (a FreeRigidBody never takes the one-shot path); the broadcast differs, so the two agree to rounding.
 ONE_TIME_TOLERANCE = 3e-15
 
 

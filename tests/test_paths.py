@@ -1,5 +1,5 @@
-"""FreeRigidBody's two paths agree: one time per body (the one-time path, ``frbjax.free_flow``) and
-many times per body (the per-body theta series).
+"""The two paths agree: the one-shot path (``frbjax.free_flow``, no per-body setup) and a prebuilt
+``FreeRigidBody``'s per-body theta series.
 
 Both paths are also checked on their own against the 30-digit references, diffrax and the gradient
 references (``tests/_reference.PATHS`` parametrises those tests); here they are compared with each
@@ -50,23 +50,48 @@ def test_values_agree():
     error_q = np.abs(np.asarray(q_once - q_series)).max(-1)
     assert (error_L <= allowed).all(), (error_L / allowed).max()
     assert (error_q <= allowed).all(), (error_q / allowed).max()
-    # FreeRigidBody at one time per body takes the same path as free_flow.
-    body = FreeRigidBody(inertia[:, None], momentum[:, None], attitude[:, None])
-    L_body, q_body = jax.jit(lambda b, t: b.state(t))(
-        FreeRigidBody(np.broadcast_to(inertia[:, None], times.shape + (3,)),
-                      np.broadcast_to(momentum[:, None], times.shape + (3,)),
-                      np.broadcast_to(attitude[:, None], times.shape + (4,))), times)
-    assert np.abs(np.asarray(L_body - L_once)).max() <= 4 * np.finfo(float).eps * norm.max()
-    assert np.abs(np.asarray(q_body - q_once)).max() <= 4 * np.finfo(float).eps
+
+
+def test_prebuilt_bodies_evaluate_through_their_series(monkeypatch):
+    """The path follows what is paid for: a FreeRigidBody evaluates through its series at any t.
+
+    At one time per body, at a scalar time and under ``jax.vmap`` over rows of times the one-shot path
+    is never traced (it raises here), and the values are those at a times axis to rounding (measured
+    5.1e-15 relative: the broadcast shapes differ, and with them XLA's vectorisation).
+    """
+    import frbjax._body
+    from frbjax import FreeRigidBody
+
+    def refuse(*args, **kwargs):
+        raise AssertionError("the one-shot path was taken by a prebuilt body")
+
+    monkeypatch.setattr(frbjax._body, "evaluate_once", refuse)
+    rng, inertia, momentum, attitude = _bodies(6, 64)
+    times = rng.uniform(-20, 20, (5, len(inertia)))
+    body = FreeRigidBody(inertia, momentum, attitude)
+    # t of shape (5, N): every body at five times, a times axis in front of the batch.
+    L_axis, q_axis = jax.jit(lambda b, t: b.state(t))(body, times)
+    rows = [jax.jit(lambda b, t: b.state(t))(body, row) for row in times]
+    L_mapped, q_mapped = jax.jit(jax.vmap(lambda b, t: b.state(t), in_axes=(None, 0)))(body, times)
+    L_scalar, q_scalar = jax.jit(lambda b, t: b.state(t))(body, times[0, 0])
+    L_scalar_axis, q_scalar_axis = jax.jit(lambda b, t: b.state(t))(body, np.full((1, 1), times[0, 0]))
+    L_rows, q_rows = np.stack([row[0] for row in rows]), np.stack([row[1] for row in rows])
+    scale = np.maximum(np.linalg.norm(momentum, axis=-1), 1)[:, None]
+    for L, q, L_want, q_want in ((L_rows, q_rows, L_axis, q_axis), (L_mapped, q_mapped, L_axis, q_axis),
+                                 (L_scalar, q_scalar, L_scalar_axis[0], q_scalar_axis[0])):
+        assert L.shape == L_want.shape and q.shape == q_want.shape
+        assert (np.abs(np.asarray(L - L_want)) / scale).max() <= 1e-14
+        assert np.abs(np.asarray(q - q_want)).max() <= 1e-14
     assert body.quaternion(times).shape == times.shape + (4,)
 
 
 def _state(x, series):
-    from frbjax import FreeRigidBody
+    from frbjax import FreeRigidBody, free_flow
 
-    body = FreeRigidBody(x[:3], x[3:6], x[6:10])
-    t = x[10]
-    momentum, attitude = (v[0] for v in body.state(t[None])) if series else body.state(t)
+    if series:
+        momentum, attitude = (v[0] for v in FreeRigidBody(x[:3], x[3:6], x[6:10]).state(x[10:]))
+    else:
+        momentum, attitude = free_flow(x[:3], x[3:6], x[6:10], x[10])
     return jnp.concatenate([momentum, attitude])
 
 
