@@ -8,7 +8,9 @@ count, not by its arithmetic.  XLA emits a small ``call`` as one kernel, compile
 carries the frontend attribute ``xla_cpu_small_call`` (the path XLA takes itself for small while
 loops).  :func:`one_kernel` puts a function into such a call: a nested ``jax.jit(...,
 inline=False)`` traced under ``jax.experimental.xla_metadata.set_xla_metadata``.  The attribute
-rides on the call, so it works inside the caller's own ``jit``, ``grad`` and ``vmap``.
+rides on the call, so it works inside the caller's own ``jit``; the library uses it for values of
+unbatched calls only, and lets ``jax.vmap`` and derivatives trace the ordinary program
+(``_primal_region``).
 
 It is an XLA-internal attribute, not an API, and it does not compile everything: XLA:CPU has no
 single-kernel emitter for sorts, calls into its runtime (linear algebra, callbacks, FFI) or large
@@ -35,6 +37,7 @@ import jax
 import jax.extend.core
 import jax.numpy as jnp
 import numpy as np
+from jax.custom_batching import custom_vmap
 from jax.experimental.xla_metadata import set_xla_metadata
 
 _ATTRIBUTES = dict(xla_cpu_small_call="true", inlineable="false")
@@ -114,14 +117,54 @@ def _fits_one_kernel(jaxpr) -> bool:
     return True
 
 
-def one_kernel(function):
-    """``function`` called as a one-kernel region where that is possible (module docstring), else as is.
+def _batched_everywhere(axis_size, in_batched, args):
+    """``args`` with every leaf given the mapped axis in front (broadcast where it was not mapped)."""
+    return jax.tree_util.tree_map(
+        lambda leaf, batched: leaf if batched else jnp.broadcast_to(leaf, (axis_size,) + jnp.shape(leaf)),
+        tuple(args), tuple(in_batched))
 
-    ``function`` takes and returns pytrees of arrays; the decision is made from its arguments' shapes
-    and its jaxpr when it is traced, so that it costs nothing at run time.  The jaxpr is traced once:
-    the region's own ``jit`` reuses it.
+
+def _primal_region(function, region):
+    """``function`` as the region for its value; its derivatives and its batches as ``function`` itself.
+
+    Under ``jax.vmap`` the per-body region would become one kernel over the whole batch, which is
+    slower than XLA's fused loops and which XLA:CPU cannot always compile (a large loop inside it
+    asks for its parallel runtime): ``custom_vmap`` maps ``function`` instead.  ``custom_vmap`` has no
+    reverse mode, so the derivatives (``custom_jvp``) are those of ``function``, traced as usual.
+    """
+
+    @custom_vmap
+    def unbatched(*args):
+        return _call_region(region, *args)
+
+    @unbatched.def_vmap
+    def _mapped(axis_size, in_batched, *args):
+        outputs = jax.vmap(function)(*_batched_everywhere(axis_size, in_batched, args))
+        return outputs, jax.tree_util.tree_map(lambda _: True, outputs)
+
+    @jax.custom_jvp
+    def evaluate(*args):
+        return unbatched(*args)
+
+    @evaluate.defjvp
+    def _derivative(primals, tangents):
+        return jax.jvp(function, primals, tangents)
+
+    return evaluate
+
+
+def one_kernel(function):
+    """``function`` evaluated as a one-kernel region where that is possible (module docstring), else as is.
+
+    ``function`` takes and returns pytrees of arrays, and must close over no tracer (pass everything
+    it reads as an argument: ``custom_jvp`` and ``custom_vmap`` refuse closed-over tracers).  The region serves the value of an
+    unbatched call; under ``jax.vmap`` and in derivatives ``function`` is traced as usual
+    (``_primal_region``).  The decision is made from the arguments' shapes and the jaxpr when the call
+    is traced, so that it costs nothing at run time; the jaxpr is traced once (the region's own
+    ``jit`` reuses it).
     """
     region = jax.jit(function, inline=False)
+    primal_region = _primal_region(function, region)
 
     @functools.wraps(function)
     def call(*args):
@@ -129,8 +172,12 @@ def one_kernel(function):
         small = all(np.size(leaf) <= MAX_ELEMENTS for leaf in leaves)
         if not (small and enabled() and available()):
             return function(*args)
-        if not _fits_one_kernel(region.trace(*args).jaxpr.jaxpr):
+        try:
+            traced = region.trace(*args)
+        except TypeError:  # an argument jit cannot take (a callable inside a pytree, say)
             return function(*args)
-        return _call_region(region, *args)
+        if not _fits_one_kernel(traced.jaxpr.jaxpr):
+            return function(*args)
+        return primal_region(*args)
 
     return call

@@ -304,8 +304,7 @@ class RigidBodySplitting(diffrax.AbstractSolver):
         term, direction = _unwrap(terms)
         # A step of one body (or a few) as one kernel (frbjax._kernel): diffrax's loop then launches
         # one kernel per step for it instead of some hundred.
-        advance = one_kernel(lambda t, h, y: self.advance(term, t, h, y, args))
-        y1 = advance(direction * t0, direction * (t1 - t0), y0)
+        y1 = one_kernel(self.advance)(term, direction * t0, direction * (t1 - t0), y0, args)
         return y1, None, dict(y0=y0, y1=y1), None, diffrax.RESULTS.successful
 
     def func(self, terms, t0, y0, args):
@@ -397,7 +396,7 @@ def splitting_trajectory(term, y0, *, dt, steps, t0=0.0, args=None, method="blan
     dt = _checked_step(dt).astype(dtype)
     t0 = jnp.asarray(t0, dtype)
 
-    def trajectory(y0, dt, t0):
+    def trajectory(term, y0, dt, t0, args):
         def one_step(state, n):
             state = solver.advance(term, t0 + n * dt, dt, state, args)
             return state, state
@@ -405,7 +404,8 @@ def splitting_trajectory(term, y0, *, dt, steps, t0=0.0, args=None, method="blan
         return jax.lax.scan(one_step, y0, jnp.arange(steps, dtype=dtype))[1]
 
     # One body (or a few): the whole loop over steps as one kernel (frbjax._kernel), the speed that
-    # XLA reaches for small loops, without a process-wide flag.
-    momenta, attitudes = one_kernel(trajectory)(y0, dt, t0)
+    # XLA reaches for small loops, without a process-wide flag.  Everything the loop reads is an
+    # argument: a region closes over no tracer of the caller's.
+    momenta, attitudes = one_kernel(trajectory)(term, y0, dt, t0, args)
     ts = t0 + dt * jnp.arange(steps + 1, dtype=dtype)
     return ts, (jnp.concatenate([y0[0][None], momenta]), jnp.concatenate([y0[1][None], attitudes]))

@@ -24,7 +24,10 @@ def test_setup_cost_quick(tmp_path, request):
     compile_row = result["rows"]["compile"]
     for name in ("frbjax_forward", "frbjax_value_and_grad", "diffrax_dopri8_forward", "diffrax_dopri8_value_and_grad"):
         assert compile_row[f"{name}_kernels"]["fusions"] > 0, name
-    assert result["rows"]["one_body"]["frbjax_kernels"]["fusions"] > 0
+    for name in ("free_flow", "FreeRigidBody"):
+        assert result["rows"]["one_body"][name]["kernels"]["fusions"] > 0, name
+    # Example 1 runs with XLA's default loop settings (its speed comes from the one-kernel regions).
+    assert "xla_backend_extra_options" not in result["rows"]["calgo903_example1"]["xla_flags"]
     assert result["rows"]["state_at_T"]["diffrax_ok"]
     assert result["rows"]["state_at_T"]["max_difference"] < 1e-10
     # No GPU on the CI machines: the row is absent there rather than made up.

@@ -41,6 +41,29 @@ def _delta_squared(sin_phi, cos_phi, mc):
     return cos_phi * cos_phi + mc * sin_phi * sin_phi
 
 
+def _homogeneity(largest):
+    """(t, t^(1/2)): powers of two that bring Carlson arguments up to ``largest`` down to moderate size.
+
+    R_F is homogeneous of degree -1/2 and R_D of degree -3/2 (their integrals, DLMF 19.16.1 and
+    19.16.5): R_F(x, y, z) = t^(1/2) R_F(tx, ty, tz) and R_D(x, y, z) = t^(3/2) R_D(tx, ty, tz).  For a
+    huge argument (1 - m sin^2 phi for m <= -1e306, say) the duplication's last scale 4^-N/A_N falls
+    below the smallest normal number, which XLA flushes to zero: the series then loses its first
+    terms (relative error 1.9e-6), and R_D's A_N^(3/2) overflows (NaN).  t = 2^-400 (float64) or
+    2^-64 (float32) applies only where ``largest`` exceeds 2^500 (2^64), and is exact: the duplication
+    of the scaled arguments is the same arithmetic on scaled numbers, so its rounding is unchanged, and
+    the smallest argument here (cos^2 phi >= 3e-33, or 0) stays normal.  Elsewhere t = 1.
+    """
+    big_exponent, t_exponent = (500, -400) if is_double(largest) else (64, -64)
+    big = largest > 2.0**big_exponent
+    return jnp.where(big, 2.0**t_exponent, 1.0), jnp.where(big, 2.0 ** (t_exponent // 2), 1.0)
+
+
+def _rd_homogeneous(x, y, z):
+    """R_D(x, y, z) for the derivative rules (rolled), with z the largest argument (``_homogeneity``)."""
+    t, root = _homogeneity(z)
+    return _rd(x * t, y * t, z * t, True) * (root * root * root)
+
+
 # ------------------------------------------------------------------------------------ complete K, E
 
 
@@ -76,16 +99,48 @@ def _complete_first(mc):
     return _horner(_K_P, mc) - jnp.log(mc) * _horner(_K_Q, mc)
 
 
+def _complete_first_any(mc):
+    """K(1 - mc) for every mc >= 0.
+
+    mc > 1 (m < 0) by the imaginary-modulus transformation K(m) = mc^(-1/2) K(1 - 1/mc) (DLMF 19.7.2
+    with k'^2 = 1/mc), where the fit of ``_complete_first`` holds: 1/mc is in (0, 1), and
+    log(1/mc) = -log(mc) stays exact where 1/mc is subnormal (flushed to zero: the polynomials then
+    give K ~ ln(4 sqrt(mc))/sqrt(mc), DLMF 19.12.1).  For mc <= 1 the same operations as
+    ``_complete_first``.
+    """
+    above = mc > 1
+    safe_mc = jnp.where(above, mc, 1)
+    p = jnp.where(above, 1 / safe_mc, mc)
+    log_mc = jnp.log(mc)
+    value = _horner(_K_P, p) - jnp.where(above, -log_mc, log_mc) * _horner(_K_Q, p)
+    return jnp.where(above, over_sqrt(value, safe_mc), value)
+
+
 def _complete_second(mc):
-    """E(1 - mc) for 0 <= mc <= 1 (E = 1 at mc = 0)."""
+    """E(1 - mc) for every mc >= 0 (E = 1 at mc = 0, +inf at mc = +inf).
+
+    The fit holds on 0 <= mc <= 1 only (at mc = 11 it gave E(-10) = 56270 for 3.6391).  mc > 1
+    (m < 0) by the imaginary-modulus transformation E(m) = mc^(1/2) E(1 - 1/mc) (DLMF 19.7.2,
+    E(ik/k') = E(k)/k', with k'^2 = 1/mc; the complete case of DLMF 19.7.5), where the fit holds:
+    p = 1/mc is in (0, 1), and its term p log(p) is taken as -p log(mc).  Where p is subnormal
+    (flushed to zero) that term, of size below 1e-305, is lost and the polynomials give E ~ mc^(1/2),
+    the limit of DLMF 19.12.2 (relative error p ln(1/p)/4).  For mc <= 1 the same operations as the
+    fit alone (bit for bit); the branch not taken sees mc = 1 (safe where).
+    """
+    above = mc > 1
+    safe_mc = jnp.where(above, mc, 1)
+    p = jnp.where(above, 1 / safe_mc, mc)
     log_mc = jnp.log(jnp.where(mc > 0, mc, 1))
-    return _horner(_E_P, mc) - mc * log_mc * _horner(_E_Q, mc)
+    # p log(p): mc log(mc) below 1, -(1/mc) log(mc) above (0 at mc = +inf, not 0 * inf).
+    p_log_p = jnp.where(above, jnp.where(p > 0, -p * log_mc, 0), p * log_mc)
+    value = _horner(_E_P, p) - p_log_p * _horner(_E_Q, p)
+    return jnp.where(above, jnp.sqrt(safe_mc) * value, value)
 
 
 @jax.custom_jvp
 def _ellipk(m, mc):
     # K(1) = +inf (scipy's convention).
-    return jnp.where(mc == 0, jnp.inf, _complete_first(mc))
+    return jnp.where(mc == 0, jnp.inf, _complete_first_any(mc))
 
 
 @_ellipk.defjvp
@@ -93,7 +148,7 @@ def _ellipk_jvp(primals, tangents):
     m, mc = primals
     dm, dmc = tangents
     # DLMF 19.25.1 and 19.18.1: dK/dm = R_D(0, 1, mc)/6 (infinite at m = 1 only).
-    derivative = _rd(jnp.zeros_like(mc), jnp.ones_like(mc), mc, True) / 6
+    derivative = _rd_homogeneous(jnp.zeros_like(mc), jnp.ones_like(mc), mc) / 6
     return _ellipk(m, mc), 0.5 * (dm - dmc) * derivative
 
 
@@ -128,7 +183,10 @@ def ellipkm1(p):
 
 
 def ellipe(m, *, mc=None):
-    r"""Complete elliptic integral of the second kind E(m) (DLMF 19.2.8), via DLMF 19.25.1."""
+    r"""Complete elliptic integral of the second kind E(m) (DLMF 19.2.8), via DLMF 19.25.1.
+
+    As ``scipy.special.ellipe``, for every m <= 1: m < 0 by DLMF 19.7.2 (``_complete_second``).
+    """
     m, mc = complement(m, mc)
     return _ellipe(m, mc)
 
@@ -139,7 +197,10 @@ def ellipe(m, *, mc=None):
 @jax.custom_jvp
 def _ellipkinc(phi, m, mc):
     turns, s, c = _reduce_amplitude(phi)
-    reduced = s * _rf(c * c, _delta_squared(s, c, mc), jnp.ones_like(s))
+    delta2 = _delta_squared(s, c, mc)
+    # R_F of the scaled arguments where 1 - m sin^2 phi is huge (m << 0: ``_homogeneity``).
+    t, root = _homogeneity(delta2)
+    reduced = s * (root * _rf(c * c * t, delta2 * t, t))
     # K only where a whole half-period is added: K(1) is infinite and must not meet turns = 0.
     complete = jnp.where(turns == 0, 0, 2 * turns * _ellipk(m, jnp.where(turns == 0, 1, mc)))
     return complete + reduced
@@ -153,10 +214,13 @@ def _ellipkinc_jvp(primals, tangents):
     turns, s, c = _reduce_amplitude(phi)
     delta2 = _delta_squared(s, c, mc)
     safe_mc = jnp.where(turns == 0, 1, mc)
-    dk_dm = _rd(jnp.zeros_like(mc), jnp.ones_like(mc), safe_mc, True) / 6
-    dfr_dm = s**3 * _rd(c * c, jnp.ones_like(s), delta2, True) / 6
+    dk_dm = _rd_homogeneous(jnp.zeros_like(mc), jnp.ones_like(mc), safe_mc) / 6
+    dfr_dm = s**3 * _rd_homogeneous(c * c, jnp.ones_like(s), delta2) / 6
     df_dm = jnp.where(turns == 0, 0, 2 * turns * dk_dm) + dfr_dm
-    tangent = over_sqrt(dphi, delta2) + 0.5 * (dm - dmc) * df_dm
+    # dF/dphi = 1/Delta (DLMF 19.2.4) as t^(1/2)/sqrt(t Delta^2) (``_homogeneity``): reverse mode
+    # divides the cotangent by Delta^2 first, which flushes to zero for Delta^2 > 4.5e307.
+    t, root = _homogeneity(delta2)
+    tangent = over_sqrt(dphi, delta2 * t) * root + 0.5 * (dm - dmc) * df_dm
     return value, tangent
 
 

@@ -413,3 +413,165 @@ def test_broadcasting_and_vmap():
     np.testing.assert_allclose(np.asarray(mapped), evaluate("ellippiinc", [0.3, phi, 0.6]), rtol=1e-15)
     assert special.ellipk(jnp.float32(0.5)).dtype == jnp.float32
     assert special.ellipkinc(jnp.float32(0.5), jnp.float32(0.5)).dtype == jnp.float32
+
+
+# ----------------------------------------------------------------------- huge negative parameter
+
+
+# The issue's parameters (down to -DBL_MAX, where 1 - m sin^2 phi and mc = 1 - m reach the overflow
+# threshold) and amplitudes in, at the edges of and beyond the principal range.
+HUGE_NEGATIVE_M = np.array([-1e300, -1e305, -1e307, -1.5e308, -1.7976931348623157e308])
+HUGE_NEGATIVE_PHI = np.array([1e-3, 0.3, 1.0, HALF_PI - 1e-9, HALF_PI, 2.0, 10.0,
+                              -1e-3, -1.0, -HALF_PI, -2.0, -10.0])
+
+
+def _huge_negative_grid(m):
+    phi, m = np.meshgrid(HUGE_NEGATIVE_PHI, m)
+    return phi.ravel(), m.ravel()
+
+
+def _f_derivatives(phi, m):
+    """(dF/dphi, dF/dm) at 40 digits: the integrand 1/Delta (DLMF 19.2.4) and DLMF 19.4.4 in the
+    parameter, dF/dm = E/(2 m mc) - F/(2m) - sin(phi) cos(phi)/(2 mc Delta), mc = 1 - m."""
+    delta = mpmath.sqrt(1 - m * mpmath.sin(phi) ** 2)
+    mc = 1 - m
+    d_m = (mpmath.ellipe(phi, m) / (2 * m * mc) - mpmath.ellipf(phi, m) / (2 * m)
+           - mpmath.sin(phi) * mpmath.cos(phi) / (2 * mc * delta))
+    return 1 / delta, d_m
+
+
+def test_huge_negative_parameter_float64():
+    """F(phi|m) for m <= -1e300 against mpmath at 40 digits (issue: 1.9e-6 for m <= -1e307).
+
+    R_F's last duplication scale 4^-12/A_12 was subnormal for 1 - m sin^2 phi >~ 1e306, and XLA
+    flushes it to zero; and K(m) for m < 0 (phi beyond pi/2) was NaN.  Measured worst relative error
+    before the fix 1.9e-6 (NaN beyond pi/2), after it 3.4e-16 (scipy 2.2e-16): tolerance 5e-16.
+    """
+    phi, m = _huge_negative_grid(HUGE_NEGATIVE_M)
+    out = evaluate("ellipkinc", [phi, m])
+    hi, lo = ref.values(ref.ellipkinc, phi, m)
+    ref.check("ellipkinc huge negative m float64 relative error",
+              ref.ratio(ref.error(out, hi[0], lo[0]), np.abs(hi[0])), 5e-16,
+              {"phi": phi, "m": m}, {"value": out, "reference": hi[0]})
+
+
+def test_huge_negative_parameter_float32():
+    """float32 from m = -1e20 to -FLT_MAX: K(m < 0) was NaN, R_F's scale flushed for m <~ -1e34.
+    Measured worst relative error 1.7e-7: tolerance 3e-7 (TOL32["ellipkinc"] is 6e-7)."""
+    phi, m = _huge_negative_grid([-1e20, -1e30, -1e36, -3.4028235e38])
+    phi, m = phi.astype(np.float32), m.astype(np.float32)
+    out = evaluate("ellipkinc", [phi, m])
+    assert out.dtype == np.float32
+    hi, lo = ref.values(ref.ellipkinc, phi, m)
+    ref.check("ellipkinc huge negative m float32 relative error",
+              ref.ratio(ref.error(out, hi[0], lo[0]), np.abs(hi[0])), 3e-7,
+              {"phi": phi, "m": m}, {"value": out, "reference": hi[0]})
+
+
+@functools.lru_cache(maxsize=None)
+def _ellipkinc_gradient():
+    return jax.jit(jax.vmap(jax.grad(special.ellipkinc, argnums=(0, 1))))
+
+
+def test_huge_negative_parameter_gradients():
+    """jax.grad in phi and m against mpmath (``_f_derivatives``), m down to -DBL_MAX.
+
+    Before the fix the phi-derivative was 0 (1/Delta^2 flushed to zero in reverse mode) and the
+    m-derivative NaN (R_D's (3/5) Delta^2 overflowed) for m <= -1.5e308.  Measured worst relative
+    errors: dF/dphi 5.7e-16 (at phi = 10: the rounding of 10 - 3 pi, times cot), dF/dm 5.7e-16;
+    tolerance 8e-16.  |dF/dm| < 1e-440 for m <= -1e300, whose float64 value is 0; -1e100 and -1e200
+    check the m-derivative where it is representable.
+    """
+    phi, m = _huge_negative_grid(np.concatenate([[-1e100, -1e200], HUGE_NEGATIVE_M]))
+    d_phi, d_m = (np.asarray(g) for g in _ellipkinc_gradient()(phi, m))
+    with mpmath.workdps(ref.DPS):
+        exact = [_f_derivatives(mpmath.mpf(p), mpmath.mpf(x)) for p, x in zip(phi, m)]
+    hi_phi = np.array([float(e[0]) for e in exact])
+    hi_m = np.array([float(e[1]) for e in exact])
+    inputs = {"phi": phi, "m": m}
+    ref.check("ellipkinc huge negative m: dF/dphi relative error",
+              ref.ratio(np.abs(d_phi - hi_phi), np.abs(hi_phi)), 8e-16, inputs)
+    ref.check("ellipkinc huge negative m: dF/dm relative error",
+              ref.ratio(np.abs(d_m - hi_m), np.abs(hi_m)), 8e-16, inputs,
+              {"value": d_m, "reference": hi_m})
+    assert np.all(hi_m[m <= -1e300] == 0) and np.all(np.isfinite(d_m))
+
+
+# ------------------------------------------------------------------------ E(m) for negative m
+
+
+# The issue's parameters (E(-10) was 56270 for 3.6391: the fit on 0 <= mc <= 1 taken at mc = 1 - m),
+# a few more down to -DBL_MAX (where 1/mc is subnormal), and random ones.
+NEGATIVE_M = np.array([-1e-300, -1e-10, -0.5, -1.0, -10.0, -1e3, -1e10, -1e100, -1e300,
+                       -1.7976931348623157e308, -1e-5, -0.1, -2.5, -123.4, -1e20, -2.0**501,
+                       -1e305, -1.5e308])
+NEGATIVE_M32 = np.array([-1e-30, -1e-10, -0.5, -1, -10, -1e3, -1e10, -1e20, -1e30, -1e36,
+                         -3.4028235e38], np.float32)
+
+
+@functools.lru_cache(maxsize=None)
+def negative_m_grids():
+    rng = np.random.default_rng(101)
+    m64 = np.concatenate([NEGATIVE_M, -ref.log_uniform(rng, -300, 308.25, 150),
+                          -rng.uniform(0, 10, 100)])
+    m32 = np.concatenate([NEGATIVE_M32, -ref.log_uniform(rng, -37, 38.5, 100),
+                          -rng.uniform(0, 10, 50)]).astype(np.float32)
+    return m64, m32
+
+
+def _ellipe_derivative(m):
+    """dE/dm = (E - K)/(2m) (DLMF 19.4.1), with the digits that E - K cancels near m = 0 added."""
+    m = mpmath.mpf(float(m))
+    with mpmath.workdps(ref.DPS + max(0, -int(mpmath.log10(abs(m)))) + 5):
+        return (mpmath.ellipe(m) - mpmath.ellipk(m)) / (2 * m)
+
+
+def test_ellipe_negative_parameter_float64():
+    """E(m) for m < 0 against mpmath.ellipe at 40 digits; the explicit complement mc = 1 - m too.
+
+    Measured worst relative error before the fix 1.5e4 at m = -10 (inf for m <= -1e50), after it
+    2.3e-16 on this grid (3.2e-16 on 2300 random points): tolerance 4e-16.
+    """
+    m, _ = negative_m_grids()
+    hi, lo = ref.values(ref.ellipe, m)
+    for out, label in [(evaluate("ellipe", [m]), "m"), (evaluate("ellipe", [m], mc=1 - m), "mc")]:
+        ref.check(f"ellipe negative m ({label}) float64 relative error",
+                  ref.ratio(ref.error(out, hi[0], lo[0]), np.abs(hi[0])), 4e-16,
+                  {"m": m}, {"value": out, "reference": hi[0]})
+    # E ~ sqrt(1 - m) as m -> -inf (DLMF 19.12.2): +inf at m = -inf, as scipy.special.ellipe.
+    assert np.isposinf(float(special.ellipe(-np.inf)))
+
+
+def test_ellipe_negative_parameter_float32():
+    """float32 down to -FLT_MAX (before the fix 1.5e4 at m = -10, inf from m = -1e10).  Measured worst
+    relative error 1.3e-7 (1.5e-7 on 1500 random points): tolerance 2e-7 (TOL32["ellipe"] is 4e-7)."""
+    _, m = negative_m_grids()
+    out = evaluate("ellipe", [m])
+    assert out.dtype == np.float32
+    hi, lo = ref.values(ref.ellipe, m)
+    ref.check("ellipe negative m float32 relative error",
+              ref.ratio(ref.error(out, hi[0], lo[0]), np.abs(hi[0])), 2e-7,
+              {"m": m}, {"value": out, "reference": hi[0]})
+
+
+@functools.lru_cache(maxsize=None)
+def _ellipe_gradient():
+    return jax.jit(jax.vmap(jax.grad(special.ellipe)))
+
+
+@pytest.mark.parametrize("dtype", ["float64", "float32"])
+def test_ellipe_negative_parameter_gradient(dtype):
+    """jax.grad of E for m < 0 against (E - K)/(2m) at 40 digits.
+
+    The rule's -R_D(0, mc, 1)/6 needs no rescaling up to mc = DBL_MAX: the small argument z = 1
+    carries the result, and the overflowing mean^(3/2) only drops a term below 1e-450 of it.
+    Measured worst relative error float64 5.2e-16 (7.0e-16 on 2300 random points; 2.2e-16 at
+    -DBL_MAX), float32 2.3e-7 (3.0e-7 on 1500 random points): tolerances 8e-16 and 4e-7.
+    """
+    m = negative_m_grids()[dtype == "float32"]
+    out = np.asarray(_ellipe_gradient()(m))
+    assert out.dtype == m.dtype and np.all(np.isfinite(out))
+    exact = np.array([float(_ellipe_derivative(x)) for x in m])
+    ref.check(f"ellipe negative m: dE/dm {dtype} relative error",
+              ref.ratio(np.abs(out - exact), np.abs(exact)), {"float64": 8e-16, "float32": 4e-7}[dtype],
+              {"m": m}, {"value": out, "reference": exact})
