@@ -3,8 +3,8 @@
 XLA:CPU turns a program into a sequence of kernels, one per fused group of operations, and pays
 for each one at compile time (about 15 ms) and at every call (a launch).  The exact motion of one
 body is a few hundred small kernels: the unrolled AGM, Carlson's duplication and Bulirsch's cel each
-leave a kernel per step (docs/performance.md), so that a one-body program is dominated by their
-count, not by its arithmetic.  XLA emits a small ``call`` as one kernel, compiled whole, when it
+leave a kernel per step (docs/performance.md), so that the compile time of a one-body program is
+set by their count, not by its arithmetic.  XLA emits a small ``call`` as one kernel, compiled whole, when it
 carries the frontend attribute ``xla_cpu_small_call`` (the path XLA takes itself for small while
 loops).  :func:`one_kernel` puts a function into such a call: a nested ``jax.jit(...,
 inline=False)`` traced under ``jax.experimental.xla_metadata.set_xla_metadata``.  The attribute
@@ -154,12 +154,12 @@ def _primal_region(function, region):
 
 
 def one_kernel(function):
-    """``function`` evaluated as a one-kernel region where that is possible (module docstring), else as is.
+    """``function`` evaluated as a one-kernel region where possible (module docstring), else as is.
 
     ``function`` takes and returns pytrees of arrays, and must close over no tracer (pass everything
-    it reads as an argument: ``custom_jvp`` and ``custom_vmap`` refuse closed-over tracers).  The region serves the value of an
-    unbatched call; under ``jax.vmap`` and in derivatives ``function`` is traced as usual
-    (``_primal_region``).  The decision is made from the arguments' shapes and the jaxpr when the call
+    it reads as an argument: ``custom_jvp`` and ``custom_vmap`` refuse closed-over tracers).  The
+    region serves the value of an unbatched call; under ``jax.vmap`` and in derivatives ``function``
+    is traced as usual (``_primal_region``).  The decision is made from the arguments' shapes and the jaxpr when the call
     is traced, so that it costs nothing at run time; the jaxpr is traced once (the region's own
     ``jit`` reuses it).
     """
