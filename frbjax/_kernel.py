@@ -159,9 +159,9 @@ def one_kernel(function):
     ``function`` takes and returns pytrees of arrays, and must close over no tracer (pass everything
     it reads as an argument: ``custom_jvp`` and ``custom_vmap`` refuse closed-over tracers).  The
     region serves the value of an unbatched call; under ``jax.vmap`` and in derivatives ``function``
-    is traced as usual (``_primal_region``).  The decision is made from the arguments' shapes and the jaxpr when the call
-    is traced, so that it costs nothing at run time; the jaxpr is traced once (the region's own
-    ``jit`` reuses it).
+    is traced as usual (``_primal_region``).  The decision is made from the arguments' shapes and
+    the jaxpr when the call is traced, so that it costs nothing at run time; the jaxpr is traced once
+    (the region's own ``jit`` reuses it).
     """
     region = jax.jit(function, inline=False)
     primal_region = _primal_region(function, region)
