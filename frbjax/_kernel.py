@@ -79,7 +79,7 @@ def available() -> bool:
         with jax.ensure_compile_time_eval():
             x = np.linspace(-1.0, 2.0, 4, dtype=np.float32)
             compiled = jax.jit(lambda x: _region(probe, x)).lower(x).compile()
-            if "xla_cpu_small_call" not in compiled.as_text():
+            if 'inlineable="false"' not in compiled.as_text():
                 return False
             return bool(np.allclose(np.asarray(compiled(x)), np.asarray(jax.jit(probe)(x)), rtol=1e-6))
     except Exception:  # noqa: BLE001 - any failure of an internal attribute: fall back

@@ -49,7 +49,7 @@ from jax import lax
 from jax.custom_derivatives import SymbolicZero
 
 from .._fusion import materialise
-from ._common import is_double, over_sqrt, promote
+from ._common import ROLLED_MAX_POINTS, is_double, over_sqrt, promote
 
 
 def _plan(x):
@@ -64,12 +64,13 @@ def _plan(x):
 def _duplicate(step, state, x, rolled=False):
     """Apply duplication ``step(state, q)`` (q = 4^-k at step k) ``_plan`` times; returns (state, 4^-N).
 
-    Unrolled by default: XLA fuses the steps and the series into one vectorized pass over the points
-    (a rolled loop writes the state to memory and back every step, several times slower).  The
-    derivative rules use ``rolled=True``: one compiled step instead of twelve (compile time).
+    Unrolled for an array of points: XLA fuses the steps and the series into one vectorized pass over
+    them (a rolled loop writes the state to memory and back every step, several times slower).  The
+    derivative rules (``rolled=True``) and one point or a few (``_common.iterate``) take a rolled
+    loop: one compiled step instead of twelve (compile time).
     """
     steps, _ = _plan(x)
-    if rolled:
+    if rolled or jnp.size(x) <= ROLLED_MAX_POINTS:  # one point or a few: ``_common.iterate``
         def body(_, carry):
             quarter, state = carry
             return quarter / 4, step(state, quarter)

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import jax.numpy as jnp
 import numpy as np
+from jax import lax
 
 
 def promote(*args):
@@ -17,6 +18,26 @@ def promote(*args):
 def is_double(x) -> bool:
     """True when ``x`` is float64: iteration counts are chosen per dtype at trace time."""
     return jnp.asarray(x).dtype == jnp.float64
+
+
+# At most this many points: a fixed iteration runs as a rolled loop rather than unrolled (``iterate``).
+ROLLED_MAX_POINTS = 64
+
+
+def iterate(step, state, count, x):
+    """``state`` after ``count`` applications of ``step(k, state)``, k = 0, 1, ...
+
+    Unrolled for an array of points (``x`` larger than ``ROLLED_MAX_POINTS``): XLA fuses the steps into
+    one vectorized pass over the points.  For one point or a few, a rolled loop: XLA:CPU compiles a
+    loop that touches little memory per iteration as one kernel, where the unrolled steps would be a
+    kernel each (a square root or quotient feeding several later steps is never fused into them), so
+    that a one-body program compiles several times faster for the same arithmetic.
+    """
+    if jnp.size(x) <= ROLLED_MAX_POINTS:
+        return lax.fori_loop(0, count, step, state)
+    for k in range(count):
+        state = step(k, state)
+    return state
 
 
 def where_safe(condition, value, substitute):

@@ -26,7 +26,7 @@ import jax.numpy as jnp
 from jax import lax
 
 from ._carlson import _rd
-from ._common import complement, is_double, over_sqrt, promote
+from ._common import ROLLED_MAX_POINTS, complement, is_double, over_sqrt, promote
 from ._legendre import _complete_first
 
 
@@ -42,6 +42,11 @@ def _tiny_argument(x) -> float:
     return 1e-100 if is_double(x) else 1e-15
 
 
+def _unroll(x):
+    """``lax.scan``'s ``unroll`` for the points ``x``: whole for an array, rolled for a few points."""
+    return True if jnp.size(x) > ROLLED_MAX_POINTS else 1
+
+
 def _agm_levels(mc):
     """The AGM levels of DLMF 22.20.1 for parameter m = 1 - mc (mc > 0): (a_n, b_n) for n < N and a_N.
 
@@ -55,9 +60,10 @@ def _agm_levels(mc):
         a, b = state
         return ((a + b) / 2, jnp.sqrt(a * b)), (a, b)
 
-    # Unrolled: one fused pass over the points instead of a loop that stores every level's state.
+    # Unrolled for an array of points: one fused pass over them instead of a loop that stores every
+    # level's state.  Rolled for one point or a few (``_common.iterate``: one kernel, faster compile).
     (mean, _), (a_levels, b_levels) = lax.scan(descend, (jnp.ones_like(mc), jnp.sqrt(mc)), None,
-                                               length=_agm_steps(mc), unroll=True)
+                                               length=_agm_steps(mc), unroll=_unroll(mc))
     return jnp.moveaxis(a_levels, 0, -1), jnp.moveaxis(b_levels, 0, -1), mean
 
 
@@ -84,10 +90,11 @@ def _jacobi_to_half_quarter(w, levels):
         return (cot_ratio / a_n, cot_ratio, dn), None
 
     start = (ratio, mean * ratio, jnp.ones_like(ratio))
-    # Unrolled: XLA fuses the whole ascent into one loop over the points (a rolled loop writes every
-    # level's state to memory and back, several times slower).
+    # Unrolled for an array of points: XLA fuses the whole ascent into one loop over them (a rolled
+    # loop writes every level's state to memory and back, several times slower); rolled for one
+    # point or a few (``_common.iterate``).
     levels = (jnp.moveaxis(a_levels, -1, 0), jnp.moveaxis(b_levels, -1, 0))
-    (_, cot_ratio, dn), _ = lax.scan(ascend, start, levels, reverse=True, unroll=True)
+    (_, cot_ratio, dn), _ = lax.scan(ascend, start, levels, reverse=True, unroll=_unroll(ratio))
     sn = over_sqrt(1, cot_ratio * cot_ratio + 1)
     cn = cot_ratio * sn
     one = jnp.ones_like(cn)

@@ -26,7 +26,7 @@ import jax
 import jax.numpy as jnp
 
 from ._carlson import _horner, _rd, _rf, _rf_rj, _rj, _rj_parameter_largest
-from ._common import complement, is_double, over_sqrt, promote
+from ._common import complement, is_double, iterate, over_sqrt, promote
 
 
 def _reduce_amplitude(phi):
@@ -353,18 +353,19 @@ def _rj_complete(mc, p):
     root_p = jnp.sqrt(p)
     a, b = jnp.zeros_like(p), root_p / p  # b / sqrt(p) with b = 1, written without a quotient by a root
     qc = jnp.sqrt(mc)
-    e, em, p = qc, jnp.ones_like(p), root_p
-    for _ in range(_cel_steps(p)):
+    def step(_, state):
+        a, b, p, e, em, qc = state
         inverse = 1 / p
         f = a
         a = a + b * inverse
         g = e * inverse
         b = 2 * (b + f * g)
         p = p + g
-        g = em
         em = em + qc
         qc = 2 * jnp.sqrt(e)
-        e = qc * em
+        return a, b, p, qc * em, em, qc
+
+    a, b, p, _, em, _ = iterate(step, (a, b, root_p, qc, jnp.ones_like(p), qc), _cel_steps(p), p)
     return 1.5 * jnp.pi * (b + a * em) / (em * (em + p))
 
 
