@@ -356,7 +356,7 @@ def plot(result, path):
     now = [distance(name, result["ratios"][name]) for name in names]
     positions = np.arange(len(names))
     figure, axes = plt.subplots(figsize=(9, 4.5))
-    axes.barh(positions + 0.2, before, height=0.4, color="0.75", label="before (frbjax 0.1.0)")
+    axes.barh(positions + 0.2, before, height=0.4, color="0.75", label="before (frbjax 0.1.0; later rows: the release before them)")
     axes.barh(positions - 0.2, now, height=0.4, color="tab:blue", label="now")
     axes.axvline(1.0, color="k", lw=1)
     axes.set_xscale("log")
