@@ -15,9 +15,7 @@ from ._body import _validate, _working_dtype, motion_once
 from ._kernel import one_kernel
 
 
-@one_kernel
-def _state_once(inertia, angular_momentum, attitude, t):
-    return motion_once(inertia, angular_momentum, attitude, t)
+_state_once = one_kernel(motion_once)
 
 
 @jax.jit

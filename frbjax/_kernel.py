@@ -46,12 +46,12 @@ _ATTRIBUTES = dict(xla_cpu_small_call="true", inlineable="false")
 MAX_ELEMENTS = 64
 # Dot products with operands up to this size are emitted inside the kernel; larger ones are not.
 _MAX_DOT_ELEMENTS = 16
-# Operations XLA:CPU cannot emit inside a single kernel: they call its runtime.
+# Operations XLA:CPU cannot emit inside a single kernel: they call its runtime (and every callback).
 _RUNTIME_PRIMITIVES = frozenset({
     "sort", "cholesky", "eig", "eigh", "lu", "lu_pivots_to_permutation", "qr", "householder_product",
     "svd", "schur", "hessenberg", "tridiagonal", "tridiagonal_solve", "triangular_solve", "fft",
-    "ffi_call", "custom_call", "pure_callback", "io_callback", "debug_callback", "debug_print",
-    "rng_bit_generator", "random_bits", "all_gather", "psum", "ppermute", "all_to_all",
+    "ffi_call", "custom_call", "debug_print", "rng_bit_generator", "random_bits", "all_gather", "psum",
+    "ppermute", "all_to_all",
 })
 
 

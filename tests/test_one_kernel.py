@@ -52,7 +52,8 @@ def _one_body_args(batch=()):
 
 def test_the_backend_says_which_program_runs(monkeypatch):
     """On CPU with this JAX the region is compiled (the probe), and switched off by the environment."""
-    assert _kernel.available() == (jax.default_backend() == "cpu" and _kernel.available())
+    if jax.default_backend() != "cpu":
+        assert not _kernel.available()
     args = _one_body_args()
     region = _has_region(_one_body_program(*args).as_text())
     assert region == (_kernel.available() and _kernel.enabled())

@@ -7,9 +7,9 @@ Taylor series of DLMF 19.36.1 and 19.36.2 up to seventh order.
 Each duplication step is an exact identity that shrinks the relative spread of the arguments by a
 factor 4, and the seventh-order series errs by about the eighth power of that spread.  A *fixed* number
 of steps per dtype (``_plan``: 12 in float64, enough for argument ratios down to 1e-300) keeps each
-function a straight-line XLA program.  The steps are unrolled, so that XLA fuses the whole evaluation
-into one vectorized pass over the points; the derivative rules use a rolled loop instead (one
-compiled step: compile time).  R_F and R_J of the same x, y, z share one loop (``_rf_rj``).  In R_J's
+function a straight-line XLA program.  Over an array the steps are unrolled, so that XLA fuses the
+whole evaluation into one vectorized pass over the points; one point or a few and the derivative
+rules use a rolled loop instead (one compiled step: compile time; ``_common.rolled``).  R_F and R_J of the same x, y, z share one loop (``_rf_rj``).  In R_J's
 step, R_C(1, 1 + e_k) (Carlson 1995, eq. (2.19)) costs a square root and a polynomial; a logarithm
 only serves the points with 1 + e_k < 1/2.
 
@@ -49,7 +49,7 @@ from jax import lax
 from jax.custom_derivatives import SymbolicZero
 
 from .._fusion import materialise
-from ._common import ROLLED_MAX_POINTS, is_double, over_sqrt, promote
+from ._common import is_double, iterate, over_sqrt, promote
 
 
 def _plan(x):
@@ -64,23 +64,14 @@ def _plan(x):
 def _duplicate(step, state, x, rolled=False):
     """Apply duplication ``step(state, q)`` (q = 4^-k at step k) ``_plan`` times; returns (state, 4^-N).
 
-    Unrolled for an array of points: XLA fuses the steps and the series into one vectorized pass over
-    them (a rolled loop writes the state to memory and back every step, several times slower).  The
-    derivative rules (``rolled=True``) and one point or a few (``_common.iterate``) take a rolled
-    loop: one compiled step instead of twelve (compile time).
+    Unrolled for an array of points, a rolled loop for one point or a few (``_common.rolled``) and in
+    the derivative rules (``rolled=True``: one compiled step instead of twelve, for compile time).
     """
-    steps, _ = _plan(x)
-    if rolled or jnp.size(x) <= ROLLED_MAX_POINTS:  # one point or a few: ``_common.iterate``
-        def body(_, carry):
-            quarter, state = carry
-            return quarter / 4, step(state, quarter)
+    def body(_, carry):
+        quarter, state = carry
+        return quarter / 4, step(state, quarter)
 
-        start = (jnp.asarray(1.0, x.dtype), state)
-        return lax.fori_loop(0, steps, body, start)[::-1]
-    quarter = 1.0
-    for _ in range(steps):
-        state = step(state, quarter)
-        quarter = quarter / 4
+    quarter, state = iterate(body, (jnp.asarray(1.0, x.dtype), state), _plan(x)[0], x, rolled)
     return state, quarter
 
 

@@ -20,20 +20,32 @@ def is_double(x) -> bool:
     return jnp.asarray(x).dtype == jnp.float64
 
 
-# At most this many points: a fixed iteration runs as a rolled loop rather than unrolled (``iterate``).
+# At most this many points: a fixed iteration runs as a rolled loop rather than unrolled (``rolled``).
 ROLLED_MAX_POINTS = 64
 
 
-def iterate(step, state, count, x):
-    """``state`` after ``count`` applications of ``step(k, state)``, k = 0, 1, ...
+def rolled(x) -> bool:
+    """Whether a fixed iteration over the points ``x`` runs as a rolled loop (static, from the shape).
 
-    Unrolled for an array of points (``x`` larger than ``ROLLED_MAX_POINTS``): XLA fuses the steps into
-    one vectorized pass over the points.  For one point or a few, a rolled loop: XLA:CPU compiles a
-    loop that touches little memory per iteration as one kernel, where the unrolled steps would be a
-    kernel each (a square root or quotient feeding several later steps is never fused into them), so
-    that a one-body program compiles several times faster for the same arithmetic.
+    Unrolled for an array of points: XLA fuses the steps into one vectorized pass over them (a rolled
+    loop writes the state to memory and back every step, several times slower).  Rolled for one point
+    or a few (at most ``ROLLED_MAX_POINTS``): XLA:CPU compiles a loop that touches little memory per
+    iteration as one kernel, where the unrolled steps would be a kernel each (a square root or
+    quotient feeding several later steps is never fused into them), so that a one-body program
+    compiles several times faster for the same arithmetic.
     """
-    if jnp.size(x) <= ROLLED_MAX_POINTS:
+    return jnp.size(x) <= ROLLED_MAX_POINTS
+
+
+def scan_unroll(x):
+    """``lax.scan``'s ``unroll`` for an iteration over the points ``x`` (``rolled``)."""
+    return 1 if rolled(x) else True
+
+
+def iterate(step, state, count, x, roll=False):
+    """``state`` after ``count`` applications of ``step(k, state)``, k = 0, 1, ..., over the points ``x``:
+    a rolled loop where ``roll`` or ``rolled(x)``, unrolled otherwise."""
+    if roll or rolled(x):
         return lax.fori_loop(0, count, step, state)
     for k in range(count):
         state = step(k, state)

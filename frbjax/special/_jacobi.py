@@ -26,7 +26,7 @@ import jax.numpy as jnp
 from jax import lax
 
 from ._carlson import _rd
-from ._common import ROLLED_MAX_POINTS, complement, is_double, over_sqrt, promote
+from ._common import complement, is_double, over_sqrt, promote, scan_unroll
 from ._legendre import _complete_first
 
 
@@ -40,11 +40,6 @@ def _tiny_argument(x) -> float:
     # Below this |w| the Bulirsch recursion (cot^2 w) would overflow; sn = w, cn = dn = 1 is then exact
     # to w^2 (1e-200 in float64, 1e-30 in float32).
     return 1e-100 if is_double(x) else 1e-15
-
-
-def _unroll(x):
-    """``lax.scan``'s ``unroll`` for the points ``x``: whole for an array, rolled for a few points."""
-    return True if jnp.size(x) > ROLLED_MAX_POINTS else 1
 
 
 def _agm_levels(mc):
@@ -61,9 +56,9 @@ def _agm_levels(mc):
         return ((a + b) / 2, jnp.sqrt(a * b)), (a, b)
 
     # Unrolled for an array of points: one fused pass over them instead of a loop that stores every
-    # level's state.  Rolled for one point or a few (``_common.iterate``: one kernel, faster compile).
+    # level's state.  Rolled for one point or a few (``_common.rolled``: one kernel, faster compile).
     (mean, _), (a_levels, b_levels) = lax.scan(descend, (jnp.ones_like(mc), jnp.sqrt(mc)), None,
-                                               length=_agm_steps(mc), unroll=_unroll(mc))
+                                               length=_agm_steps(mc), unroll=scan_unroll(mc))
     return jnp.moveaxis(a_levels, 0, -1), jnp.moveaxis(b_levels, 0, -1), mean
 
 
@@ -92,9 +87,9 @@ def _jacobi_to_half_quarter(w, levels):
     start = (ratio, mean * ratio, jnp.ones_like(ratio))
     # Unrolled for an array of points: XLA fuses the whole ascent into one loop over them (a rolled
     # loop writes every level's state to memory and back, several times slower); rolled for one
-    # point or a few (``_common.iterate``).
+    # point or a few (``_common.rolled``).
     levels = (jnp.moveaxis(a_levels, -1, 0), jnp.moveaxis(b_levels, -1, 0))
-    (_, cot_ratio, dn), _ = lax.scan(ascend, start, levels, reverse=True, unroll=_unroll(ratio))
+    (_, cot_ratio, dn), _ = lax.scan(ascend, start, levels, reverse=True, unroll=scan_unroll(ratio))
     sn = over_sqrt(1, cot_ratio * cot_ratio + 1)
     cn = cot_ratio * sn
     one = jnp.ones_like(cn)

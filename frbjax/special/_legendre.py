@@ -99,20 +99,28 @@ def _complete_first(mc):
     return _horner(_K_P, mc) - jnp.log(mc) * _horner(_K_Q, mc)
 
 
-def _complete_first_any(mc):
-    """K(1 - mc) for every mc >= 0.
+def _imaginary_modulus(mc):
+    """(above, safe_mc, p, log p) for the complete integrals at every mc >= 0 from fits on [0, 1].
 
-    mc > 1 (m < 0) by the imaginary-modulus transformation K(m) = mc^(-1/2) K(1 - 1/mc) (DLMF 19.7.2
-    with k'^2 = 1/mc), where the fit of ``_complete_first`` holds: 1/mc is in (0, 1), and
-    log(1/mc) = -log(mc) stays exact where 1/mc is subnormal (flushed to zero: the polynomials then
-    give K ~ ln(4 sqrt(mc))/sqrt(mc), DLMF 19.12.1).  For mc <= 1 the same operations as
-    ``_complete_first``.
+    mc > 1 (m < 0) goes through the imaginary-modulus transformation (DLMF 19.7.2, k'^2 = 1/mc):
+    ``above`` marks it, ``safe_mc`` is mc there and 1 elsewhere (safe where), p = 1/mc there and mc
+    elsewhere (in [0, 1], where the fits hold), and log p = -log(mc) there, which stays exact where
+    1/mc is subnormal (flushed to zero).  For mc <= 1: p = mc and log p = log(mc), the operations of
+    the fit alone (bit for bit).
     """
     above = mc > 1
     safe_mc = jnp.where(above, mc, 1)
-    p = jnp.where(above, 1 / safe_mc, mc)
     log_mc = jnp.log(mc)
-    value = _horner(_K_P, p) - jnp.where(above, -log_mc, log_mc) * _horner(_K_Q, p)
+    return above, safe_mc, jnp.where(above, 1 / safe_mc, mc), jnp.where(above, -log_mc, log_mc)
+
+
+def _complete_first_any(mc):
+    """K(1 - mc) for every mc >= 0: K(m) = mc^(-1/2) K(1 - 1/mc) for mc > 1 (``_imaginary_modulus``).
+
+    Where 1/mc is flushed to zero the polynomials give K ~ ln(4 sqrt(mc))/sqrt(mc) (DLMF 19.12.1).
+    """
+    above, safe_mc, p, log_p = _imaginary_modulus(mc)
+    value = _horner(_K_P, p) - log_p * _horner(_K_Q, p)
     return jnp.where(above, over_sqrt(value, safe_mc), value)
 
 
@@ -121,18 +129,13 @@ def _complete_second(mc):
 
     The fit holds on 0 <= mc <= 1 only (at mc = 11 it gave E(-10) = 56270 for 3.6391).  mc > 1
     (m < 0) by the imaginary-modulus transformation E(m) = mc^(1/2) E(1 - 1/mc) (DLMF 19.7.2,
-    E(ik/k') = E(k)/k', with k'^2 = 1/mc; the complete case of DLMF 19.7.5), where the fit holds:
-    p = 1/mc is in (0, 1), and its term p log(p) is taken as -p log(mc).  Where p is subnormal
-    (flushed to zero) that term, of size below 1e-305, is lost and the polynomials give E ~ mc^(1/2),
-    the limit of DLMF 19.12.2 (relative error p ln(1/p)/4).  For mc <= 1 the same operations as the
-    fit alone (bit for bit); the branch not taken sees mc = 1 (safe where).
+    E(ik/k') = E(k)/k'; ``_imaginary_modulus``).  Where p = 1/mc is subnormal (flushed to zero) its
+    term p log(p), of size below 1e-305, is lost and the polynomials give E ~ mc^(1/2), the limit of
+    DLMF 19.12.2 (relative error p ln(1/p)/4).
     """
-    above = mc > 1
-    safe_mc = jnp.where(above, mc, 1)
-    p = jnp.where(above, 1 / safe_mc, mc)
-    log_mc = jnp.log(jnp.where(mc > 0, mc, 1))
-    # p log(p): mc log(mc) below 1, -(1/mc) log(mc) above (0 at mc = +inf, not 0 * inf).
-    p_log_p = jnp.where(above, jnp.where(p > 0, -p * log_mc, 0), p * log_mc)
+    above, safe_mc, p, log_p = _imaginary_modulus(mc)
+    # p log(p) is 0 at p = 0 (mc = 0, and mc = +inf), not 0 * inf.
+    p_log_p = jnp.where(p > 0, p * log_p, 0)
     value = _horner(_E_P, p) - p_log_p * _horner(_E_Q, p)
     return jnp.where(above, jnp.sqrt(safe_mc) * value, value)
 
