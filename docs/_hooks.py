@@ -1,18 +1,26 @@
 """mkdocs hooks: files from outside docs/ and the command's help text, at build time.
 
-- The figures of benchmarks/results (written by the benchmark scripts) and the CHANGELOG at the root
-  are added to the site as they are, so that no copy of them is kept under docs/.
+- The figures of benchmarks/results (written by the benchmark scripts), the CHANGELOG and CONTRIBUTING
+  at the root are added to the site as they are, so that no copy of them is kept under docs/.
 - ``<!-- frbjax-help: ARGS -->`` in a page becomes the output of ``frbjax ARGS --help``, so that the
   command-line reference is the parser's own text.
+- The API pages' mathematics: docstrings write it as ``$...$`` and ``$$...$$`` (CONTRIBUTING.md,
+  "Writing docstrings"), which pymdownx.arithmatex turns into MathJax markup like the pages' own.  A
+  ``$`` left in a rendered page outside code and mathematics is a formula that did not parse (an
+  unpaired ``$``, a space inside it): a warning, so that the strict build fails.  Docstrings still
+  in the reST form (``:math:``, ``.. math::``) are listed at INFO level, to be converted.
 """
 
 from __future__ import annotations
 
+import logging
 import os
 import pathlib
 import re
 
 from mkdocs.structure.files import File
+
+log = logging.getLogger("mkdocs.hooks.frbjax")
 
 ROOT = pathlib.Path(__file__).resolve().parents[1]
 FIGURES = ("stability.png", "throughput.png", "work_precision.png", "setup_cost.png", "torqued_work_precision.png",
@@ -25,6 +33,7 @@ def on_files(files, config):
         files.append(File.generated(config, f"images/{name}",
                                     abs_src_path=str(ROOT / "benchmarks" / "results" / name)))
     files.append(File.generated(config, "changelog.md", abs_src_path=str(ROOT / "CHANGELOG.md")))
+    files.append(File.generated(config, "contributing.md", abs_src_path=str(ROOT / "CONTRIBUTING.md")))
     return files
 
 
@@ -52,3 +61,24 @@ def on_page_markdown(markdown, page, config, files):
         return "```text\n" + _help(match["arguments"].split()).rstrip() + "\n```"
 
     return HELP_MARKER.sub(replace, markdown)
+
+
+# What a rendered page may hold a "$" in: code, preformatted blocks, typeset mathematics, scripts.
+_EXEMPT = re.compile(r"<(code|pre|script|style)\b.*?</\1>|<(span|div) class=\"arithmatex\">.*?</\2>",
+                     re.DOTALL)
+_TAGS = re.compile(r"<[^>]+>")
+_REST_MATH = re.compile(r":math:|\.\. math::")
+
+
+def on_page_content(html, page, config, files):
+    if not page.file.src_uri.startswith("api/"):
+        return html
+    text = _TAGS.sub(" ", _EXEMPT.sub(" ", html))
+    for line in text.splitlines():
+        if "$" in line:
+            log.warning(f"{page.file.src_uri}: mathematics not typeset (a $ outside $...$ or $$...$$; "
+                        f"see CONTRIBUTING.md, \"Writing docstrings\"): {line.strip()[:120]!r}")
+    if _REST_MATH.search(text):
+        log.info(f"{page.file.src_uri}: a docstring still writes mathematics in reST (:math:, .. math::); "
+                 "CONTRIBUTING.md, \"Writing docstrings\", has the convention")
+    return html

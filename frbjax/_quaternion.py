@@ -1,14 +1,16 @@
-"""Small quaternion helpers: (w, x, y, z) order, Hamilton product, unit quaternions map body to space."""
+"""Small quaternion helpers: $(w, x, y, z)$ order, Hamilton product, unit quaternions map body to space."""
 
 from __future__ import annotations
 
 import jax.numpy as jnp
+from jax import Array
+from jax.typing import ArrayLike
 
 from ._fusion import sum_last
 
 
-def multiply(p, q):
-    """Hamilton product p ⊗ q of (..., 4) arrays."""
+def multiply(p: Array, q: Array) -> Array:
+    r"""Hamilton product $p \otimes q$ of (..., 4) arrays."""
     pw, px, py, pz = p[..., 0], p[..., 1], p[..., 2], p[..., 3]
     qw, qx, qy, qz = q[..., 0], q[..., 1], q[..., 2], q[..., 3]
     return jnp.stack(
@@ -22,13 +24,23 @@ def multiply(p, q):
     )
 
 
-def conjugate(q):
-    """q* = (w, -x, -y, -z), the inverse of a unit quaternion."""
+def conjugate(q: Array) -> Array:
+    r"""$\bar q = (w, -x, -y, -z)$, the inverse of a unit quaternion."""
     return q * jnp.array([1, -1, -1, -1], dtype=q.dtype)
 
 
-def as_matrix(q):
-    """Rotation matrix R(q) with R v = q ⊗ (0, v) ⊗ q* for a unit quaternion q, shape (..., 3, 3)."""
+def as_matrix(q: ArrayLike) -> Array:
+    r"""Rotation matrix $R(q)$ of a unit quaternion $q = (w, x, y, z)$, shape (..., 3, 3).
+
+    $R(q)\, v = q \otimes (0, v) \otimes \bar q$: the columns of $R$ are the body axes in space
+    ($x_\text{space} = R\, x_\text{body}$), and
+
+    $$R = \begin{pmatrix}
+      1 - 2(y^2 + z^2) & 2(xy - wz) & 2(xz + wy) \\
+      2(xy + wz) & 1 - 2(x^2 + z^2) & 2(yz - wx) \\
+      2(xz - wy) & 2(yz + wx) & 1 - 2(x^2 + y^2)
+    \end{pmatrix}.$$
+    """
     w, x, y, z = q[..., 0], q[..., 1], q[..., 2], q[..., 3]
     return jnp.stack(
         [
@@ -40,11 +52,11 @@ def as_matrix(q):
     )
 
 
-def from_matrix(matrix):
-    """Unit quaternion (w >= 0 where possible) of a rotation matrix, by Shepperd's method.
+def from_matrix(matrix: ArrayLike) -> Array:
+    r"""Unit quaternion ($w \ge 0$ where possible) of a rotation matrix $R$ (..., 3, 3), by Shepperd's method.
 
-    Picks the largest of 1 + trace and 1 + 2 R_ii - trace so that the square root is of a number >= 1,
-    then divides the off-diagonal sums by it.
+    Picks the largest of $1 + \mathrm{tr}\,R$ and $1 + 2R_{ii} - \mathrm{tr}\,R$ so that the square
+    root is of a number $\ge 1$, then divides the off-diagonal sums by it.
     """
     r = matrix
     trace = r[..., 0, 0] + r[..., 1, 1] + r[..., 2, 2]
@@ -71,11 +83,11 @@ def from_matrix(matrix):
     return jnp.take_along_axis(options, choice[..., None, None], axis=-2)[..., 0, :]
 
 
-def exp_pure(rotation_vector):
-    """exp(v/2) as a unit quaternion for a rotation vector v (..., 3): rotation by |v| about v/|v|.
+def exp_pure(rotation_vector: Array) -> Array:
+    r"""$\exp(v/2)$ as a unit quaternion for a rotation vector $v$ (..., 3): rotation by $|v|$ about $v/|v|$.
 
-    Uses the safe-where pattern: the series 1 - θ²/8 and 1/2 - θ²/48 below θ² = 1e-8 keep the value
-    and its gradient finite at v = 0.
+    Uses the safe-where pattern: the series $1 - \theta^2/8$ and $1/2 - \theta^2/48$ below
+    $\theta^2 = 10^{-8}$ keep the value and its gradient finite at $v = 0$.
     """
     theta2 = sum_last(rotation_vector * rotation_vector)
     small = theta2 < 1e-8

@@ -2,12 +2,13 @@
 
 ``frbjax run FILE [-o OUT]`` reads the input file of any of the five example drivers of CALGO 903
 (Celledoni and Zanna, ACM TOMS 37(2), 2010) and writes what the driver writes, computed with the exact
-motion of :class:`frbjax.FreeRigidBody`.  ``frbjax demo`` shows the Dzhanibekov effect: a T-handle spun
-almost about its middle axis flips over and over, with the period predicted by the elliptic integral K.
+motion of `frbjax.FreeRigidBody`.  ``frbjax demo`` shows the Dzhanibekov effect: a T-handle spun
+almost about its middle axis flips over and over, with the period $4K(m)/B$ predicted by the complete
+elliptic integral $K$; it plots $L(t)$ and $q(t)$ and animates the tumbling body (`FlipAnimation`).
 
 This is an application, not the library: it enables 64-bit JAX and a persistent compilation cache.
 It leaves XLA's flags alone: one body stepping in time runs as one kernel through the library's own
-one-kernel regions (:mod:`frbjax._kernel`).  JAX and matplotlib are imported when a command needs
+one-kernel regions (``frbjax._kernel``).  JAX and matplotlib are imported when a command needs
 them, so that ``--help`` answers at once.
 """
 
@@ -17,11 +18,16 @@ import argparse
 import os
 import sys
 import tempfile
+from typing import TYPE_CHECKING, TextIO
 
 import numpy as np
 
+if TYPE_CHECKING:
+    from ._body import FreeRigidBody
+
 PROGRAM = "frbjax"
 DEFAULT_DEMO_PATH = "frbjax_demo.png"
+ANIMATION_SUFFIXES = (".gif", ".mp4")
 
 _RUN_DESCRIPTION = """\
 Run one of the five example drivers of CALGO 903 (FRB, Celledoni & Zanna 2010) on its input file
@@ -52,8 +58,11 @@ _DEMO_DESCRIPTION = """\
 The tennis racket theorem (Dzhanibekov effect) with the exact motion: a T-handle with principal
 moments I = (1, 2, 3) spun almost exactly about its middle axis, L(0) = (0.001, 1, 0.001)/|.|.
 Prints its state at a few times, the period 4K/B of the flips from the complete elliptic integral K
-(frbjax.special.ellipk) next to the period observed in L(t), and plots L(t) and q(t) to a PNG
-(the plot needs matplotlib: pip install 'frbjax[demo]'; without it the demo prints and says so)."""
+(frbjax.special.ellipk) next to the period observed in L(t), plots L(t) and q(t) to a PNG, and
+animates the tumbling T-handle over one period of L(t) (a flip and a flip back: its body axes and
+the angular momentum, fixed in space) to a GIF next to the plot, or an MP4 where ffmpeg exists.
+The plot and the animation need matplotlib: pip install 'frbjax[demo]'; without it the demo
+prints and says so."""
 
 _EPILOG = """\
 environment:
@@ -68,7 +77,7 @@ environment:
 # --------------------------------------------------------------------------------------------- parser
 
 
-def build_parser():
+def build_parser() -> argparse.ArgumentParser:
     """The argparse parser of the ``frbjax`` command and its subcommands."""
     parser = argparse.ArgumentParser(
         prog=PROGRAM,
@@ -99,8 +108,13 @@ def build_parser():
     )
     demo.add_argument("--out", metavar="PNG", default=DEFAULT_DEMO_PATH,
                       help=f"where to save the plot (default: {DEFAULT_DEMO_PATH})")
+    demo.add_argument("--animation", metavar="PATH",
+                      help="where to save the animation: .gif (Pillow, always available) or .mp4 "
+                           "(needs ffmpeg) (default: the plot's name with .gif)")
+    demo.add_argument("--no-animation", dest="animate", action="store_false",
+                      help="plot only, no animation")
     demo.add_argument("--quick", action="store_true",
-                      help="fewer sample times and a smaller image (for tests)")
+                      help="fewer sample times, a smaller image and a short, small animation (for tests)")
     demo.set_defaults(handler=_demo)
     return parser
 
@@ -115,8 +129,13 @@ def _non_negative_int(text):
     return value
 
 
-def main(argv=None):
-    """Entry point of the ``frbjax`` console script; returns the exit status."""
+def main(argv: list[str] | None = None) -> int:
+    """Entry point of the ``frbjax`` console script; returns the exit status.
+
+    ``argv`` are the arguments after the program name (default: ``sys.argv[1:]``), e.g.
+    ``main(["demo", "--quick"])``.  0 is success, 2 a usage or input error, 1 an output that could
+    not be written.
+    """
     args = build_parser().parse_args(argv)
     return args.handler(args)
 
@@ -148,7 +167,7 @@ def _note(command, message):
     print(f"{PROGRAM} {command}: note: {message}", file=sys.stderr)
 
 
-def write_atomically(path, text):
+def write_atomically(path: str | os.PathLike, text: str) -> None:
     """Write ``text`` to ``path`` through a temporary file in the same folder, renamed at the end.
 
     Readers never see a partial file, and a failure leaves no file behind (nor changes an old one).
@@ -224,13 +243,17 @@ DEMO_MOMENTUM = (1e-3, 1.0, 1e-3)
 MATPLOTLIB_HINT = "pip install 'frbjax[demo]' adds it"
 
 
-def flip_period(inertia, angular_momentum):
-    """Period 4K(m)/(B |L|) of L(t) for a body with sorted moments I1 < I2 < I3 rotating about I1.
+def flip_period(inertia: tuple[float, float, float], angular_momentum: np.ndarray) -> float:
+    r"""Period $4K(m)/(B |L|)$ of $L(t)$ for a body with sorted moments $I_1 < I_2 < I_3$ rotating about $I_1$.
 
-    That is the regime d = 2E/|L|^2 > 1/I2 (just above the separatrix: the minor axis side), with
-    B = sqrt((d I3 - 1)(I2 - I1)/(I1 I2 I3)) and m = (1 - d I1)(I3 - I2)/((d I3 - 1)(I2 - I1)).  Next to
-    the separatrix m is close to 1, so its complement is formed without cancellation,
-    1 - m = (I3 - I1)(d I2 - 1)/((d I3 - 1)(I2 - I1)), with d I2 - 1 = l1^2 (I2 - I1)/I1 - l3^2 (I3 - I2)/I3.
+    That is the regime $d = 2E/|L|^2 > 1/I_2$ (just above the separatrix: the minor axis side), with
+
+    $$B = \sqrt{\frac{(d I_3 - 1)(I_2 - I_1)}{I_1 I_2 I_3}}, \qquad
+      m = \frac{(1 - d I_1)(I_3 - I_2)}{(d I_3 - 1)(I_2 - I_1)}.$$
+
+    Next to the separatrix $m$ is close to 1, so its complement is formed without cancellation,
+    $1 - m = (I_3 - I_1)(d I_2 - 1)/((d I_3 - 1)(I_2 - I_1))$, with
+    $d I_2 - 1 = l_1^2 (I_2 - I_1)/I_1 - l_3^2 (I_3 - I_2)/I_3$ ($l = L/|L|$).
     """
     from .special import ellipk
 
@@ -270,13 +293,18 @@ def _crossings(body, times, momentum):
     return np.sort(roots[: len(upward)]), np.sort(roots[len(upward):])
 
 
-def run_demo(out=DEFAULT_DEMO_PATH, quick=False, stream=None):
-    """The demo: print the table and the periods to ``stream`` (stdout), save the plot to ``out``.
+def run_demo(out: str | os.PathLike = DEFAULT_DEMO_PATH, quick: bool = False,
+             stream: TextIO | None = None, animation: bool | str | os.PathLike = True) -> dict:
+    """The demo: print the table and the periods to ``stream`` (stdout), save the plot to ``out``
+    and the animation of the tumbling T-handle (`FlipAnimation`) to ``animation``.
 
-    Without matplotlib (not a dependency of the library: the ``demo`` extra) the plot is left out and
-    the demo says so.
+    ``animation`` is a path (``.gif``, or ``.mp4`` where ffmpeg exists), ``True`` for the plot's path
+    with ``.gif`` (``frbjax_demo.gif``), or ``False`` for none.  ``quick`` makes everything small and
+    short (for tests).  Without matplotlib (not a dependency of the library: the ``demo`` extra) the
+    plot and the animation are left out and the demo says so.
 
-    Returns a dict with the predicted and observed periods and the sampled motion.
+    Returns a dict with the predicted and observed periods, the sampled motion and, when one was
+    saved, the animation (``"animation"``: the `FlipAnimation`, its figure closed).
     """
     _configure_jax()
     from ._body import FreeRigidBody
@@ -320,7 +348,8 @@ def run_demo(out=DEFAULT_DEMO_PATH, quick=False, stream=None):
         import matplotlib
     except ImportError:
         # The library does not need matplotlib; the plot is the demo's only use of it.
-        print(f"\nno plot: matplotlib is not installed ({MATPLOTLIB_HINT})", file=stream)
+        print(f"\nno plot: matplotlib is not installed ({MATPLOTLIB_HINT}); no animation either",
+              file=stream)
         return result
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
@@ -351,18 +380,194 @@ def run_demo(out=DEFAULT_DEMO_PATH, quick=False, stream=None):
     figure.savefig(out, dpi=80 if quick else 150)
     plt.close(figure)
     print(f"\nplot saved to {out}", file=stream)
+
+    path = animation_path(out, animation)
+    if path is not None:
+        frames = FlipAnimation(body, np.linspace(0.0, period, 24 if quick else 180), quick=quick)
+        frames.save(path)
+        result["animation"] = frames
+        print(f"animation ({len(frames.times)} frames, one period of L: a flip and a flip back) "
+              f"saved to {path}", file=stream)
     return result
 
 
+def animation_path(out, animation):
+    """Where ``run_demo`` saves the animation: ``None`` for none, the plot's name with .gif for True."""
+    if animation is False or animation is None:
+        return None
+    if animation is True:
+        return os.path.splitext(os.fspath(out))[0] + ".gif"
+    return os.fspath(animation)
+
+
 def _demo(args):
-    folder = os.path.dirname(os.path.abspath(args.out))
-    if not os.path.isdir(folder):
-        return _error("demo", f"cannot save {args.out}: no folder {folder}")
+    animation = args.animation if args.animation is not None else args.animate
+    if args.animation is not None and not args.animate:
+        return _error("demo", "--animation and --no-animation exclude each other")
+    paths = [args.out]
+    target = animation_path(args.out, animation)
+    if target is not None:
+        if os.path.splitext(target)[1].lower() not in ANIMATION_SUFFIXES:
+            return _error("demo", f"cannot save the animation as {target}: expected a .gif or .mp4 file")
+        if target.lower().endswith(".mp4") and not _ffmpeg_available():
+            return _error("demo", f"cannot save {target}: ffmpeg is not installed (a .gif needs nothing more)")
+        paths.append(target)
+    for path in paths:
+        folder = os.path.dirname(os.path.abspath(path))
+        if not os.path.isdir(folder):
+            return _error("demo", f"cannot save {path}: no folder {folder}")
     try:
-        run_demo(args.out, args.quick)
+        run_demo(args.out, args.quick, animation=animation)
     except OSError as error:
-        return _error("demo", f"cannot save {args.out}: {error.strerror or error}", status=1)
+        return _error("demo", f"cannot save {error.filename or args.out}: {error.strerror or error}",
+                      status=1)
     return 0
+
+
+# ---------------------------------------------------------------------------------------- animation
+
+# The demo's body as two thin uniform rods of equal mass joined in a T: a crossbar of length 2 along
+# the body axis e1 and a stem of length s = sqrt(0.8) along e2, from the middle of the crossbar.  About
+# their centre of mass (s/4 up the stem) their moments are m s^2 (1/16 + 1/12 + 1/16) = m/6 about e1,
+# m/3 about e2 and m/2 about e3: proportional to the demo's I = (1, 2, 3).  The demo spins it about
+# the stem (the middle axis) and the crossbar turns it over.
+_STEM = float(np.sqrt(0.8))
+_BASE = -_STEM / 4
+AXIS_LENGTH = 1.45
+BODY_POINTS = {
+    "bar": np.array([[-1.0, _BASE, 0.0], [1.0, _BASE, 0.0]]),
+    "stem": np.array([[0.0, _BASE, 0.0], [0.0, _BASE + _STEM, 0.0]]),
+    "e1": np.array([[0.0, 0.0, 0.0], [AXIS_LENGTH, 0.0, 0.0]]),
+    "e2": np.array([[0.0, 0.0, 0.0], [0.0, AXIS_LENGTH, 0.0]]),
+    "e3": np.array([[0.0, 0.0, 0.0], [0.0, 0.0, AXIS_LENGTH]]),
+}
+
+
+def t_handle_geometry(rotation: np.ndarray) -> dict[str, np.ndarray]:
+    r"""The T-handle and its body axes in space at the attitude matrix ``rotation`` (3, 3).
+
+    Returns ``{name: points}`` with ``points`` of shape (2, 3), the two ends of each segment in the
+    space frame ($x_\text{space} = R\, x_\text{body}$): ``"bar"`` and ``"stem"`` (the two rods, about
+    the centre of mass) and ``"e1"``, ``"e2"``, ``"e3"`` (from the centre of mass along the body axes,
+    length ``AXIS_LENGTH``): the end of ``"ek"`` is ``AXIS_LENGTH`` times column $k$ of $R$.
+    """
+    rotation = np.asarray(rotation)
+    return {name: points @ rotation.T for name, points in BODY_POINTS.items()}
+
+
+def _ffmpeg_available():
+    try:
+        from matplotlib import animation
+    except ImportError:  # no matplotlib: the demo says so, and makes neither plot nor animation
+        return True
+    return animation.writers.is_available("ffmpeg")
+
+
+class FlipAnimation:
+    """The tumbling T-handle of the demo, drawn with matplotlib frame by frame.
+
+    Left, in 3D: the body (`t_handle_geometry`) at ``body.rotation_matrix(t)``, its body axes $e_1$
+    (along the crossbar), $e_2$ (along the stem) and $e_3$, the path of the stem's end over the last
+    frames, and the angular momentum $R L$, fixed in space (vertical).  Right: the body-frame
+    $L(t)$, whose $L_2$ changes sign at every flip, with the time of the frame marked.
+
+    ``times`` are the frame times; ``quick`` draws small (for tests).  ``frame(k)`` sets every
+    artist to frame ``k`` (what `matplotlib.animation.FuncAnimation` calls); ``artists`` holds them
+    by name (the 3D lines under the names of `t_handle_geometry`) so that a test can read them back;
+    ``save(path)`` writes a GIF (Pillow) or an MP4 (ffmpeg).
+    """
+
+    TRAIL = 14  # frames of the stem end's path
+
+    def __init__(self, body: FreeRigidBody, times: np.ndarray, *, quick: bool = False):
+        import matplotlib
+
+        matplotlib.use("Agg")
+        import matplotlib.pyplot as plt
+        from matplotlib import animation
+
+        self.times = np.asarray(times, dtype=float)
+        self.rotations = np.asarray(body.rotation_matrix(self.times))
+        self.momentum = np.asarray(body.angular_momentum(self.times))
+        self.quick = quick
+        self.fps = 10 if quick else 20  # GIF frame durations are whole hundredths of a second
+        self.dpi = 40 if quick else 90
+        self.geometry = [t_handle_geometry(rotation) for rotation in self.rotations]
+        # The spatial angular momentum R L is the same at every frame (to rounding): take frame 0's.
+        spatial = self.rotations[0] @ self.momentum[0]
+        momentum_axis = 1.5 * spatial / np.linalg.norm(spatial)
+
+        self.figure = figure = plt.figure(figsize=(6.4, 3.6))
+        grid = figure.add_gridspec(1, 2, width_ratios=(1.15, 1), left=0.0, right=0.97, bottom=0.14,
+                                   top=0.84, wspace=0.18)
+        space = figure.add_subplot(grid[0], projection="3d")
+        space.view_init(elev=16, azim=-62, vertical_axis="y")
+        limit = 1.25
+        space.set(xlim=(-limit, limit), ylim=(-limit, limit), zlim=(-limit, limit))
+        space.set_box_aspect((1, 1, 1), zoom=1.35)
+        space.set_axis_off()
+        colours = {"bar": "#2f3b4c", "stem": "#2f3b4c", "e1": "#d62728", "e2": "#2ca02c", "e3": "#1f77b4"}
+        thick = 2.2 if quick else 1.0  # line widths are in points: scale with the small figure's dpi
+        artists = {}
+        space.plot(*np.stack([-momentum_axis, momentum_axis]).T, color="#e0a800", lw=2.0 * thick, ls=(0, (4, 2)))
+        space.text(*(0.92 * momentum_axis), "  $L$ (fixed)", color="#b08400", fontsize=10, ha="left",
+                   va="center")
+        artists["trail"], = space.plot([], [], [], color=colours["e2"], lw=1.0 * thick, alpha=0.55)
+        for name in ("bar", "stem"):
+            artists[name], = space.plot([], [], [], color=colours[name], lw=7.0 * thick, solid_capstyle="round")
+        for name in ("e1", "e2", "e3"):
+            artists[name], = space.plot([], [], [], color=colours[name], lw=1.8 * thick)
+            artists[name + "_label"] = space.text(0, 0, 0, f"$e_{name[1]}$", color=colours[name],
+                                                  fontsize=10, ha="center", va="center")
+
+        plot = figure.add_subplot(grid[1])
+        for k, colour in enumerate(("#d62728", "#2ca02c", "#1f77b4")):
+            plot.plot(self.times, self.momentum[:, k], color=colour, lw=1.3 * thick, label=f"$L_{k + 1}$")
+        artists["cursor"] = plot.axvline(self.times[0], color="0.3", lw=0.8 * thick)
+        artists["marker"], = plot.plot([], [], "o", color=colours["e2"], ms=4 * thick)
+        plot.set_xlim(self.times[0], self.times[-1])
+        plot.set_ylim(-1.15, 1.15)
+        plot.set_xlabel("time $t$")
+        plot.set_ylabel("body-frame $L(t)$")
+        plot.legend(loc="lower center", bbox_to_anchor=(0.5, 1.0), fontsize=9, frameon=False, ncol=3)
+        plot.grid(True, alpha=0.3)
+        artists["title"] = figure.suptitle("", fontsize=11)
+        self.artists = artists
+        self.animation = animation.FuncAnimation(figure, self.frame, frames=len(self.times),
+                                                 interval=1000 / self.fps, blit=False)
+
+    def frame(self, index: int) -> list:
+        """Set every artist to frame ``index`` (time ``times[index]``); returns the artists."""
+        geometry = self.geometry[index]
+        for name, points in geometry.items():
+            self.artists[name].set_data_3d(*points.T)
+        for name in ("e1", "e2", "e3"):
+            label = self.artists[name + "_label"]
+            x, y, z = 1.13 * geometry[name][1]
+            label.set_position((x, y))
+            label.set_3d_properties(z, None)
+        first = max(0, index - self.TRAIL)
+        trail = np.array([self.geometry[k]["stem"][1] for k in range(first, index + 1)])
+        self.artists["trail"].set_data_3d(*trail.T)
+        t = self.times[index]
+        self.artists["cursor"].set_xdata([t, t])
+        self.artists["marker"].set_data([t], [self.momentum[index, 1]])
+        self.artists["title"].set_text(f"The Dzhanibekov flip of a T-handle, exact motion (frbjax): t = {t:5.1f}")
+        return list(self.artists.values())
+
+    def save(self, path: str | os.PathLike) -> None:
+        """Write every frame to ``path``: a GIF (``.gif``, Pillow) or an MP4 (``.mp4``, ffmpeg)."""
+        from matplotlib import animation
+        import matplotlib.pyplot as plt
+
+        if os.fspath(path).lower().endswith(".mp4"):
+            writer = animation.FFMpegWriter(fps=self.fps, bitrate=800)
+        else:
+            writer = animation.PillowWriter(fps=self.fps)
+        try:
+            self.animation.save(path, writer=writer, dpi=self.dpi)
+        finally:
+            plt.close(self.figure)
 
 
 if __name__ == "__main__":

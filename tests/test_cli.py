@@ -6,6 +6,7 @@ installed console script in a subprocess, end to end.
 
 from __future__ import annotations
 
+import io
 import os
 import pathlib
 import subprocess
@@ -14,6 +15,7 @@ import sys
 import numpy as np
 import pytest
 
+import frbjax
 from frbjax import _calgo903 as calgo
 from frbjax import cli
 
@@ -30,6 +32,7 @@ TOLERANCE = {"example0": 1e-14, "example1": 1e-10, "example2": 1e-14, "example3"
              "example4": 1e-9}
 EXAMPLE1_STEPS = 200
 PNG_SIGNATURE = b"\x89PNG\r\n\x1a\n"
+GIF_SIGNATURE = b"GIF89a"
 
 
 @pytest.fixture(autouse=True)
@@ -228,13 +231,16 @@ def test_write_atomically(tmp_path):
 
 
 def test_demo_console_script(tmp_path, cache_environment):
-    """``frbjax demo --quick``: a PNG, the table, and flips recurring with the period 4K/B."""
+    """``frbjax demo --quick``: a PNG, a GIF next to it, the table, and flips recurring with the period 4K/B."""
     output = tmp_path / "tmp.png"
     result = subprocess.run([*console_script(), "demo", "--quick", "--out", str(output)],
                             capture_output=True, text=True, cwd=tmp_path, env=cache_environment,
                             timeout=300)
     assert result.returncode == 0, result.stderr
     assert output.read_bytes().startswith(PNG_SIGNATURE)
+    assert (tmp_path / "tmp.gif").read_bytes().startswith(GIF_SIGNATURE)
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["tmp.gif", "tmp.png"]
+    assert f"saved to {tmp_path / 'tmp.gif'}" in result.stdout
     lines = result.stdout.splitlines()
     table = [line for line in lines if line[:8].strip().replace(".", "").isdigit()]
     assert len(table) == 11
@@ -258,6 +264,106 @@ def test_flip_period_against_the_published_value():
 def test_demo_folder_must_exist(tmp_path, capsys):
     assert cli.main(["demo", "--quick", "--out", str(tmp_path / "no" / "demo.png")]) == 2
     assert "no folder" in capsys.readouterr().err
+    assert cli.main(["demo", "--quick", "--out", str(tmp_path / "demo.png"),
+                     "--animation", str(tmp_path / "no" / "demo.gif")]) == 2
+    assert "no folder" in capsys.readouterr().err
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_demo_animation_format_errors(tmp_path, capsys, monkeypatch):
+    """Checked before anything is computed: a suffix other than .gif or .mp4, an .mp4 without ffmpeg,
+    and --animation with --no-animation are usage errors (status 2) that write nothing."""
+    png = str(tmp_path / "demo.png")
+    assert cli.main(["demo", "--quick", "--out", png, "--animation", str(tmp_path / "demo.avi")]) == 2
+    assert "expected a .gif or .mp4" in capsys.readouterr().err
+    monkeypatch.setattr(cli, "_ffmpeg_available", lambda: False)
+    assert cli.main(["demo", "--quick", "--out", png, "--animation", str(tmp_path / "demo.mp4")]) == 2
+    assert "ffmpeg is not installed" in capsys.readouterr().err
+    assert cli.main(["demo", "--quick", "--out", png, "--animation", str(tmp_path / "demo.gif"),
+                     "--no-animation"]) == 2
+    assert "exclude each other" in capsys.readouterr().err
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_t_handle_geometry():
+    """The drawn body is the demo's body: rods whose moments are proportional to I = (1, 2, 3), each
+    point carried by R (x_space = R x_body), lengths kept."""
+    # Thin uniform rods of equal mass: the inertia tensor about the common centre of mass.
+    tensor = np.zeros((3, 3))
+    for name in ("bar", "stem"):
+        a, b = cli.BODY_POINTS[name]
+        # The mean of p p^T over the rod from a to b: the integral of (a + s (b - a)) (...)^T over s.
+        second = (np.outer(a, a) + np.outer(b, b)) / 3 + (np.outer(a, b) + np.outer(b, a)) / 6
+        tensor += np.trace(second) * np.eye(3) - second
+    centre = np.mean([cli.BODY_POINTS[name].mean(axis=0) for name in ("bar", "stem")], axis=0)
+    np.testing.assert_allclose(centre, 0.0, atol=1e-15)
+    np.testing.assert_allclose(tensor / tensor[0, 0], np.diag(cli.DEMO_INERTIA), atol=1e-14)
+
+    rotation = np.asarray(frbjax.quaternion_to_matrix(np.array([0.8, 0.1, -0.5, 0.3]) / np.sqrt(0.99)))
+    geometry = cli.t_handle_geometry(rotation)
+    for name, points in cli.BODY_POINTS.items():
+        np.testing.assert_allclose(geometry[name], points @ rotation.T, atol=1e-15)
+        np.testing.assert_allclose(np.linalg.norm(np.diff(geometry[name], axis=0)),
+                                   np.linalg.norm(np.diff(points, axis=0)), rtol=1e-14)
+    for k in range(3):
+        np.testing.assert_allclose(geometry[f"e{k + 1}"][1], cli.AXIS_LENGTH * rotation[:, k], atol=1e-15)
+
+
+def test_demo_animation_frames(tmp_path):
+    """The animation made at small size (``--quick``): its frames show the T-handle at
+    ``rotation_matrix`` of their times, at least one flip among them.
+
+    - the frame times cover a flip: L2, along the stem, goes from +1 to -1;
+    - for every frame, the 3D artists read back (``get_data_3d``) are the body axes and rods of an
+      independently built FreeRigidBody's ``rotation_matrix`` at that frame's time;
+    - the GIF holds one image per frame time, and image k of the file is the figure drawn at frame k:
+      nearer to a fresh drawing of frame k than to a drawing of any other frame.
+    """
+    from PIL import Image, ImageSequence
+
+    from frbjax import FreeRigidBody
+
+    out = tmp_path / "demo.png"
+    result = cli.run_demo(out, quick=True, stream=io.StringIO())
+    animation = result["animation"]
+    times = animation.times
+    assert len(times) >= 20 and times[0] == 0.0
+    assert times[-1] == pytest.approx(result["period"])
+
+    momentum = np.array(cli.DEMO_MOMENTUM) / np.linalg.norm(cli.DEMO_MOMENTUM)
+    body = FreeRigidBody(np.array(cli.DEMO_INERTIA), momentum)
+    rotations = np.asarray(body.rotation_matrix(times))
+    stem = np.asarray(body.angular_momentum(times))[:, 1]
+    assert stem[0] > 0.99 and stem.min() < -0.99 and stem[-1] > 0.99  # a flip and a flip back
+
+    for k in range(len(times)):
+        animation.frame(k)
+        for j in range(3):
+            ends = np.array(animation.artists[f"e{j + 1}"].get_data_3d()).T
+            np.testing.assert_allclose(ends[0], 0.0, atol=1e-15)
+            np.testing.assert_allclose(ends[1], cli.AXIS_LENGTH * rotations[k][:, j], atol=1e-12)
+        for name in ("bar", "stem"):
+            ends = np.array(animation.artists[name].get_data_3d()).T
+            np.testing.assert_allclose(ends, cli.BODY_POINTS[name] @ rotations[k].T, atol=1e-12)
+
+    with Image.open(tmp_path / "demo.gif") as gif:
+        assert gif.n_frames == len(times)
+        assert gif.info["duration"] == pytest.approx(1000 / animation.fps, abs=1)
+        saved = [np.asarray(image.convert("RGB"), dtype=float) for image in ImageSequence.Iterator(gif)]
+
+    def drawn(k):
+        animation.frame(k)
+        buffer = io.BytesIO()
+        animation.figure.savefig(buffer, format="rgba", dpi=animation.dpi)
+        width, height = saved[0].shape[1], saved[0].shape[0]
+        return np.frombuffer(buffer.getvalue(), np.uint8).reshape(height, width, 4)[..., :3].astype(float)
+
+    checked = range(0, len(times), 5)
+    drawings = {k: drawn(k) for k in checked}
+    for k in checked:
+        distance = {j: np.abs(saved[k] - drawings[j]).mean() for j in checked}
+        assert min(distance, key=distance.get) == k, (k, distance)
+        assert distance[k] < 0.5 * min(d for j, d in distance.items() if j != k), (k, distance)
 
 
 # ------------------------------------------------------------------------------------- README
@@ -267,7 +373,8 @@ def test_readme_quick_start_commands(cache_environment):
     """The README's Quick start block is exactly `make demo` and `make test`, and `make demo` runs.
 
     (`make test` is what CI runs: this very suite.)  `make demo` reuses the .venv that `make test`
-    created, so it costs one demo run here; its plot goes to the git-ignored frbjax_demo.png.
+    created, so it costs one demo run here; its plot and its animation go to frbjax_demo.png and
+    frbjax_demo.gif at the root (git-ignored, as `make demo` leaves them).
     """
     root = pathlib.Path(__file__).resolve().parent.parent
     readme = (root / "README.md").read_text()
@@ -279,3 +386,4 @@ def test_readme_quick_start_commands(cache_environment):
                             env=cache_environment, timeout=600)
     assert result.returncode == 0, result.stdout + result.stderr
     assert "4K(m)/B" in result.stdout and "plot saved to frbjax_demo.png" in result.stdout
+    assert "saved to frbjax_demo.gif" in result.stdout

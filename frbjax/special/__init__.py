@@ -2,13 +2,13 @@
 
 Every function is element-wise with numpy broadcasting, works under ``jit``, ``vmap``, ``grad`` and
 ``jvp`` with a fixed operation count, keeps the dtype it is given, and has a custom JVP rule built on
-the analytic derivatives (see each module's notes).  Where accuracy near m = 1 depends on it, the
-complementary parameter ``mc = 1 - m`` can be passed directly.
+the analytic derivatives (see each module's notes).  Where accuracy near $m = 1$ depends on it, the
+complementary parameter ``mc`` $= 1 - m$ can be passed directly.
 
-- Jacobi: :func:`ellipj` (sn, cn, dn, am; DLMF 22).
-- Legendre: :func:`ellipk`, :func:`ellipkm1`, :func:`ellipe`, :func:`ellipkinc`, :func:`ellippi`,
-  :func:`ellippiinc` (DLMF 19.2).
-- Carlson: :func:`elliprf`, :func:`elliprd`, :func:`elliprj`, :func:`elliprc` (DLMF 19.16).
+- Jacobi: ``ellipj`` (sn, cn, dn, am; DLMF 22).
+- Legendre: ``ellipk``, ``ellipkm1``, ``ellipe``, ``ellipkinc``, ``ellippi``, ``ellippiinc``
+  (DLMF 19.2).
+- Carlson: ``elliprf``, ``elliprd``, ``elliprj``, ``elliprc`` (DLMF 19.16).
 """
 
 from ._carlson import elliprc, elliprd, elliprf, elliprj

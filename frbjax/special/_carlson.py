@@ -1,4 +1,4 @@
-"""Carlson's symmetric elliptic integrals R_F, R_D, R_J, R_C for real arguments (DLMF 19.16).
+r"""Carlson's symmetric elliptic integrals $R_F$, $R_D$, $R_J$, $R_C$ for real arguments (DLMF 19.16).
 
 R_F, R_D and R_J: Carlson's duplication algorithm (B. C. Carlson, "Numerical computation of real or
 complex elliptic integrals", Numer. Algorithms 10 (1995) 13-26; DLMF 19.36.1-19.36.2), followed by the
@@ -13,16 +13,18 @@ rules use a rolled loop instead (one compiled step: compile time; ``_common.roll
 step, R_C(1, 1 + e_k) (Carlson 1995, eq. (2.19)) costs a square root and a polynomial; a logarithm
 only serves the points with 1 + e_k < 1/2.
 
-R_C has closed forms (DLMF 19.2.18-19.2.19): an arctangent for x < y, a logarithm for x > y, and its
-Maclaurin series in (y - x)/x near x = y.
+$R_C$ has closed forms (DLMF 19.2.18-19.2.19): an arctangent for $x < y$, a logarithm for $x > y$, and
+its Maclaurin series in $(y - x)/x$ near $x = y$.
 
 Nowhere a quotient by a square root: XLA turns it into rsqrt, whose float64 CPU code is scalar and
 de-vectorizes the fused loop around it (``_common.over_sqrt``).
 
 Derivatives (custom JVP rules):
-- R_F: DLMF 19.18.1, dR_F/dz = -R_D(x, y, z)/6 (and symmetrically).
-- R_C = R_F(x, y, y): dR_C/dx = -R_D(y, y, x)/6, dR_C/dy = -R_D(x, y, y)/3.
-- R_D and R_J: the tangent of the duplication recurrence itself.  Every duplication step is an exact
+
+- $R_F$: DLMF 19.18.1, $\partial R_F/\partial z = -R_D(x, y, z)/6$ (and symmetrically).
+- $R_C = R_F(x, y, y)$: $\partial R_C/\partial x = -R_D(y, y, x)/6$,
+  $\partial R_C/\partial y = -R_D(x, y, y)/3$.
+- $R_D$ and $R_J$: the tangent of the duplication recurrence itself.  Every duplication step is an exact
   identity (DLMF 19.26.18-19.26.20), so its derivative is exact, and the derivative of the truncated
   series converges at the same rate as the series.  The partial derivatives in each argument come out
   of one forward pass (``_value_and_partials``), so that the rule is linear in the tangents with no
@@ -47,6 +49,8 @@ import jax
 import jax.numpy as jnp
 from jax import lax
 from jax.custom_derivatives import SymbolicZero
+from jax import Array
+from jax.typing import ArrayLike
 
 from .._fusion import materialise
 from ._common import is_double, iterate, over_sqrt, promote
@@ -555,24 +559,24 @@ def _rc_positive_jvp(primals, tangents):
 # ------------------------------------------------------------------------------------- public names
 
 
-def elliprf(x, y, z):
+def elliprf(x: ArrayLike, y: ArrayLike, z: ArrayLike) -> Array:
     r"""Carlson's symmetric integral of the first kind (DLMF 19.16.1).
 
-    .. math:: R_F(x, y, z) = \tfrac12 \int_0^\infty \frac{dt}{\sqrt{(t+x)(t+y)(t+z)}}
+    $$R_F(x, y, z) = \tfrac12 \int_0^\infty \frac{dt}{\sqrt{(t+x)(t+y)(t+z)}}$$
 
-    for x, y, z >= 0 with at most one of them zero.  Same name and arguments as
+    for $x, y, z \ge 0$ with at most one of them zero.  Same name and arguments as
     ``scipy.special.elliprf``.  Duplication algorithm, DLMF 19.36.1.
     """
     x, y, z = promote(x, y, z)
     return _rf(x, y, z)
 
 
-def elliprd(x, y, z):
+def elliprd(x: ArrayLike, y: ArrayLike, z: ArrayLike) -> Array:
     r"""Carlson's degenerate integral of the second kind (DLMF 19.16.5).
 
-    .. math:: R_D(x, y, z) = \tfrac32 \int_0^\infty \frac{dt}{\sqrt{(t+x)(t+y)}\,(t+z)^{3/2}}
+    $$R_D(x, y, z) = \tfrac32 \int_0^\infty \frac{dt}{\sqrt{(t+x)(t+y)}\,(t+z)^{3/2}}$$
 
-    for x, y >= 0 (at most one zero) and z > 0.  As ``scipy.special.elliprd``.
+    for $x, y \ge 0$ (at most one zero) and $z > 0$.  As ``scipy.special.elliprd``.
     """
     x, y, z = promote(x, y, z)
     return _rd(x, y, z)
@@ -632,14 +636,14 @@ def _rj_general_jvp(primals, tangents):
     return jax.jvp(frozen, primals, tangents)
 
 
-def elliprj(x, y, z, p):
+def elliprj(x: ArrayLike, y: ArrayLike, z: ArrayLike, p: ArrayLike) -> Array:
     r"""Carlson's symmetric integral of the third kind (DLMF 19.16.2).
 
-    .. math:: R_J(x, y, z, p) = \tfrac32 \int_0^\infty \frac{dt}{\sqrt{(t+x)(t+y)(t+z)}\,(t+p)}
+    $$R_J(x, y, z, p) = \tfrac32 \int_0^\infty \frac{dt}{\sqrt{(t+x)(t+y)(t+z)}\,(t+p)}$$
 
-    for x, y, z >= 0 (at most one zero) and p > 0; p <= 0 (a Cauchy principal value in scipy) gives NaN
-    here.  As ``scipy.special.elliprj`` otherwise.  When p is much larger than x, y and z the change
-    of parameter DLMF 19.21.12 keeps the duplication short.
+    for $x, y, z \ge 0$ (at most one zero) and $p > 0$; $p \le 0$ (a Cauchy principal value in
+    scipy) gives NaN here.  As ``scipy.special.elliprj`` otherwise.  When $p$ is much larger than
+    $x$, $y$ and $z$ the change of parameter DLMF 19.21.12 keeps the duplication short.
     """
     x, y, z, p = promote(x, y, z, p)
     valid = p > 0
@@ -647,11 +651,13 @@ def elliprj(x, y, z, p):
     return jnp.where(valid, result, jnp.nan)
 
 
-def elliprc(x, y):
-    r"""Carlson's degenerate integral R_C(x, y) = R_F(x, y, y) (DLMF 19.2.17, 19.16.6).
+def elliprc(x: ArrayLike, y: ArrayLike) -> Array:
+    r"""Carlson's degenerate integral $R_C(x, y) = R_F(x, y, y)$ (DLMF 19.2.17, 19.16.6).
 
-    For x >= 0, y != 0.  For y < 0 the Cauchy principal value
-    R_C(x, y) = sqrt(x/(x - y)) R_C(x - y, -y) (DLMF 19.6.16), as ``scipy.special.elliprc``.
+    $$R_C(x, y) = \tfrac12 \int_0^\infty \frac{dt}{\sqrt{t+x}\,(t+y)}$$
+
+    for $x \ge 0$, $y \ne 0$.  For $y < 0$ the Cauchy principal value
+    $R_C(x, y) = \sqrt{x/(x - y)}\, R_C(x - y, -y)$ (DLMF 19.6.16), as ``scipy.special.elliprc``.
     """
     x, y = promote(x, y)
     positive = y > 0

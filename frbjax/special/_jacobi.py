@@ -1,22 +1,28 @@
-"""Jacobi elliptic functions sn, cn, dn and the amplitude am (DLMF 22.2, 22.16.1).
+r"""Jacobi elliptic functions sn, cn, dn and the amplitude am (DLMF 22.2, 22.16.1).
 
 Evaluation (fixed operation count, per dtype):
-1. Reduce u by whole half-periods: u = 2jK + u_r with |u_r| <= K (DLMF 22.4.3 table: sn and cn change
-   sign, dn does not, am gains j pi).  K = R_F(0, mc, 1) is computed from the complement, so the
-   reduction error grows only linearly with the number of periods.
-2. For |u_r| <= K/2, Bulirsch's form of the descending Landen transformation (AGM, DLMF 22.20.ii),
+
+1. Reduce $u$ by whole half-periods: $u = 2jK + u_r$ with $|u_r| \le K$ (DLMF 22.4.3 table: sn and cn
+   change sign, dn does not, am gains $j\pi$).  $K = R_F(0, m_c, 1)$ is computed from the complement,
+   so the reduction error grows only linearly with the number of periods.
+2. For $|u_r| \le K/2$, Bulirsch's form of the descending Landen transformation (AGM, DLMF 22.20.ii),
    which carries cn/sn and dn down the AGM levels with positive products and sums only; for
-   K/2 < |u_r| <= K the quarter-period reflection u_r = K - w (DLMF 22.4.3).  sn, cn and dn then all
-   have a few ulp *relative* error, also where cn and dn are as small as sqrt(mc) (u near K, m -> 1),
-   which is what the rigid body near its separatrix needs.
-3. am = j pi + atan2(sn_r, cn_r).
-m = 1 (mc = 0) is the limit sn = tanh, cn = dn = sech, am = gd(u) (DLMF 22.5.ii, 4.23.39).
+   $K/2 < |u_r| \le K$ the quarter-period reflection $u_r = K - w$ (DLMF 22.4.3).  sn, cn and dn then
+   all have a few ulp *relative* error, also where cn and dn are as small as $\sqrt{m_c}$ ($u$ near
+   $K$, $m \to 1$), which is what the rigid body near its separatrix needs.
+3. $\mathrm{am} = j\pi + \mathrm{atan2}(\mathrm{sn}_r, \mathrm{cn}_r)$.
+
+$m = 1$ ($m_c = 0$) is the limit sn = tanh, cn = dn = sech, am = gd($u$) (DLMF 22.5.ii, 4.23.39).
 
 Derivatives (custom JVP):
-- in u: sn' = cn dn, cn' = -sn dn, dn' = -m sn cn, am' = dn (DLMF 22.13.1-22.13.3, 22.16.1);
-- in m: am(u|m) inverts u = F(am|m), so d am/dm = -dn dF/dm at fixed amplitude, with
-  dF/dm = 2j dK/dm + (sn_r^3/6) R_D(cn_r^2, 1, dn^2) (DLMF 19.25.5, 19.18.1); sn, cn and dn follow by
-  the chain rule.  At m = 1 the limits of DLMF 22.10.ii give d am/dm = -(sinh u - u sech u)/4.
+
+- in $u$: $\mathrm{sn}' = \mathrm{cn}\,\mathrm{dn}$, $\mathrm{cn}' = -\mathrm{sn}\,\mathrm{dn}$,
+  $\mathrm{dn}' = -m\,\mathrm{sn}\,\mathrm{cn}$, $\mathrm{am}' = \mathrm{dn}$ (DLMF 22.13.1-22.13.3, 22.16.1);
+- in $m$: $\mathrm{am}(u|m)$ inverts $u = F(\mathrm{am}|m)$, so
+  $\partial\,\mathrm{am}/\partial m = -\mathrm{dn}\; \partial F/\partial m$ at fixed amplitude, with
+  $\partial F/\partial m = 2j\, dK/dm + (\mathrm{sn}_r^3/6)\, R_D(\mathrm{cn}_r^2, 1, \mathrm{dn}^2)$
+  (DLMF 19.25.5, 19.18.1); sn, cn and dn follow by the chain rule.  At $m = 1$ the limits of DLMF
+  22.10.ii give $\partial\,\mathrm{am}/\partial m = -(\sinh u - u\,\mathrm{sech}\,u)/4$.
 """
 
 from __future__ import annotations
@@ -24,6 +30,8 @@ from __future__ import annotations
 import jax
 import jax.numpy as jnp
 from jax import lax
+from jax import Array
+from jax.typing import ArrayLike
 
 from ._carlson import _rd
 from ._common import complement, is_double, over_sqrt, promote, scan_unroll
@@ -223,13 +231,20 @@ def _ellipj_given_jvp(primals, tangents):
     return values, _ellipj_tangents(u, m, mc, quarter, values, tangents[:3])
 
 
-def ellipj(u, m, *, mc=None):
-    r"""Jacobi elliptic functions sn, cn, dn and the amplitude am of argument u, parameter m.
+def ellipj(u: ArrayLike, m: ArrayLike, *, mc: ArrayLike | None = None) -> tuple[Array, Array, Array, Array]:
+    r"""Jacobi elliptic functions sn, cn, dn and the amplitude am of argument $u$, parameter $m$.
 
     ``sn, cn, dn, am = ellipj(u, m)`` as ``scipy.special.ellipj`` (DLMF 22.2.4, 22.16.1), for
-    0 <= m <= 1 and every real u; ``am`` is continuous (it grows by pi every 2K(m)).  ``mc = 1 - m``
-    may be passed directly when it is known more accurately than ``1 - m`` (e.g. mc = 1e-20).
-    The absolute error is a few ulp times max(1, |u|/K(m)).
+    $0 \le m \le 1$ and every real $u$.  The amplitude $\phi = \mathrm{am}(u|m)$ inverts the
+    incomplete integral of the first kind, and the three functions are
+
+    $$u = \int_0^\phi \frac{d\theta}{\sqrt{1 - m \sin^2\theta}}, \qquad
+      \mathrm{sn}\,u = \sin\phi, \quad \mathrm{cn}\,u = \cos\phi, \quad
+      \mathrm{dn}\,u = \sqrt{1 - m \sin^2\phi}.$$
+
+    ``am`` is continuous (it grows by $\pi$ every $2K(m)$).  ``mc`` $= 1 - m$ may be passed directly
+    when it is known more accurately than ``1 - m`` (e.g. ``mc=1e-20``).  The absolute error is a few
+    ulp times $\max(1, |u|/K(m))$.
     """
     m, mc = complement(m, mc)
     u, m, mc = promote(u, m, mc)

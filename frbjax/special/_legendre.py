@@ -1,29 +1,35 @@
-"""Legendre's elliptic integrals K, E, F, Pi through Carlson's integrals (DLMF 19.25).
+r"""Legendre's elliptic integrals K, E, F, Pi through Carlson's integrals (DLMF 19.25).
 
-Every function takes the parameter m together with its complement ``mc = 1 - m``: near m = 1 the
-integrals depend on mc, which a caller (the rigid body) often knows to full relative precision while
-``1 - m`` of a rounded m would not.  The tangent along the parameter is ``(dm - dmc)/2``, which is
-``dm`` whenever mc = 1 - m holds exactly as functions.
+Every function takes the parameter $m$ together with its complement ``mc`` $= 1 - m$: near $m = 1$
+the integrals depend on $m_c$, which a caller (the rigid body) often knows to full relative precision
+while ``1 - m`` of a rounded $m$ would not.  The tangent along the parameter is ``(dm - dmc)/2``,
+which is ``dm`` whenever $m_c = 1 - m$ holds exactly as functions.
 
-Amplitudes of any size are reduced to ``phi = k pi + phi_r`` with ``|phi_r| <= pi/2``
-(quasi-periodicity, DLMF 19.2.10): F(phi) = 2k K + F(phi_r), Pi(phi) = 2k Pi(n) + Pi(phi_r).  Carlson's
-forms are used only on the reduced amplitude, where cos(phi_r) >= 0.  The complete Pi(n|m) of that
-continuation is K(m) plus R_J(0, mc, 1, p) by Bulirsch's cel iteration (``_rj_complete``: one square
-root and one quotient per step, where a duplication step costs four square roots), in the values;
-the JVP rule takes both integrals through the Carlson functions (their rules give the derivatives).
+Amplitudes of any size are reduced to $\phi = k\pi + \phi_r$ with $|\phi_r| \le \pi/2$
+(quasi-periodicity, DLMF 19.2.10): $F(\phi) = 2kK + F(\phi_r)$, $\Pi(\phi) = 2k\,\Pi(n) + \Pi(\phi_r)$.
+Carlson's forms are used only on the reduced amplitude, where $\cos\phi_r \ge 0$.  The complete
+$\Pi(n|m)$ of that continuation is $K(m)$ plus $R_J(0, m_c, 1, p)$ by Bulirsch's cel iteration
+(``_rj_complete``: one square root and one quotient per step, where a duplication step costs four
+square roots), in the values; the JVP rule takes both integrals through the Carlson functions (their
+rules give the derivatives).
 
-JVP rules (analytic, no cancellation at m = 0, n = 0 or m = n):
-- dF/dphi = 1/Delta, dPi/dphi = 1/((1 - n sin^2 phi) Delta) (the integrands, DLMF 19.2.4-19.2.7),
-- dF/dm = (1/2) int_0^phi sin^2/Delta^3 = (s^3/6) R_D(c^2, 1, Delta^2) and dK/dm = R_D(0, 1, mc)/6,
-  dE/dm = -R_D(0, mc, 1)/6 (from DLMF 19.25.1, 19.25.5 and 19.18.1),
-- dPi/dm, dPi/dn: the tangent of the Carlson representation at fixed reduced amplitude (the Carlson
-  functions carry their own rules).
+JVP rules (analytic, no cancellation at $m = 0$, $n = 0$ or $m = n$), with $s = \sin\phi$,
+$c = \cos\phi$, $\Delta^2 = 1 - m s^2$:
+
+- $\partial F/\partial\phi = 1/\Delta$, $\partial\Pi/\partial\phi = 1/((1 - n s^2)\Delta)$ (the
+  integrands, DLMF 19.2.4-19.2.7),
+- $\partial F/\partial m = \tfrac12 \int_0^\phi \sin^2\theta/\Delta^3\,d\theta = (s^3/6)\, R_D(c^2, 1, \Delta^2)$
+  and $dK/dm = R_D(0, 1, m_c)/6$, $dE/dm = -R_D(0, m_c, 1)/6$ (from DLMF 19.25.1, 19.25.5 and 19.18.1),
+- $\partial\Pi/\partial m$, $\partial\Pi/\partial n$: the tangent of the Carlson representation at
+  fixed reduced amplitude (the Carlson functions carry their own rules).
 """
 
 from __future__ import annotations
 
 import jax
 import jax.numpy as jnp
+from jax import Array
+from jax.typing import ArrayLike
 
 from ._carlson import _horner, _rd, _rf, _rf_rj, _rj, _rj_parameter_largest
 from ._common import complement, is_double, iterate, over_sqrt, promote
@@ -169,26 +175,30 @@ def _ellipe_jvp(primals, tangents):
     return _ellipe(m, mc), 0.5 * (dm - dmc) * derivative
 
 
-def ellipk(m, *, mc=None):
-    r"""Complete elliptic integral of the first kind K(m) (DLMF 19.2.8), parameter m = k^2.
+def ellipk(m: ArrayLike, *, mc: ArrayLike | None = None) -> Array:
+    r"""Complete elliptic integral of the first kind $K(m)$ (DLMF 19.2.8), parameter $m = k^2$.
 
-    K(m) = R_F(0, 1 - m, 1) (DLMF 19.25.1).  ``mc`` passes 1 - m directly (see module notes).
-    As ``scipy.special.ellipk``; infinite at m = 1.
+    $$K(m) = \int_0^{\pi/2} \frac{d\theta}{\sqrt{1 - m \sin^2\theta}} = R_F(0, 1 - m, 1)$$
+
+    (DLMF 19.25.1).  ``mc`` passes $1 - m$ directly (see the module notes).  As
+    ``scipy.special.ellipk``; infinite at $m = 1$.
     """
     m, mc = complement(m, mc)
     return _ellipk(m, mc)
 
 
-def ellipkm1(p):
-    r"""K(1 - p), accurate as p -> 0 (``scipy.special.ellipkm1``); DLMF 19.2.8, 19.25.1."""
+def ellipkm1(p: ArrayLike) -> Array:
+    r"""$K(1 - p)$, accurate as $p \to 0$ (``scipy.special.ellipkm1``); DLMF 19.2.8, 19.25.1."""
     (p,) = promote(p)
     return _ellipk(1 - p, p)
 
 
-def ellipe(m, *, mc=None):
-    r"""Complete elliptic integral of the second kind E(m) (DLMF 19.2.8), via DLMF 19.25.1.
+def ellipe(m: ArrayLike, *, mc: ArrayLike | None = None) -> Array:
+    r"""Complete elliptic integral of the second kind $E(m)$ (DLMF 19.2.8), via DLMF 19.25.1.
 
-    As ``scipy.special.ellipe``, for every m <= 1: m < 0 by DLMF 19.7.2 (``_complete_second``).
+    $$E(m) = \int_0^{\pi/2} \sqrt{1 - m \sin^2\theta}\, d\theta$$
+
+    As ``scipy.special.ellipe``, for every $m \le 1$: $m < 0$ by DLMF 19.7.2 (``_complete_second``).
     """
     m, mc = complement(m, mc)
     return _ellipe(m, mc)
@@ -227,14 +237,15 @@ def _ellipkinc_jvp(primals, tangents):
     return value, tangent
 
 
-def ellipkinc(phi, m, *, mc=None):
-    r"""Incomplete elliptic integral of the first kind F(phi|m) (DLMF 19.2.4).
+def ellipkinc(phi: ArrayLike, m: ArrayLike, *, mc: ArrayLike | None = None) -> Array:
+    r"""Incomplete elliptic integral of the first kind $F(\phi|m)$ (DLMF 19.2.4).
 
-    .. math:: F(\phi|m) = \int_0^\phi \frac{d\theta}{\sqrt{1 - m \sin^2\theta}}
-              = \sin\phi\, R_F(\cos^2\phi, 1 - m\sin^2\phi, 1)
+    $$F(\phi|m) = \int_0^\phi \frac{d\theta}{\sqrt{1 - m \sin^2\theta}}
+                = \sin\phi\, R_F(\cos^2\phi, 1 - m\sin^2\phi, 1)$$
 
-    (DLMF 19.25.5) for |phi| <= pi/2, continued to every real phi by F(phi + k pi) = F(phi) + 2k K(m)
-    (DLMF 19.2.10).  Argument order as ``scipy.special.ellipkinc``.
+    (DLMF 19.25.5) for $|\phi| \le \pi/2$, continued to every real $\phi$ by
+    $F(\phi + k\pi|m) = F(\phi|m) + 2k K(m)$ (DLMF 19.2.10).  Argument order as
+    ``scipy.special.ellipkinc``.
     """
     m, mc = complement(m, mc)
     phi, m, mc = promote(phi, m, mc)
@@ -449,16 +460,19 @@ def _ellippiinc_jvp(primals, tangents):
     return value, tangent_nm + tangent_phi
 
 
-def ellippiinc(n, phi, m, *, mc=None):
-    r"""Incomplete elliptic integral of the third kind (DLMF 19.2.7, characteristic n, parameter m).
+def ellippiinc(n: ArrayLike, phi: ArrayLike, m: ArrayLike, *, mc: ArrayLike | None = None) -> Array:
+    r"""Incomplete elliptic integral of the third kind (DLMF 19.2.7, characteristic $n$, parameter $m$).
 
-    .. math:: \Pi(n; \phi|m) = \int_0^\phi \frac{d\theta}{(1 - n\sin^2\theta)\sqrt{1 - m\sin^2\theta}}
+    $$\Pi(n; \phi|m) = \int_0^\phi \frac{d\theta}{(1 - n\sin^2\theta)\sqrt{1 - m\sin^2\theta}}$$
 
-    for n <= 1 (n > 1, a principal value, gives NaN) and every real phi, continued by
-    Pi(n; phi + k pi|m) = Pi(n; phi|m) + 2k Pi(n|m).  On |phi| <= pi/2 DLMF 19.25.14:
-    Pi = s R_F(c^2, Delta^2, 1) + (n/3) s^3 R_J(c^2, Delta^2, 1, 1 - n s^2); for n < -1 the
-    characteristic is first moved into (-1, 0] by DLMF 19.7.8.  The argument order (n, phi, m) is that
-    of Mathematica's EllipticPi and Boost's ellint_3.
+    for $n \le 1$ ($n > 1$, a principal value, gives NaN) and every real $\phi$, continued by
+    $\Pi(n; \phi + k\pi|m) = \Pi(n; \phi|m) + 2k\,\Pi(n|m)$.  On $|\phi| \le \pi/2$, DLMF 19.25.14
+    with $s = \sin\phi$, $c = \cos\phi$, $\Delta^2 = 1 - m s^2$:
+
+    $$\Pi(n; \phi|m) = s\, R_F(c^2, \Delta^2, 1) + \tfrac{n}{3} s^3 R_J(c^2, \Delta^2, 1, 1 - n s^2);$$
+
+    for $n < -1$ the characteristic is first moved into $(-1, 0]$ by DLMF 19.7.8.  The argument order
+    $(n, \phi, m)$ is that of Mathematica's EllipticPi and Boost's ellint_3.
     """
     m, mc = complement(m, mc)
     n, phi, m, mc = promote(n, phi, m, mc)
@@ -480,10 +494,12 @@ def _ellippi_jvp(primals, tangents):
     return jax.jvp(_pi_complete, (n, m, mc), (dn, dparam, -dparam))
 
 
-def ellippi(n, m, *, mc=None):
-    r"""Complete elliptic integral of the third kind Pi(n|m) = Pi(n; pi/2|m) (DLMF 19.2.8), n < 1.
+def ellippi(n: ArrayLike, m: ArrayLike, *, mc: ArrayLike | None = None) -> Array:
+    r"""Complete elliptic integral of the third kind $\Pi(n|m) = \Pi(n; \pi/2|m)$ (DLMF 19.2.8), $n < 1$.
 
-    Pi(n|m) = R_F(0, mc, 1) + (n/3) R_J(0, mc, 1, 1 - n) (DLMF 19.25.2), with DLMF 19.7.8 for n < -1.
+    $$\Pi(n|m) = R_F(0, m_c, 1) + \tfrac{n}{3} R_J(0, m_c, 1, 1 - n), \qquad m_c = 1 - m$$
+
+    (DLMF 19.25.2), with DLMF 19.7.8 for $n < -1$.
     """
     m, mc = complement(m, mc)
     n, m, mc = promote(n, m, mc)
