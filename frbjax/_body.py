@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import functools
 
 import equinox as eqx
@@ -13,6 +14,7 @@ from jaxtyping import Array, Float, Int
 
 from . import _quaternion as quaternion
 from ._fusion import materialise, sum_last, when_any
+from ._inertia import InertiaTensor, through_principal_frame
 from ._regimes import UNIFORM, classify, constants, evaluate, evaluate_once, orbit_constants
 from ._regimes import reference as regime_reference
 
@@ -171,14 +173,28 @@ def _working_dtype(inertia, angular_momentum):
     return jnp.result_type(inertia, angular_momentum, float)
 
 
-def _prepare(inertia, angular_momentum, attitude):
+def _matrix_product(first, second):
+    """first @ second for (..., 3, 3) arrays, as elementwise products and additions (no dot)."""
+    return sum_last(first[..., :, None, :] * jnp.swapaxes(second, -1, -2)[..., None, :, :])
+
+
+def _prepare(inertia, angular_momentum, attitude, axes=None):
     """Broadcast, checked (NaN for invalid bodies) and normalised inputs and the working frame:
-    (inertia, angular_momentum, attitude, valid, permutation, sorted inertia, unit L, |L|, regime)."""
+    (inertia, angular_momentum, attitude, valid, frame, sorted inertia, unit L, |L|, regime).
+
+    ``axes`` (..., 3, 3): principal axes as columns in body coordinates (a rotation), or None when
+    the body axes are principal.  The frame is then the working frame's axes in body coordinates,
+    axes @ P (docs/theory.md §12); ``angular_momentum`` and ``attitude`` stay those of the body frame.
+    """
     dtype = _working_dtype(inertia, angular_momentum)
     attitude = jnp.asarray(attitude, dtype)
     inertia = inertia.astype(dtype)
     angular_momentum = angular_momentum.astype(dtype)
-    batch = jnp.broadcast_shapes(inertia.shape[:-1], angular_momentum.shape[:-1], attitude.shape[:-1])
+    shapes = [inertia.shape[:-1], angular_momentum.shape[:-1], attitude.shape[:-1]]
+    if axes is not None:
+        axes = axes.astype(dtype)
+        shapes.append(axes.shape[:-2])
+    batch = jnp.broadcast_shapes(*shapes)
     inertia = jnp.broadcast_to(inertia, batch + (3,))
     angular_momentum = jnp.broadcast_to(angular_momentum, batch + (3,))
     attitude = jnp.broadcast_to(attitude, batch + (4,))
@@ -190,6 +206,9 @@ def _prepare(inertia, angular_momentum, attitude):
         & jnp.all(jnp.isfinite(attitude), axis=-1)
         & jnp.any(attitude != 0, axis=-1)
     )
+    if axes is not None:
+        axes = jnp.broadcast_to(axes, batch + (3, 3))
+        valid = valid & jnp.all(jnp.isfinite(axes), axis=(-2, -1))
     inertia = jnp.where(valid[..., None], inertia, jnp.nan)
     angular_momentum = jnp.where(valid[..., None], angular_momentum, jnp.nan)
     attitude = jnp.where(valid[..., None], attitude, jnp.nan)
@@ -198,7 +217,12 @@ def _prepare(inertia, angular_momentum, attitude):
     # Normalised in the working frame (a signed permutation: exact), where the components come in
     # the order of the sorted moments: |L| then rounds the same way for the moments in any order,
     # and a body with its axes relabelled computes bit for bit the same motion.
-    permutation, sorted_inertia, momentum_working = working_frame(inertia, angular_momentum)
+    if axes is None:
+        permutation, sorted_inertia, momentum_working = working_frame(inertia, angular_momentum)
+    else:
+        principal_momentum = _apply(jnp.swapaxes(axes, -1, -2), angular_momentum)
+        permutation, sorted_inertia, momentum_working = working_frame(inertia, principal_momentum)
+        permutation = _matrix_product(axes, permutation)
     norm_squared = sum_last(momentum_working**2)
     moving = norm_squared > 0
     norm = jnp.sqrt(jnp.where(moving, norm_squared, 1))
@@ -210,10 +234,10 @@ def _prepare(inertia, angular_momentum, attitude):
 
 
 @jax.jit
-def _construct(inertia, angular_momentum, attitude):
+def _construct(inertia, angular_momentum, attitude, axes=None):
     """The fields of a FreeRigidBody (see its docstring) from validated inputs, as one jitted program."""
     (inertia, angular_momentum, attitude, valid, permutation, sorted_inertia, unit_working, norm,
-     regime) = _prepare(inertia, angular_momentum, attitude)
+     regime) = _prepare(inertia, angular_momentum, attitude, axes)
     dtype = inertia.dtype
     consts = constants(sorted_inertia, unit_working, regime)
 
@@ -242,39 +266,102 @@ def _construct(inertia, angular_momentum, attitude):
         momentum_norm=jnp.where(valid, norm, jnp.nan),
         permutation=permutation,
         regime=regime,
+        principal_axes=None if axes is None else jnp.where(valid[..., None, None], axes, jnp.nan),
         _constants=consts,
         _attitude_map=attitude_map,
     )
 
 
-def _uniform_attitude(uniform, inertia, momentum, attitude, t, moving):
-    """``moving`` where the body does not rotate uniformly, q0 ⊗ exp(t Omega0 / 2) where it does."""
+def _angular_velocity(inertia, axes, momentum):
+    """Omega = L / I for principal body axes, R (R^T L / I) for principal axes R in the body frame."""
+    if axes is None:
+        return momentum / inertia
+    return _apply(axes, _apply(jnp.swapaxes(axes, -1, -2), momentum) / inertia)
+
+
+def _sphere_drift(inertia, axes, momentum):
+    """dL/dt of a sphere to first order in the change of its moments: exactly 0, with that derivative.
+
+    A sphere rotates uniformly, but moments changed by dI make dL/dt = L x Omega = -L x (dI L) / I^2,
+    constant to first order (the variational equation of a sphere has a constant forcing), so that
+    L(t) = L0 + t L0 x (Omega0 - L0 / I_1) is exact to first order: the bracket is an exact zero for
+    equal moments (the same division twice) whose derivative is -dI L0 / I^2 up to a multiple of L0.
+    Computed in the principal frame (where the divisions agree bit for bit) and zero for every body
+    that is not a sphere (whose uniform rotations keep the derivatives of the rigid spin).
+    """
+    principal = momentum if axes is None else _apply(jnp.swapaxes(axes, -1, -2), momentum)
+    rate = jnp.cross(principal, principal / inertia - principal / inertia[..., :1])
+    sphere = (inertia[..., 0] == inertia[..., 1]) & (inertia[..., 1] == inertia[..., 2])
+    rate = jnp.where(sphere[..., None], rate, 0)
+    return rate if axes is None else _apply(axes, rate)
+
+
+def _uniform_momentum(uniform, inertia, axes, momentum, t):
+    """L0 (+ t dL/dt of ``_sphere_drift``, exactly 0, where a batch has a sphere)."""
+    shape = jnp.broadcast_shapes(uniform.shape, jnp.shape(t)) + (3,)
+
+    def with_sphere(momentum):
+        drift = _sphere_drift(inertia, axes, momentum)
+        return jnp.broadcast_to(momentum + jnp.asarray(t)[..., None] * drift, shape)
+
+    spheres = uniform & (inertia[..., 0] == inertia[..., 2]) & (inertia[..., 1] == inertia[..., 2])
+    return when_any(spheres, with_sphere, lambda momentum: jnp.broadcast_to(momentum, shape), momentum)
+
+
+def _sphere_turn(omega, drift_rate, t):
+    """phi(t) = int_0^t exp(-hat(Omega0) (t - s)) (s b) ds, b = (dL/dt) / I, of a sphere's drift.
+
+    The attitude of a sphere whose angular velocity grows as Omega0 + s b (b perpendicular to
+    Omega0) is q0 ⊗ exp(t Omega0 / 2) ⊗ exp(phi / 2) to first order, with phi = C1 b - C2 Omega0 x b,
+    C1 = (1 - cos x) / w^2 = t^2 (2 sin^2(x/2) / x^2), C2 = (x - sin x) / w^3 = t^3 (x - sin x) / x^3,
+    w = |Omega0|, x = w t; their series below x^2 = 0.01 (C2's form cancels there).  Exactly 0 with b.
+    """
+    x2 = sum_last(omega * omega) * t**2
+    small = x2 < 0.01
+    x = jnp.sqrt(jnp.where(small, 1, x2))
+    half_sinc = jnp.where(small, 1 - x2 / 24 + x2**2 / 1920, jnp.sin(x / 2) / (x / 2))
+    first = 0.5 * t**2 * half_sinc**2
+    third = jnp.where(small, 1 / 6 - x2 / 120 + x2**2 / 5040 - x2**3 / 362880,
+                      (x - jnp.sin(x)) / jnp.where(small, 1, x2 * x))
+    second = t**3 * third
+    return first[..., None] * drift_rate - second[..., None] * jnp.cross(omega, drift_rate)
+
+
+def _uniform_attitude(uniform, inertia, axes, momentum, attitude, t, moving):
+    """``moving`` where the body does not rotate uniformly, q0 ⊗ exp(t Omega0 / 2) where it does
+    (⊗ exp(phi / 2) of ``_sphere_turn``, exactly 1, for its first-order derivatives)."""
 
     def with_uniform(moving):
-        omega = momentum / inertia
-        spin = quaternion.exp_pure(omega * jnp.broadcast_to(t, uniform.shape)[..., None])
+        omega = _angular_velocity(inertia, axes, momentum)
+        time = jnp.broadcast_to(t, uniform.shape)
+        spin = quaternion.exp_pure(omega * time[..., None])
+        turn = _sphere_turn(omega, _sphere_drift(inertia, axes, momentum) / inertia[..., :1], time)
+        spin = quaternion.multiply(spin, quaternion.exp_pure(turn))
         return jnp.where(uniform[..., None], quaternion.multiply(attitude, spin), moving)
 
     # Most batches have no uniformly rotating body: then its trigonometry is not evaluated at all.
     return when_any(uniform, with_uniform, lambda moving: moving, moving)
 
 
-def motion_once(inertia, angular_momentum, attitude, t, with_attitude=True):
+def motion_once(inertia, angular_momentum, attitude, t, with_attitude=True, axes=None):
     """(L(t), q(t)) (q None unless ``with_attitude``) of bodies evaluated at one time each.
 
     The one-time path (``_regimes.evaluate_once``): the per-body constants are elementwise formulas,
     the motion one Jacobi evaluation, one R_J and an arctangent, and no theta series.  ``t`` must
-    broadcast to the bodies' batch shape without adding dimensions.
+    broadcast to the bodies' batch shape without adding dimensions.  ``axes``: principal axes in the
+    body frame (``_prepare``), or None.
     """
     (inertia, angular_momentum, attitude, _, permutation, sorted_inertia, unit_working, norm,
-     regime) = _prepare(inertia, angular_momentum, attitude)
+     regime) = _prepare(inertia, angular_momentum, attitude, axes)
     t = jnp.asarray(t, inertia.dtype)
     tau = norm * t
     orbit = orbit_constants(sorted_inertia, unit_working, regime)
     unit_momentum, chart_start, chart_now = evaluate_once(orbit, unit_working, tau, with_attitude)
     uniform = regime == UNIFORM
     moving = norm[..., None] * _apply(permutation, unit_momentum)
-    momentum = jnp.where(uniform[..., None], jnp.broadcast_to(angular_momentum, moving.shape), moving)
+    axes = None if axes is None else jnp.broadcast_to(axes, inertia.shape + (3,))
+    fixed = _uniform_momentum(uniform, inertia, axes, angular_momentum, t)
+    momentum = jnp.where(uniform[..., None], fixed, moving)
     if not with_attitude:
         return momentum, None
     # q = q0 ⊗ P ⊗ conj(q̂(0)) ⊗ q̂(tau) ⊗ conj(P) (docs/theory.md §8), where P ⊗ (w, v) ⊗ conj(P) =
@@ -283,7 +370,7 @@ def motion_once(inertia, angular_momentum, attitude, t, with_attitude=True):
     change = materialise(quaternion.multiply(quaternion.conjugate(chart_start), chart_now))
     change = jnp.concatenate([change[..., :1], _apply(permutation, change[..., 1:])], -1)
     moving = _normalised(materialise(quaternion.multiply(attitude, change)))
-    return momentum, _uniform_attitude(uniform, inertia, angular_momentum, attitude, t, moving)
+    return momentum, _uniform_attitude(uniform, inertia, axes, angular_momentum, attitude, t, moving)
 
 
 def _compiled(method):
@@ -358,10 +445,17 @@ class FreeRigidBody(eqx.Module):
     momentum_norm: Float[Array, "..."]
     permutation: Float[Array, "... 3 3"]
     regime: Int[Array, "..."]
+    principal_axes: Float[Array, "... 3 3"] | None
+    inertia_tensor: InertiaTensor | None
     _constants: dict
     _attitude_map: Float[Array, "... 4 4"]
 
     def __init__(self, inertia, angular_momentum, attitude=None):
+        tensor = None
+        if isinstance(inertia, InertiaTensor):
+            # A body in its own body frame: the motion of its principal frame, turned (docs/theory.md
+            # §12).  The fields are those of that motion; the tensor is kept for the derivatives.
+            tensor, inertia = inertia, inertia.principal_moments
         _validate(inertia, angular_momentum, attitude)
         inertia = jnp.asarray(inertia)
         angular_momentum = jnp.asarray(angular_momentum)
@@ -373,8 +467,25 @@ class FreeRigidBody(eqx.Module):
         attitude = jnp.asarray(attitude)
         # One compiled program (cached by shape and dtype): called eagerly, construction is a single
         # dispatch instead of hundreds of eager operations; under the caller's jit it is inlined.
-        for name, value in _construct(inertia, angular_momentum, attitude).items():
+        axes = None if tensor is None else tensor.principal_axes
+        for name, value in _construct(inertia, angular_momentum, attitude, axes).items():
             setattr(self, name, value)
+        self.inertia_tensor = tensor
+
+    @classmethod
+    def from_inertia_tensor(cls, inertia_tensor, angular_momentum, attitude=None) -> FreeRigidBody:
+        r"""The body with inertia tensor ``inertia_tensor`` (..., 3, 3) in its own body frame.
+
+        ``FreeRigidBody.from_inertia_tensor(T, L, q)`` is ``FreeRigidBody(InertiaTensor(T), L, q)``:
+        ``angular_momentum`` L (..., 3) and ``attitude`` q (..., 4) (body to space) are those of the
+        tensor's body frame, and so are every method's outputs (Omega = T^-1 L).  ``inertia`` is then
+        the principal moments (ascending), ``principal_axes`` their directions (columns, body
+        coordinates) and ``inertia_tensor`` the :class:`InertiaTensor`.  Evaluating costs what a body
+        built from principal moments costs: the change of frame is folded into the per-body data.
+        Derivatives with respect to every tensor entry are finite and correct, repeated moments
+        included (:class:`InertiaTensor`).
+        """
+        return cls(InertiaTensor(inertia_tensor), angular_momentum, attitude)
 
     # ------------------------------------------------------------------------------------ helpers
 
@@ -385,10 +496,11 @@ class FreeRigidBody(eqx.Module):
     def _uniform(self):
         return self.regime == UNIFORM
 
-    def _momentum_from(self, unit_working):
+    def _momentum_from(self, t, unit_working):
         moving = self.momentum_norm[..., None] * _apply(self.permutation, unit_working)
-        fixed = jnp.broadcast_to(self.initial_angular_momentum, moving.shape)
-        return jnp.where(self._uniform()[..., None], fixed, moving)
+        fixed = _uniform_momentum(self._uniform(), self.inertia, self.principal_axes,
+                                  self.initial_angular_momentum, t)
+        return jnp.where(self._uniform()[..., None], jnp.broadcast_to(fixed, moving.shape), moving)
 
     def _attitude_from(self, t, tau, particular):
         # q = offset ⊗ q̂ ⊗ conj(P) (docs/theory.md §8), as one matrix product.
@@ -398,8 +510,44 @@ class FreeRigidBody(eqx.Module):
         moving = _normalised(materialise(moving))
         uniform = jnp.broadcast_to(self._uniform(), tau.shape)
         # Uniform rotation about a principal direction (or L = 0): q(t) = q0 ⊗ exp(t Omega0 / 2).
-        return _uniform_attitude(uniform, self.inertia, self.initial_angular_momentum, self.initial_attitude,
-                                 t, moving)
+        return _uniform_attitude(uniform, self.inertia, self.principal_axes, self.initial_angular_momentum,
+                                 self.initial_attitude, t, moving)
+
+    def _through_tensor(self, method, t):
+        """method(self, t); for a body built from an inertia tensor, its derivatives with respect to
+        the tensor taken through the principal frame (``_inertia.through_principal_frame``)."""
+        if self.inertia_tensor is None:
+            return method(self, t)
+        t = jnp.asarray(t, self.inertia.dtype)
+
+        def motion(moments, axes, arguments):
+            momentum, attitude, t = arguments
+            return method(_body_of(_construct(moments, momentum, attitude, axes)), t)
+
+        def evaluate(prepared, arguments):
+            return method(prepared, arguments[2])
+
+        # The series already built: their own derivatives are not needed (the rule rebuilds along
+        # the tangent), and cutting them keeps forward mode from computing them.
+        prepared = jax.lax.stop_gradient(_body_of(dict(
+            (name, getattr(self, name)) for name in _FIELDS if name != "inertia_tensor")))
+        return through_principal_frame(motion, evaluate, self.inertia_tensor.matrix, prepared,
+                                       (self.initial_angular_momentum, self.initial_attitude, t))
+
+    def _angular_momentum(self, t):
+        t, tau = self._time(t)
+        unit_working, _ = evaluate(self._constants, tau, attitude=False)
+        return self._momentum_from(t, unit_working)
+
+    def _quaternion(self, t):
+        t, tau = self._time(t)
+        particular, _ = evaluate(self._constants, tau)
+        return self._attitude_from(t, tau, particular)
+
+    def _state(self, t):
+        t, tau = self._time(t)
+        particular, unit_working = evaluate(self._constants, tau)
+        return self._momentum_from(t, unit_working), self._attitude_from(t, tau, particular)
 
     # ------------------------------------------------------------------------------------- public
 
@@ -409,21 +557,18 @@ class FreeRigidBody(eqx.Module):
 
         Evaluates only the Jacobi functions: no elliptic integral of the third kind.
         """
-        t, tau = self._time(t)
-        unit_working, _ = evaluate(self._constants, tau, attitude=False)
-        return self._momentum_from(unit_working)
+        return self._through_tensor(FreeRigidBody._angular_momentum, t)
 
     @_compiled
     def angular_velocity(self, t) -> Float[Array, "... 3"]:
-        """Body-frame angular velocity Omega(t) = L(t) / I."""
-        return self.angular_momentum(t) / self.inertia
+        """Body-frame angular velocity Omega(t) = I^-1 L(t) (L / I for principal moments)."""
+        return self._through_tensor(
+            lambda body, t: _angular_velocity(body.inertia, body.principal_axes, body._angular_momentum(t)), t)
 
     @_compiled
     def quaternion(self, t) -> Float[Array, "... 4"]:
         """Attitude q(t) (w, x, y, z), body to space, continuous in t, equal to the attitude at t = 0."""
-        t, tau = self._time(t)
-        particular, _ = evaluate(self._constants, tau)
-        return self._attitude_from(t, tau, particular)
+        return self._through_tensor(FreeRigidBody._quaternion, t)
 
     @_compiled
     def state(self, t) -> tuple[Float[Array, "... 3"], Float[Array, "... 4"]]:
@@ -432,11 +577,27 @@ class FreeRigidBody(eqx.Module):
         The same values as the two methods (bit for bit), at the cost of ``quaternion`` alone: the
         Jacobi functions that give the attitude give L too.
         """
-        t, tau = self._time(t)
-        particular, unit_working = evaluate(self._constants, tau)
-        return self._momentum_from(unit_working), self._attitude_from(t, tau, particular)
+        return self._through_tensor(FreeRigidBody._state, t)
 
     @_compiled
     def rotation_matrix(self, t) -> Float[Array, "... 3 3"]:
         """Attitude matrix R(t) with x_space = R x_body (dR/dt = R hat(Omega))."""
         return quaternion.as_matrix(self.quaternion(t))
+
+
+_FIELDS = tuple(field.name for field in dataclasses.fields(FreeRigidBody))
+
+
+def _body_of(fields):
+    """A FreeRigidBody with the given fields (those of ``_construct``; no inertia tensor unless given),
+    without the constructor's checks: for bodies built inside derivative rules and the fit."""
+    body = object.__new__(FreeRigidBody)
+    for name in _FIELDS:
+        object.__setattr__(body, name, fields.get(name))
+    return body
+
+
+def with_principal_axes(inertia, angular_momentum, attitude, axes):
+    """The body with principal moments ``inertia`` along ``axes`` (columns, a rotation, in the body
+    frame), differentiable in all four directly (the fit's parameterisation; no inertia tensor)."""
+    return _body_of(_construct(inertia, angular_momentum, attitude, axes))

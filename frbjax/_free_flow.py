@@ -12,10 +12,37 @@ import jax.numpy as jnp
 from jaxtyping import Array, Float
 
 from ._body import _validate, _working_dtype, motion_once
+from ._inertia import InertiaTensor, through_principal_frame
 from ._kernel import one_kernel
 
 
 _state_once = one_kernel(motion_once)
+
+
+def _state_in_principal_frame(inertia, angular_momentum, attitude, t, axes):
+    return motion_once(inertia, angular_momentum, attitude, t, True, axes)
+
+
+_state_once_in_principal_frame = one_kernel(_state_in_principal_frame)
+
+
+@jax.jit
+def _tensor_free_flow(matrix, moments, axes, angular_momentum, attitude, t):
+    batch = jnp.broadcast_shapes(moments.shape[:-1], angular_momentum.shape[:-1], attitude.shape[:-1], t.shape)
+    moments = jnp.broadcast_to(moments, batch + (3,))
+    axes = jnp.broadcast_to(axes, batch + (3, 3))
+    matrix = jnp.broadcast_to(matrix, batch + (3, 3))
+    arguments = (jnp.broadcast_to(angular_momentum, batch + (3,)), jnp.broadcast_to(attitude, batch + (4,)),
+                 jnp.broadcast_to(t, batch))
+
+    def motion(moments, axes, arguments):
+        return _state_in_principal_frame(moments, *arguments, axes)
+
+    def evaluate(prepared, arguments):
+        return _state_once_in_principal_frame(prepared[0], *arguments, prepared[1])
+
+    prepared = jax.lax.stop_gradient((moments, axes))
+    return through_principal_frame(motion, evaluate, matrix, prepared, arguments)
 
 
 @jax.jit
@@ -29,7 +56,8 @@ def _free_flow(inertia, angular_momentum, attitude, t):
 def free_flow(inertia, angular_momentum, attitude, t) -> tuple[Float[Array, "... 3"], Float[Array, "... 4"]]:
     r"""(L(t), q(t)) of the free bodies with body angular momentum L and attitude q at time 0.
 
-    ``inertia`` (..., 3) (principal moments, any order, > 0), ``angular_momentum`` (..., 3),
+    ``inertia`` (..., 3) (principal moments, any order, > 0) or an :class:`~frbjax.InertiaTensor`
+    (then L, q and the results are those of the tensor's body frame), ``angular_momentum`` (..., 3),
     ``attitude`` (..., 4) (w, x, y, z, body to space) and ``t`` (...) broadcast together; every
     element of the broadcast shape is one body at one time.  The values are those of
     ``FreeRigidBody(inertia, angular_momentum, attitude).state(t)`` (to rounding), computed without
@@ -45,6 +73,12 @@ def free_flow(inertia, angular_momentum, attitude, t) -> tuple[Float[Array, "...
     and ``grad``.  Invalid inputs raise ValueError as in :class:`~frbjax.FreeRigidBody` (NaN under
     tracing).
     """
+    if isinstance(inertia, InertiaTensor):
+        _validate(inertia.principal_moments, angular_momentum, attitude)
+        angular_momentum, attitude = jnp.asarray(angular_momentum), jnp.asarray(attitude)
+        dtype = _working_dtype(inertia.principal_moments, angular_momentum)
+        return _tensor_free_flow(inertia.matrix, inertia.principal_moments, inertia.principal_axes,
+                                 angular_momentum, attitude, jnp.asarray(t, dtype))
     _validate(inertia, angular_momentum, attitude)
     inertia, angular_momentum, attitude = (jnp.asarray(a) for a in (inertia, angular_momentum, attitude))
     dtype = _working_dtype(inertia, angular_momentum)

@@ -12,6 +12,10 @@ numbers
 
     theta = (log(I2/I1), log(I3/I1), Omega_1, Omega_2, Omega_3, delta_1, delta_2, delta_3)
 
+(``inertia="tensor"`` appends psi, the rotation vector of the principal axes in the body frame:
+principal_axes = exp(hat(psi)), the tensor R diag(I) R^T, 11 parameters; the body is built from the
+moments and axes directly, so the derivatives never meet an eigen-decomposition)
+
 with Omega the body angular velocity at the reference time t_ref (the sample time nearest 0; it is 0
 whenever the data contain t = 0) and delta a rotation vector: q(t_ref) = q_ref ⊗ exp(delta / 2), q_ref
 the observed attitude at t_ref.  The result reports the moments scaled so that the largest is 1, and
@@ -67,11 +71,19 @@ import optimistix as optx
 from jaxtyping import Array, Float
 
 from . import _quaternion as quaternion
-from ._body import FreeRigidBody
+from ._body import FreeRigidBody, with_principal_axes
 
 __all__ = ["AttitudeFit", "fit_attitude"]
 
 _LOSSES = {"squared": 0, "huber": 1, "cauchy": 2}
+_PRINCIPAL_PARAMETERS, _TENSOR_PARAMETERS = 8, 11
+_AXES_AT_BODY_AXES = 12  # starts of a tensor fit whose principal axes start at the body axes
+# A principal moment gap smaller than this many of its standard deviations leaves the axes in its
+# plane undetermined (AttitudeFit.axes_identifiable).
+_SIGNIFICANT_GAP = 3.0
+# Weight of the triangle-inequality penalty (per unit of (I3 - I1 - I2) / I3) against residuals
+# of the order of the attitude noise.
+_TRIANGLE_WEIGHT = 1e9
 # Fractions of the samples (nearest t_ref first) of the continuation windows; the last is all of them.
 _WINDOWS = (0.12, 0.3, 0.6, 1.0)
 _MIN_WINDOW = 12  # samples in the smallest window (at least)
@@ -81,14 +93,26 @@ _BASE_SHAPES = ((0.6, 0.8, 1.0), (0.85, 0.92, 1.0), (0.4, 0.9, 1.0), (0.5, 0.55,
 class AttitudeFit(eqx.Module):
     """Result of :func:`fit_attitude`.
 
-    - ``inertia`` (3,): principal moments in the data's body axes, scaled so that the largest is 1;
+    - ``inertia`` (3,): principal moments, scaled so that the largest is 1: in the data's body axes
+      (``inertia="principal"``), or ascending along ``principal_axes`` (``inertia="tensor"``);
+    - ``inertia_tensor`` (3, 3): the inertia tensor in the data's body frame, scaled so that its
+      largest principal moment is 1 (``diag(inertia)`` for a principal fit); ``principal_axes``
+      (3, 3): the principal axes as columns in the body frame, a rotation (the identity for a
+      principal fit); ``inertia_tensor_covariance`` (3, 3, 3, 3): Cov(T_ij, T_kl);
+    - ``axes_identifiable``: False when two fitted principal moments are not significantly different
+      (gap below 3 standard deviations): the data cannot show the orientation of the axes about the
+      third one, the ``symmetry_axis`` (3,) (zeros when identifiable); the principal axes in that
+      plane are then an arbitrary choice, and ``unidentified_direction`` (P,) is the direction of
+      the parameters that the residuals do not determine (the null direction of J^T J; zeros when
+      identifiable);
     - ``angular_velocity`` (3,): body angular velocity at t = 0;
     - ``attitude`` (4,): attitude (w, x, y, z; w >= 0) at t = 0;
-    - ``body``: the fitted :class:`FreeRigidBody` (moments ``inertia``, angular momentum
-      ``inertia * angular_velocity``, attitude ``attitude``), built when asked for (a property: a fit
-      whose caller wants the parameters alone does not compile the constructor);
-    - ``parameters`` (8,): theta = (log I2/I1, log I3/I1, Omega(t_ref), delta) of the module docstring;
-    - ``covariance`` (8, 8): covariance of ``parameters``, (J^T J)^-1 s^2, s^2 = 2 cost / (m - 8);
+    - ``body``: the fitted :class:`FreeRigidBody` (from ``inertia_tensor``, angular momentum
+      ``inertia_tensor @ angular_velocity``, attitude ``attitude``), built when asked for (a
+      property: a fit whose caller wants the parameters alone does not compile the constructor);
+    - ``parameters`` (P,): theta = (log I2/I1, log I3/I1, Omega(t_ref), delta), and for a tensor fit
+      psi, the rotation vector of the principal axes (module docstring); P = 8 or 11;
+    - ``covariance`` (P, P): covariance of ``parameters``, (J^T J)^+ s^2, s^2 = 2 cost / (m - P);
     - ``inertia_covariance`` (3, 3): the same propagated to ``inertia`` (rank 2);
     - ``residuals`` (N, 3) attitude residuals (rad, unweighted, least-squares form) and
       ``angular_velocity_residuals`` (N, 3) (zeros without gyro data);
@@ -98,10 +122,16 @@ class AttitudeFit(eqx.Module):
     """
 
     inertia: Float[Array, "3"]
+    inertia_tensor: Float[Array, "3 3"]
+    principal_axes: Float[Array, "3 3"]
+    inertia_tensor_covariance: Float[Array, "3 3 3 3"]
+    axes_identifiable: Array
+    symmetry_axis: Float[Array, "3"]
+    unidentified_direction: Float[Array, "P"]
     angular_velocity: Float[Array, "3"]
     attitude: Float[Array, "4"]
-    parameters: Float[Array, "8"]
-    covariance: Float[Array, "8 8"]
+    parameters: Float[Array, "P"]
+    covariance: Float[Array, "P P"]
     inertia_covariance: Float[Array, "3 3"]
     residuals: Float[Array, "N 3"]
     angular_velocity_residuals: Float[Array, "N 3"]
@@ -115,22 +145,36 @@ class AttitudeFit(eqx.Module):
     @property
     def body(self) -> FreeRigidBody:
         """The fitted FreeRigidBody, built on each access (one dispatch of the cached constructor)."""
-        inertia = np.asarray(self.inertia)
-        return _fitted_body(inertia, inertia * np.asarray(self.angular_velocity), np.asarray(self.attitude))
+        omega, attitude = np.asarray(self.angular_velocity), np.asarray(self.attitude)
+        if self.parameters.shape[0] == _PRINCIPAL_PARAMETERS:
+            inertia = np.asarray(self.inertia)
+            return _fitted_body(inertia, inertia * omega, attitude)
+        tensor = np.asarray(self.inertia_tensor)
+        return _fitted_body(tensor, tensor @ omega, attitude, tensor=True)
 
 
 # ------------------------------------------------------------------------------------ the model
 
 
 def _model(theta, reference, times, time_scale):
-    """(q(t), Omega(t)) of the motion with parameters theta at times - t_ref (already subtracted)."""
+    """(q(t), Omega(t)) of the motion with parameters theta at times - t_ref (already subtracted).
+
+    8 parameters: principal body axes; 11: principal axes exp(hat(theta[8:11])) in the body frame,
+    the body built from moments and axes directly (smooth in both: no eigen-decomposition).
+    """
     inertia = jnp.exp(jnp.concatenate([jnp.zeros(1, theta.dtype), theta[:2]]))
     omega = theta[2:5] / time_scale
     attitude = quaternion.multiply(reference, quaternion.exp_pure(theta[5:8]))
-    body = FreeRigidBody(inertia, inertia * omega, attitude)
-    # One evaluation gives both (``state``): the Jacobi functions behind q(t) give L(t) too.
+    if theta.shape[0] == _PRINCIPAL_PARAMETERS:
+        body = FreeRigidBody(inertia, inertia * omega, attitude)
+        # One evaluation gives both (``state``): the Jacobi functions behind q(t) give L(t) too.
+        momentum, attitude_t = body.state(times)
+        return attitude_t, momentum / inertia
+    axes = quaternion.as_matrix(quaternion.exp_pure(theta[8:11]))
+    momentum0 = axes @ (inertia * (axes.T @ omega))
+    body = with_principal_axes(inertia, momentum0, attitude, axes)
     momentum, attitude_t = body.state(times)
-    return attitude_t, momentum / inertia
+    return attitude_t, (momentum @ axes) / inertia @ axes.T
 
 
 def _attitude_residual(q_model, q_observed):
@@ -153,14 +197,20 @@ def _robust_factor(squared, loss):
 def _residuals(theta, args):
     """(weighted, robustified residuals (M, 6), (q_model (M, 4), Omega_model (M, 3))) at every row."""
     data, mask, loss, scale = args
-    times, q_obs, w_obs, reference, time_scale, gyro_weight, attitude_weight = data
+    times, q_obs, w_obs, reference, time_scale, gyro_weight, attitude_weight, triangle = data
     q_model, w_model = _model(theta, reference, times, time_scale)
     r_att = _attitude_residual(q_model, q_obs) * attitude_weight
     r_gyro = (w_model - w_obs) * gyro_weight
     r = jnp.concatenate([r_att, r_gyro], -1)  # (M, 6): one sample's residual vector
     squared = jnp.sum(r * r, -1) / scale**2
     factor = _robust_factor(squared, loss) * mask
-    return r * factor[:, None], (q_model, w_model)
+    r = r * factor[:, None]
+    # The triangle inequality I1 + I2 >= I3 of physical bodies, when asked for: a penalty on its
+    # violation in the last row (the t = 0 row, which holds no sample).
+    moments = jnp.exp(jnp.concatenate([jnp.zeros(1, theta.dtype), theta[:2]]))
+    excess = (2 * jnp.max(moments) - jnp.sum(moments)) / jnp.max(moments)
+    penalty = triangle * _TRIANGLE_WEIGHT * jnp.maximum(excess, 0)
+    return r.at[-1, 0].set(penalty), (q_model, w_model)
 
 
 # ------------------------------------------------------------------------------------ the solver
@@ -256,7 +306,7 @@ def _fit(thetas0, references, data, masks, final_loss, loss_scale, rtol, atol, m
     covariance = jnp.linalg.pinv(jac.T @ jac) * variance
     # The model at the samples and, in the last row, at t = 0 (unweighted).
     q_obs, w_obs = data[1][:-1], data[2][:-1]
-    return dict(theta=theta, costs=costs, oks=oks, best=best, covariance=covariance, scale=scale,
+    return dict(theta=theta, costs=costs, oks=oks, best=best, covariance=covariance, scale=scale, jacobian=jac,
                 residuals=_attitude_residual(q_model[:-1], q_obs), gyro_residuals=w_model[:-1] - w_obs,
                 attitude0=q_model[-1], omega0=w_model[-1])
 
@@ -267,23 +317,106 @@ def _normalised_inertia(p):
     largest = int(np.argmax(logs))
     moments = np.exp(logs - logs[largest])
     # d log(moment_i) / d theta_j = [i == j + 1] - [largest == j + 1]
-    jacobian = np.zeros((3, 8))
+    jacobian = np.zeros((3, len(p)))
     for j in range(2):
         jacobian[:, j] = moments * ((np.arange(3) == j + 1).astype(float) - float(largest == j + 1))
     return moments, jacobian
 
 
+def _rotation_matrix(rotation_vector):
+    """Rodrigues' formula (numpy): the rotation by |v| about v."""
+    def cross(v):  # cross(v) @ x = v x x
+        return np.array([[0.0, -v[2], v[1]], [v[2], 0.0, -v[0]], [-v[1], v[0], 0.0]])
+
+    angle = np.linalg.norm(rotation_vector)
+    if angle < 1e-12:
+        return np.eye(3) + cross(rotation_vector)
+    generator = cross(rotation_vector / angle)
+    return np.eye(3) + np.sin(angle) * generator + (1 - np.cos(angle)) * generator @ generator
+
+
+def _scaled_tensor(theta):
+    """(sorted moments with a largest of 1, their axes (a rotation), the tensor) of parameters theta."""
+    moments, _ = _normalised_inertia(theta)
+    axes = _rotation_matrix(theta[8:11])
+    order = np.argsort(moments, kind="stable")
+    moments, axes = moments[order], axes[:, order]
+    if np.linalg.det(axes) < 0:
+        axes[:, 2] = -axes[:, 2]
+    return moments, axes, axes @ np.diag(moments) @ axes.T
+
+
+def _tensor_result(theta, covariance, jacobian):
+    """The tensor, its principal moments and axes, their covariances and identifiability (numpy).
+
+    Derivatives of the tensor and of the moments with respect to theta by central differences of
+    these smooth (closed-form) functions; the moments' are exact up to ~1e-10 relative, more than
+    enough for a covariance.
+    """
+    moments, axes, tensor = _scaled_tensor(theta)
+    step = 1e-6
+    tensor_derivative, moments_derivative = [], []
+    for k in range(theta.size):
+        shift = np.zeros_like(theta)
+        shift[k] = step
+        plus, minus = _scaled_tensor(theta + shift), _scaled_tensor(theta - shift)
+        tensor_derivative.append((plus[2] - minus[2]) / (2 * step))
+        moments_derivative.append((plus[0] - minus[0]) / (2 * step))
+    tensor_derivative, moments_derivative = np.asarray(tensor_derivative), np.asarray(moments_derivative).T
+    tensor_covariance = np.einsum("kij,kl,lmn->ijmn", tensor_derivative, covariance, tensor_derivative)
+    moments_covariance = moments_derivative @ covariance @ moments_derivative.T
+    # A pair of moments whose gap is not significant leaves the rotation of the axes in their plane
+    # undetermined (an axisymmetric body has no preferred axes about its symmetry axis): the axis of
+    # the third moment is then the symmetry axis.
+    symmetry_axis = np.zeros(3)
+    identifiable = True
+    for (i, j), third in (((0, 1), 2), ((1, 2), 0)):
+        gap = moments[j] - moments[i]
+        spread = np.sqrt(max(moments_covariance[i, i] + moments_covariance[j, j]
+                             - 2 * moments_covariance[i, j], 0.0))
+        if not gap > _SIGNIFICANT_GAP * spread:
+            identifiable = False
+            symmetry_axis = axes[:, third]
+    unidentified = np.zeros(theta.size)
+    if not identifiable:
+        # The parameters' direction that changes the residuals least: the null direction of J^T J
+        # (columns scaled to unit norm, then back to the parameters' units, normalised).
+        norms = np.maximum(np.linalg.norm(jacobian, axis=0), 1e-300)
+        _, vectors = np.linalg.eigh((jacobian / norms).T @ (jacobian / norms))
+        unidentified = vectors[:, 0] / norms
+        unidentified /= np.linalg.norm(unidentified)
+    return dict(principal_moments=moments, principal_axes=axes, inertia_tensor=tensor,
+                inertia_tensor_covariance=tensor_covariance, moments_covariance=moments_covariance,
+                axes_identifiable=identifiable, symmetry_axis=symmetry_axis,
+                unidentified_direction=unidentified)
+
+
+def _principal_result(moments, moments_covariance):
+    """The same fields for a fit whose body axes are principal (diagonal tensor, identity axes)."""
+    covariance = np.zeros((3, 3, 3, 3))
+    for i in range(3):
+        for j in range(3):
+            covariance[i, i, j, j] = moments_covariance[i, j]
+    return dict(principal_moments=moments, principal_axes=np.eye(3), inertia_tensor=np.diag(moments),
+                inertia_tensor_covariance=covariance, moments_covariance=moments_covariance,
+                axes_identifiable=True, symmetry_axis=np.zeros(3),
+                unidentified_direction=np.zeros(_PRINCIPAL_PARAMETERS))
+
+
 _make_body = eqx.filter_jit(FreeRigidBody)
+_make_tensor_body = eqx.filter_jit(FreeRigidBody.from_inertia_tensor)
 
 
-def _fitted_body(inertia, angular_momentum, attitude):
+def _fitted_body(inertia, angular_momentum, attitude, tensor=False):
     """The fitted FreeRigidBody.  Built as any body is (its constructor is one compiled program, cached
     by shapes); a fit that ended non-finite, which the eager constructor rejects, gets the NaN body of
-    a construction under jit."""
+    a construction under jit.  ``inertia``: moments, or the tensor when ``tensor``."""
+    build, build_traced = ((FreeRigidBody.from_inertia_tensor, _make_tensor_body) if tensor
+                           else (FreeRigidBody, _make_body))
     try:
-        return FreeRigidBody(inertia, angular_momentum, attitude)
+        return build(inertia, angular_momentum, attitude)
     except ValueError:
-        return _make_body(inertia, angular_momentum, attitude)
+        return build_traced(inertia, angular_momentum, attitude)
 
 
 # XLA:CPU compiles the solver about a quarter faster, and runs it as fast, with the fusion emitters
@@ -362,6 +495,8 @@ def fit_attitude(
     loss_scale: float | None = None,
     attitude_sigma: float = 1.0,
     angular_velocity_sigma: float = 1.0,
+    inertia: str = "principal",
+    triangle_inequality: bool = False,
     n_starts: int = 12,
     seed: int = 0,
     key=None,
@@ -379,6 +514,11 @@ def fit_attitude(
     median residual norm of the least-squares fit on the previous continuation window);
     ``attitude_sigma``, ``angular_velocity_sigma``: the residuals are divided by them (their ratio
     weighs gyro against attitude data);
+    ``inertia``: "principal" (the data's body axes are principal axes: 8 parameters) or "tensor"
+    (the whole inertia tensor up to scale in the data's body frame: the principal axes are fitted
+    too, as the rotation vector psi of ``principal_axes``, 11 parameters; their starts are the body
+    axes, and random orientations for starts beyond the twelfth); ``triangle_inequality``: make the
+    fitted moments obey I1 + I2 >= I3, as those of matter do (a penalty: to about 1e-9 relative);
     ``n_starts``: starting points (solved together under ``jax.vmap``); ``seed`` or ``key`` (a
     ``jax.random`` key): randomises the starts beyond the deterministic ones and their inertia guesses.
 
@@ -387,12 +527,18 @@ def fit_attitude(
     defaults; e.g. ``{"xla_backend_optimization_level": 0}`` compiles faster and runs slower).
 
     Only the ratios of the moments are identifiable (I -> c I, L -> c L give the same motion): see the
-    module docstring for the 8 fitted parameters.  Runs in the dtype of the inputs (use float64).
+    module docstring for the fitted parameters.  A tensor fit of a (nearly) axisymmetric body cannot
+    determine the principal axes about the symmetry axis: ``AttitudeFit.axes_identifiable`` is then
+    False (the tensor itself is still determined).  Runs in the dtype of the inputs (use float64).
     All starts share one compilation for a given (N, n_starts), dtype, solver settings and compiler
     options (module docstring, "Compilation").
     """
     if loss not in _LOSSES:
         raise ValueError(f"loss must be one of {sorted(_LOSSES)}, got {loss!r}")
+    if inertia not in ("principal", "tensor"):
+        raise ValueError(f"inertia must be 'principal' or 'tensor', got {inertia!r}")
+    tensor = inertia == "tensor"
+    n_parameters = _TENSOR_PARAMETERS if tensor else _PRINCIPAL_PARAMETERS
     times_np = np.asarray(times, dtype=float)
     q_np = np.asarray(quaternions, dtype=float)
     if times_np.ndim != 1 or q_np.shape != times_np.shape + (4,):
@@ -421,12 +567,19 @@ def fit_attitude(
     time_scale = 1.0 / rate_norm if rate_norm > 1e-300 else 1.0
 
     shapes = _start_shapes(n_starts, rng)
-    thetas0 = np.zeros((n_starts, 8))
+    thetas0 = np.zeros((n_starts, n_parameters))
     thetas0[:, 0] = np.log(shapes[:, 1] / shapes[:, 0])
     thetas0[:, 1] = np.log(shapes[:, 2] / shapes[:, 0])
     for s in range(n_starts):
         # Cycle the rate guesses over the inertia guesses (the first shapes get the first guess).
         thetas0[s, 2:5] = rates[(s // 6) % len(rates)] * time_scale
+    if tensor:
+        # Principal axes start at the body axes (the usual case: products of inertia of a few
+        # percent, axes tilted by tens of degrees at most); starts beyond the first
+        # _AXES_AT_BODY_AXES try random orientations too.
+        turns = rng.normal(size=(n_starts, 3))
+        turns *= rng.uniform(0, np.pi, size=(n_starts, 1)) / np.linalg.norm(turns, axis=1, keepdims=True)
+        thetas0[:, 8:11] = np.where((np.arange(n_starts) >= _AXES_AT_BODY_AXES)[:, None], turns, 0.0)
     references = np.broadcast_to(reference, (n_starts, 4))
 
     # Continuation windows: the samples nearest t_ref.  One more row (mask 0) holds t = 0, where the
@@ -450,6 +603,7 @@ def fit_attitude(
         jnp.asarray(time_scale, dtype),
         jnp.asarray(gyro_weight, dtype),
         jnp.asarray(1.0 / attitude_sigma, dtype),
+        jnp.asarray(1.0 if triangle_inequality else 0.0, dtype),
     )
     scale_in = jnp.asarray(-1.0 if loss_scale is None else loss_scale, dtype)
     out = _solve(
@@ -460,15 +614,18 @@ def fit_attitude(
     # Back to physical parameters (Omega in 1/time).  The rest is numpy on the solver's outputs (one
     # transfer each): eager JAX operations would each compile a small program on a first call.
     out = {key: np.asarray(value) for key, value in out.items()}
-    unscale = np.ones(8)
+    unscale = np.ones(n_parameters)
     unscale[2:5] = 1.0 / time_scale
     theta_physical = out["theta"].astype(float) * unscale
     covariance = out["covariance"].astype(float) * unscale[:, None] * unscale[None, :]
-    inertia, d_inertia = _normalised_inertia(theta_physical)
+    moments, d_inertia = _normalised_inertia(theta_physical)
     inertia_covariance = d_inertia @ covariance @ d_inertia.T
+    tensor_result = _tensor_result(theta_physical, covariance, out["jacobian"] / unscale) if tensor else \
+        _principal_result(moments, inertia_covariance)
     omega0 = out["omega0"]
     attitude0 = -out["attitude0"] if out["attitude0"][0] < 0 else out["attitude0"]
-    inertia = inertia.astype(dtype)
+    moments = tensor_result["principal_moments"]
+    inertia_covariance = tensor_result["moments_covariance"]
     unsort = np.argsort(order)
     residuals = out["residuals"][unsort]
     if angular_velocity_data is None:
@@ -478,7 +635,13 @@ def fit_attitude(
     costs, oks, best = out["costs"], out["oks"], int(out["best"])
     as_float = functools.partial(jnp.asarray, dtype=dtype)
     return AttitudeFit(
-        inertia=as_float(inertia),
+        inertia=as_float(moments),
+        inertia_tensor=as_float(tensor_result["inertia_tensor"]),
+        principal_axes=as_float(tensor_result["principal_axes"]),
+        inertia_tensor_covariance=as_float(tensor_result["inertia_tensor_covariance"]),
+        axes_identifiable=jnp.asarray(tensor_result["axes_identifiable"]),
+        symmetry_axis=as_float(tensor_result["symmetry_axis"]),
+        unidentified_direction=as_float(tensor_result["unidentified_direction"]),
         angular_velocity=as_float(omega0),
         attitude=as_float(attitude0),
         parameters=as_float(theta_physical),
