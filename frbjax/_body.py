@@ -393,13 +393,17 @@ class FreeRigidBody(eqx.Module):
 
     ``FreeRigidBody(inertia, angular_momentum, attitude=None)``
 
-    - ``inertia``: (..., 3) principal moments of inertia, any order, all > 0;
-    - ``angular_momentum``: (..., 3) body-frame angular momentum L at t = 0, any magnitude (0 too);
-    - ``attitude``: (..., 4) unit quaternion (w, x, y, z), Hamilton convention, body to space, at t = 0
-      (None: the identity); a non-unit quaternion is normalised.
+    - ``inertia``: (..., 3) principal moments of inertia, any order, all > 0; or an
+      `InertiaTensor` (the tensor in the body frame: see ``from_inertia_tensor``);
+    - ``angular_momentum``: (..., 3) body-frame angular momentum $L$ at $t = 0$, any magnitude (0 too);
+    - ``attitude``: (..., 4) unit quaternion (w, x, y, z), Hamilton convention, body to space, at
+      $t = 0$ (None: the identity); a non-unit quaternion is normalised.
 
     Leading dimensions of the inputs and of ``t`` broadcast together (numpy rules).  The body solves
-    dL/dt = L x Omega, dR/dt = R hat(Omega), Omega = L / I, exactly: L through Jacobi elliptic functions,
+
+    $$\dot L = L \times \Omega, \qquad \dot R = R\,\hat\Omega, \qquad \Omega = I^{-1} L$$
+
+    exactly: $L$ through Jacobi elliptic functions,
     the attitude through the elliptic integral of the third kind (Celledoni, Fassò, Säfström and Zanna,
     "The exact computation of the free rigid body motion and its use in splitting methods", SIAM J. Sci.
     Comput. 30 (2008); derivation in docs/theory.md).
@@ -410,7 +414,7 @@ class FreeRigidBody(eqx.Module):
     evaluates through them, at any ``t`` (a scalar for the whole batch, one time per body, a times
     axis, inside ``jax.vmap`` or ``lax.map`` over rows of times).  Bodies that are evaluated once
     and never again (the state at a final time, one step of a splitting method) should not pay for
-    the series: :func:`frbjax.free_flow` is that one-shot entry point (docs/theory.md §11).
+    the series: `free_flow` is that one-shot entry point (docs/theory.md §11).
 
     Invalid inputs: wrong trailing shapes or leading shapes that do not broadcast raise ValueError,
     always (shapes are static, under jit too).  With concrete inputs (not JAX tracers) the values are
@@ -427,13 +431,15 @@ class FreeRigidBody(eqx.Module):
     under ``jax.vmap``), and every derivative is finite.  Where the motion has no derivative, or
     changes formula, the derivatives are those of the formula taken, i.e. one-sided along it:
 
-    - uniform rotation q0 ⊗ exp(Omega t / 2) wherever Omega is parallel to L (L = 0, L along a
-      principal axis or in the plane of two equal moments, a sphere): derivatives that keep Omega
-      parallel to L (in t, in q0, in L along the axis, in moments that stay equal) are exact, and at
-      L = 0 all of them are (the motion is q0 ⊗ exp(t L / (2 I)) + O(|L|^2)); those that leave it (a
-      transverse component of L, which starts a nutation; unequal moments of a sphere) are those of
-      the rigid spin: finite, not the limit of the nutating motion's;
-    - the separatrix (2 E I2 = |L|^2 exactly, rounding included): derivatives that keep the body on
+    - uniform rotation $q_0 \otimes \exp(\Omega t / 2)$ wherever $\Omega$ is parallel to $L$ ($L = 0$,
+      $L$ along a principal axis or in the plane of two equal moments): derivatives that keep
+      $\Omega$ parallel to $L$ (in $t$, in $q_0$, in $L$ along the axis, in moments that stay equal) are
+      exact, and at $L = 0$ all of them are (the motion is $q_0 \otimes \exp(t L / 2I) + O(|L|^2)$);
+      those that leave it (a transverse component of $L$, which starts a nutation) are those of the
+      rigid spin: finite, not the limit of the nutating motion's.  A sphere is the exception: its
+      derivatives in every direction, unequal changes of the moments included, are those of the
+      motion (docs/theory.md §12);
+    - the separatrix ($2 E I_2 = |L|^2$ exactly, rounding included): derivatives that keep the body on
       it are exact, the others miss the (finite) change of the elliptic parameter.
 
     tests/test_gradients_body.py checks all of them against 32-digit references.
@@ -474,16 +480,16 @@ class FreeRigidBody(eqx.Module):
 
     @classmethod
     def from_inertia_tensor(cls, inertia_tensor, angular_momentum, attitude=None) -> FreeRigidBody:
-        r"""The body with inertia tensor ``inertia_tensor`` (..., 3, 3) in its own body frame.
+        r"""The body with inertia tensor ``inertia_tensor`` $T$ (..., 3, 3) in its own body frame.
 
         ``FreeRigidBody.from_inertia_tensor(T, L, q)`` is ``FreeRigidBody(InertiaTensor(T), L, q)``:
-        ``angular_momentum`` L (..., 3) and ``attitude`` q (..., 4) (body to space) are those of the
-        tensor's body frame, and so are every method's outputs (Omega = T^-1 L).  ``inertia`` is then
-        the principal moments (ascending), ``principal_axes`` their directions (columns, body
-        coordinates) and ``inertia_tensor`` the :class:`InertiaTensor`.  Evaluating costs what a body
-        built from principal moments costs: the change of frame is folded into the per-body data.
+        ``angular_momentum`` $L$ (..., 3) and ``attitude`` $q$ (..., 4) (body to space) are those of the
+        tensor's body frame, and so are every method's outputs ($\Omega = T^{-1} L$).  ``inertia`` is
+        then the principal moments (ascending), ``principal_axes`` their directions (columns, body
+        coordinates) and ``inertia_tensor`` the `InertiaTensor`.  Evaluating costs what a body built
+        from principal moments costs: the change of frame is folded into the per-body data.
         Derivatives with respect to every tensor entry are finite and correct, repeated moments
-        included (:class:`InertiaTensor`).
+        included (`InertiaTensor`; docs/theory.md §12).
         """
         return cls(InertiaTensor(inertia_tensor), angular_momentum, attitude)
 
@@ -553,7 +559,7 @@ class FreeRigidBody(eqx.Module):
 
     @_compiled
     def angular_momentum(self, t) -> Float[Array, "... 3"]:
-        """Body-frame angular momentum L(t), shape broadcast(batch, t.shape) + (3,).
+        """Body-frame angular momentum $L(t)$, shape broadcast(batch, t.shape) + (3,).
 
         Evaluates only the Jacobi functions: no elliptic integral of the third kind.
         """
@@ -561,13 +567,13 @@ class FreeRigidBody(eqx.Module):
 
     @_compiled
     def angular_velocity(self, t) -> Float[Array, "... 3"]:
-        """Body-frame angular velocity Omega(t) = I^-1 L(t) (L / I for principal moments)."""
+        r"""Body-frame angular velocity $\Omega(t) = I^{-1} L(t)$ ($L / I$ for principal moments)."""
         return self._through_tensor(
             lambda body, t: _angular_velocity(body.inertia, body.principal_axes, body._angular_momentum(t)), t)
 
     @_compiled
     def quaternion(self, t) -> Float[Array, "... 4"]:
-        """Attitude q(t) (w, x, y, z), body to space, continuous in t, equal to the attitude at t = 0."""
+        """Attitude $q(t)$ (w, x, y, z), body to space, continuous in $t$; $q(0)$ is the given attitude."""
         return self._through_tensor(FreeRigidBody._quaternion, t)
 
     @_compiled
@@ -581,7 +587,7 @@ class FreeRigidBody(eqx.Module):
 
     @_compiled
     def rotation_matrix(self, t) -> Float[Array, "... 3 3"]:
-        """Attitude matrix R(t) with x_space = R x_body (dR/dt = R hat(Omega))."""
+        r"""Attitude matrix $R(t)$ with $x_\text{space} = R\, x_\text{body}$ ($\dot R = R\,\hat\Omega$)."""
         return quaternion.as_matrix(self.quaternion(t))
 
 

@@ -1,8 +1,8 @@
 """The exact torque-free flow over one time per body: the state after time t, without a per-body series.
 
-:func:`free_flow` is the one-shot entry point: the state (L(t), q(t)) of bodies each evaluated at one
-time.  It is the path :class:`~frbjax.FreeRigidBody` takes itself when ``t`` gives each body one time,
-and every free flow of the splitting integrators (:mod:`frbjax._splitting`) goes through it.
+``free_flow`` is the one-shot entry point: the state (L(t), q(t)) of bodies each evaluated at one
+time, without the per-body series that a ``FreeRigidBody`` prepares; every free flow of the
+splitting integrators (``frbjax._splitting``) goes through it.
 """
 
 from __future__ import annotations
@@ -54,23 +54,23 @@ def _free_flow(inertia, angular_momentum, attitude, t):
 
 
 def free_flow(inertia, angular_momentum, attitude, t) -> tuple[Float[Array, "... 3"], Float[Array, "... 4"]]:
-    r"""(L(t), q(t)) of the free bodies with body angular momentum L and attitude q at time 0.
+    r"""$(L(t), q(t))$ of the free bodies with body angular momentum $L$ and attitude $q$ at time 0.
 
-    ``inertia`` (..., 3) (principal moments, any order, > 0) or an :class:`~frbjax.InertiaTensor`
+    ``inertia`` (..., 3) (principal moments, any order, > 0) or an `InertiaTensor`
     (then L, q and the results are those of the tensor's body frame), ``angular_momentum`` (..., 3),
     ``attitude`` (..., 4) (w, x, y, z, body to space) and ``t`` (...) broadcast together; every
     element of the broadcast shape is one body at one time.  The values are those of
     ``FreeRigidBody(inertia, angular_momentum, attitude).state(t)`` (to rounding), computed without
     the per-body data that pays off only over many times (docs/theory.md §11): the Jacobi functions at
-    the phase u0 + B|L|t follow from the given L and from sn, cn, dn(B|L|t) by the addition theorem
+    the phase $u_0 + B|L|t$ follow from the given $L$ and from sn, cn, dn$(B|L|t)$ by the addition theorem
     (DLMF 22.8.1-22.8.3), and the change of the third-kind integral from one
-    :math:`\Pi(n; \mathrm{am}\, v_r|m)` at the reduced argument and an arctangent (the addition
+    $\Pi(n; \mathrm{am}\, v_r|m)$ at the reduced argument and an arctangent (the addition
     theorem of Jacobi's third kind).  Use it for one step of a splitting method or the state at a
-    final time; for a body at many times, build a :class:`~frbjax.FreeRigidBody` once.
+    final time; for a body at many times, build a `FreeRigidBody` once.
 
     Exact in every regime, differentiable in every input (forward and reverse mode, any order),
     jit-compiled once per shape and dtype when called eagerly, and composable with ``jit``, ``vmap``
-    and ``grad``.  Invalid inputs raise ValueError as in :class:`~frbjax.FreeRigidBody` (NaN under
+    and ``grad``.  Invalid inputs raise ValueError as in `FreeRigidBody` (NaN under
     tracing).
     """
     if isinstance(inertia, InertiaTensor):

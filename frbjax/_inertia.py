@@ -186,25 +186,29 @@ class InertiaTensor(eqx.Module):
     r"""A body's inertia tensor in its own body frame, with its principal moments and axes.
 
     ``InertiaTensor(matrix)``: ``matrix`` (..., 3, 3) symmetric positive definite, in any consistent
-    units (the motion depends only on the ratios of the moments to |L|).  Its principal decomposition
-    T = R diag(lambda) R^T is computed once: ``principal_moments`` lambda (..., 3) ascending and
-    ``principal_axes`` R (..., 3, 3), the unit principal axes as columns in body coordinates, a
-    rotation (det R = +1): x_body = R x_principal.
+    units (the motion depends only on the ratios of the moments to $|L|$).  Its principal decomposition
+    $T = R \operatorname{diag}(\lambda) R^T$ is computed once: ``principal_moments`` $\lambda$ (..., 3)
+    ascending and ``principal_axes`` $R$ (..., 3, 3), the unit principal axes as columns in body
+    coordinates, a rotation ($\det R = +1$): $x_\text{body} = R\, x_\text{principal}$.  Moments within
+    8 ulp of each other are made equal (an axisymmetric or spherical tensor to its own rounding).
 
     Wherever frbjax takes principal moments it takes an ``InertiaTensor`` too (an explicit type, never
     a guess from shapes: a (3, 3) array of moments stays a batch of three bodies):
-    :meth:`FreeRigidBody.from_inertia_tensor`, :func:`free_flow`, :class:`RigidBodyTerm`.  Angular
-    momentum, angular velocity and attitude are then those of the body frame of the tensor.
+    ``FreeRigidBody.from_inertia_tensor``, `free_flow`, `RigidBodyTerm`.  Angular momentum, angular
+    velocity ($\Omega = T^{-1} L$) and attitude are then those of the body frame of the tensor.
 
     Bad input: a matrix that is not (..., 3, 3), not symmetric beyond rounding (64 ulp of its largest
     entry), not finite or not positive definite raises ValueError naming ``inertia_tensor`` when it is
     concrete; under ``jax.jit`` such a tensor has NaN moments and axes, and every output of a body
-    built from it is NaN.  The triangle inequality of physical bodies (lambda_1 + lambda_2 >=
-    lambda_3) is not required: the motion is that of Euler's equations for any positive moments.
+    built from it is NaN.  The triangle inequality of physical bodies ($\lambda_1 + \lambda_2 \ge
+    \lambda_3$) is not required: the motion is that of Euler's equations for any positive moments.
 
     Derivatives of the motion with respect to every entry of the matrix are finite and correct also
-    at repeated moments (axisymmetric bodies), where ``principal_axes`` itself has no derivative
-    (``frbjax._inertia``: first-order perturbation in the principal frame; docs/theory.md §12).
+    at repeated moments (axisymmetric bodies, a sphere), where ``principal_axes`` itself has no
+    derivative: they are taken by first-order perturbation theory in the principal frame
+    (docs/theory.md §12), exact to rounding except where two moments agree to about $10^{-8}$
+    (relative), where they are good to about $10^{-8}$.  The derivatives of ``principal_axes`` are
+    those of the eigenvectors between distinct moments and 0 in the plane of equal ones.
     """
 
     matrix: Float[Array, "... 3 3"]
@@ -233,11 +237,11 @@ class InertiaTensor(eqx.Module):
         return self.matrix.shape[:-2]
 
     def as_matrix(self) -> Float[Array, "... 3 3"]:
-        """The tensor T (..., 3, 3), symmetrised."""
+        """The tensor $T$ (..., 3, 3), symmetrised."""
         return self.matrix
 
     def angular_velocity(self, angular_momentum) -> Float[Array, "... 3"]:
-        """Omega = T^-1 L = R (R^T L / lambda) for body-frame angular momenta L (..., 3)."""
+        r"""$\Omega = T^{-1} L = R (R^T L / \lambda)$ for body-frame angular momenta $L$ (..., 3)."""
         axes = self.principal_axes
         principal = jnp.einsum("...ji,...j->...i", axes, angular_momentum)
         return jnp.einsum("...ij,...j->...i", axes, principal / self.principal_moments)
