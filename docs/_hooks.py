@@ -24,7 +24,8 @@ log = logging.getLogger("mkdocs.hooks.frbjax")
 
 ROOT = pathlib.Path(__file__).resolve().parents[1]
 FIGURES = ("stability.png", "throughput.png", "work_precision.png", "setup_cost.png", "torqued_work_precision.png",
-           "torqued_energy.png")
+           "torqued_energy.png", "lightcurve.png",
+           "torques_basilisk.png", "torques_energy.png", "torques_debris.png")
 HELP_MARKER = re.compile(r"<!-- frbjax-help:(?P<arguments>[^>]*)-->")
 
 

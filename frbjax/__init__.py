@@ -3,6 +3,9 @@
 - :class:`FreeRigidBody`: angular momentum, angular velocity, quaternion and rotation matrix at any
   times, for batches of bodies, under jit/vmap/grad.
 - :func:`free_flow`: the state (L(t), q(t)) of bodies each at one time, without per-body setup.
+- :class:`InertiaTensor`: a body's inertia as a (..., 3, 3) tensor in its own body frame, accepted
+  wherever principal moments are (``FreeRigidBody.from_inertia_tensor``, ``free_flow``,
+  ``RigidBodyTerm``).
 - :mod:`frbjax.special`: Jacobi elliptic functions and Legendre/Carlson elliptic integrals.
 - :class:`RigidBodyTerm`, :class:`RigidBodySplitting`, :func:`splitting_trajectory`: torqued bodies
   (a potential or a body-frame torque) integrated by splitting methods built on the exact free flow,
@@ -20,6 +23,7 @@ The library never changes JAX's global configuration: enable float64 yourself
 from . import special
 from ._body import FreeRigidBody
 from ._free_flow import free_flow
+from ._inertia import InertiaTensor
 from ._quaternion import as_matrix as quaternion_to_matrix
 from ._quaternion import from_matrix as quaternion_from_matrix
 from ._sharding import batch_mesh, pad_batch, shard_batch, shard_bodies
@@ -28,6 +32,7 @@ __all__ = [
     "SPLITTING_METHODS",
     "AttitudeFit",
     "FreeRigidBody",
+    "InertiaTensor",
     "RigidBodySplitting",
     "RigidBodyTerm",
     "fit_attitude",
@@ -50,6 +55,16 @@ def __getattr__(name):
         from . import _splitting
 
         return getattr(_splitting, name)
+    # frbjax.torques: ready-made torques for RigidBodyTerm (it imports the core, never the reverse).
+    if name == "torques":
+        import importlib
+
+        return importlib.import_module(".torques", __name__)
+    # frbjax.lightcurve (shapes, brightness, light-curve inversion) imports optimistix and scipy.
+    if name == "lightcurve":
+        import importlib
+
+        return importlib.import_module(".lightcurve", __name__)
     if name == "SPLITTING_METHODS":
         from ._splitting import METHODS
 

@@ -13,7 +13,10 @@ method composes them within a step of size h as
     K(k_0 h) F(f_0 h) K(k_1 h) F(f_1 h) ... F(f_{n-1} h) K(k_n h),
 
 with kicks K by k_i h and free flows F by f_i h (the time advances with the free flows, so a
-time-dependent torque is evaluated at t + h (f_0 + ... + f_{i-1}) in kick i).  Each piece is the exact
+time-dependent torque is evaluated at t + h (f_0 + ... + f_{i-1}) in kick i).  A torque that depends
+on L too (damping, controllers, eddy currents: :mod:`frbjax.torques`) makes the kick the flow of
+dL/dt = tau(t, q, L) at fixed q: a matrix exponential where tau is affine in L, else a Runge-Kutta
+sub-step of at least the method's order (:class:`RigidBodySplitting`).  Each piece is the exact
 flow of a Hamiltonian (Poisson) vector field when the torque derives from a potential, so the method
 is symplectic (Poisson), keeps |q| = 1 exactly and, with fixed steps, keeps the energy error bounded
 over exponentially long times (Hairer, Lubich and Wanner, "Geometric Numerical Integration", 2nd ed.,
@@ -31,7 +34,6 @@ Runge-Kutta and Runge-Kutta-Nyström methods", J. Comput. Appl. Math. 142 (2002)
 from __future__ import annotations
 
 import math
-from collections.abc import Callable
 from typing import ClassVar
 
 import diffrax
@@ -118,40 +120,99 @@ def _per_body(function, t, attitude, args):
     return values.reshape(batch + values.shape[1:])
 
 
-class RigidBodyTerm(diffrax.AbstractTerm):
-    r"""A rigid body under a torque, as a diffrax term: the state is ``y = (L, q)``.
+def _per_body_with_momentum(function, t, attitude, momentum, args):
+    """function(t, q, L, args) for each body of (..., 4) attitudes and (..., 3) momenta, args shared."""
+    batch = jnp.broadcast_shapes(attitude.shape[:-1], momentum.shape[:-1])
+    flat_attitude = jnp.broadcast_to(attitude, batch + (4,)).reshape((-1, 4))
+    flat_momentum = jnp.broadcast_to(momentum, batch + (3,)).reshape((-1, 3))
+    values = jax.vmap(function, in_axes=(None, 0, 0, None))(t, flat_attitude, flat_momentum, args)
+    return values.reshape(batch + values.shape[1:])
 
-    ``RigidBodyTerm(inertia, *, potential=None, torque=None)``, with exactly one of
+
+class _Function(eqx.Module):
+    """A user's function kept in a term: its arrays are pytree leaves, the rest static.
+
+    A plain function is all static (the term stays a pytree of arrays, as jit and the one-kernel
+    regions need); a module holding parameters (the torques of :mod:`frbjax.torques`, a bound method
+    of one) keeps its arrays as leaves, so that they are traced and differentiated, never hashed.
+    """
+
+    arrays: object
+    rest: object = eqx.field(static=True)
+
+    def __init__(self, function):
+        self.arrays, self.rest = eqx.partition(function, eqx.is_array)
+
+    @property
+    def function(self):
+        return eqx.combine(self.arrays, self.rest)
+
+    def __call__(self, *arguments):
+        return self.function(*arguments)
+
+
+class RigidBodyTerm(diffrax.AbstractTerm):
+    r"""A rigid body under torques, as a diffrax term: the state is ``y = (L, q)``.
+
+    ``RigidBodyTerm(inertia, *, potential=None, torque=None, momentum_torque=None)``, with at least
+    one of the three (they add up):
 
     - ``potential(t, q, args) -> scalar``: the potential energy V of one body in terms of its attitude
       ``q`` (4,) (wxyz, body to space: a body vector x is x_space = R(q) x in space).  The body-frame
       torque is tau = -dV(q ⊗ exp(w / 2))/dw at w = 0 = -vec(conj(q) ⊗ dV/dq) / 2, by autodiff;
-    - ``torque(t, q, args) -> (3,)``: the body-frame torque of one body (non-conservative torques:
-      thrusters fixed in the body, magnetic torquers, ...).  It may depend on time and attitude, not on
-      L: the kick then has the exact flow L += h tau(t, q) that the splitting needs.
+    - ``torque(t, q, args) -> (3,)``: a body-frame torque of one body that depends on time and
+      attitude only (thrusters fixed in the body, magnetic torquers with a given dipole, ...);
+    - ``momentum_torque(t, q, L, args) -> (3,)``: a body-frame torque of one body that may also depend
+      on its body angular momentum L (3,), hence on its angular velocity Omega = L / I (damping,
+      eddy currents, attitude controllers, B-dot: :mod:`frbjax.torques`).
 
-    Both are written for one body; the term maps them over the leading dimensions of the state with
-    ``args`` shared (per-body parameters: ``jax.vmap`` the whole solve).  ``inertia`` (..., 3) are the
-    principal moments (> 0, finite), broadcasting with the state's leading dimensions; ``y = (L, q)``
-    with L (..., 3) in the body frame and q (..., 4) must carry the full batch shape.
+    The body moves by
 
-    The term is an ordinary diffrax term: with :class:`RigidBodySplitting` it is integrated by
-    splitting; with any other diffrax solver (``Tsit5``, ``Dopri8``, ...) the same ODE
-    dL/dt = L x Omega + tau, dq/dt = q ⊗ (0, Omega)/2 is integrated by that solver (``vf``).
+        dL/dt = L x Omega + tau(t, q, L),      dq/dt = q ⊗ (0, Omega) / 2,      Omega = L / I,
+
+    tau the sum of the torques given.  With any diffrax solver other than
+    :class:`RigidBodySplitting` (``Tsit5``, ``Dopri8``, ...) this ODE is integrated as written
+    (``vf``).  With :class:`RigidBodySplitting` the kick is the flow of dL/dt = tau(t, q, L) at fixed
+    attitude and time:
+
+    - without a momentum torque, L += s tau(t, q): exact;
+    - with a momentum torque that is affine in L, tau = A(t, q) L + c(t, q) (declare it with
+      ``linear_in_momentum=True``; every torque of :mod:`frbjax.torques` declares it itself through
+      its attribute ``linear_in_momentum``): exact, the matrix exponential of the 4 x 4 matrix
+      s [[A, c], [0, 0]] applied to (L, 1) (A = dtau/dL by forward-mode autodiff, c = tau at L = 0).
+      Declaring a torque affine that is not gives a kick that is wrong, not merely inaccurate;
+    - otherwise one step of a diffrax Runge-Kutta method (``RigidBodySplitting(kick_solver=...)``)
+      of at least the splitting's order, so that the order of the method is kept.
+
+    ``linear_in_momentum`` (``None``: the ``momentum_torque``'s own attribute of that name, else
+    False) matters only to the splitting.
+
+    The functions are written for one body; the term maps them over the leading dimensions of the
+    state with ``args`` shared (per-body parameters: ``jax.vmap`` the whole solve).  ``inertia``
+    (..., 3) are the principal moments (> 0, finite), broadcasting with the state's leading
+    dimensions; ``y = (L, q)`` with L (..., 3) in the body frame and q (..., 4) must carry the full
+    batch shape.  Everything that uses the moments goes through :meth:`angular_velocity` and the
+    free flow.
     """
 
     inertia: Float[Array, "... 3"]
-    potential: Callable | None = eqx.field(static=True)
-    torque: Callable | None = eqx.field(static=True)
+    potential: _Function | None
+    torque: _Function | None
+    momentum_torque: _Function | None
+    linear_in_momentum: bool = eqx.field(static=True)
 
-    def __init__(self, inertia, *, potential=None, torque=None):
-        if (potential is None) == (torque is None):
-            raise ValueError("RigidBodyTerm needs exactly one of potential=V(t, q, args) (a scalar) and "
-                             "torque=tau(t, q, args) (a body-frame (3,) vector)")
-        for name, function in (("potential", potential), ("torque", torque)):
+    def __init__(self, inertia, *, potential=None, torque=None, momentum_torque=None,
+                 linear_in_momentum=None):
+        if potential is None and torque is None and momentum_torque is None:
+            raise ValueError("RigidBodyTerm needs at least one of potential=V(t, q, args) (a scalar), "
+                             "torque=tau(t, q, args) and momentum_torque=tau(t, q, L, args) (body-frame "
+                             "(3,) vectors)")
+        signatures = {"potential": "(t, q, args) -> scalar", "torque": "(t, q, args) -> (3,) body torque",
+                      "momentum_torque": "(t, q, L, args) -> (3,) body torque"}
+        for name, function in (("potential", potential), ("torque", torque),
+                               ("momentum_torque", momentum_torque)):
             if function is not None and not callable(function):
-                raise ValueError(f"{name} must be a function (t, q, args) -> "
-                                 f"{'scalar' if name == 'potential' else '(3,) body torque'}")
+                raise ValueError(f"{name} must be a function {signatures[name]}")
         inertia = jnp.asarray(inertia)
         if inertia.ndim == 0 or inertia.shape[-1] != 3:
             raise ValueError(f"inertia must have shape (..., 3), got shape {tuple(inertia.shape)}")
@@ -160,50 +221,90 @@ class RigidBodyTerm(diffrax.AbstractTerm):
         value = _concrete(inertia)
         if value is not None and not (np.all(np.isfinite(value)) and np.all(np.asarray(value) > 0)):
             raise ValueError("inertia: the principal moments of inertia must be finite and > 0")
+        if linear_in_momentum is None:
+            linear_in_momentum = bool(getattr(momentum_torque, "linear_in_momentum", False))
         self.inertia = inertia
-        self.potential = potential
-        self.torque = torque
+        self.potential = None if potential is None else _Function(potential)
+        self.torque = None if torque is None else _Function(torque)
+        self.momentum_torque = None if momentum_torque is None else _Function(momentum_torque)
+        self.linear_in_momentum = bool(linear_in_momentum)
+
+    # --------------------------------------------------------------------------- the moments
+
+    def angular_velocity(self, momentum) -> Float[Array, "... 3"]:
+        """Omega = L / I, the body angular velocity of a body angular momentum L (..., 3)."""
+        return momentum / self.inertia
+
+    def free_motion(self, momentum, attitude, time):
+        """The exact torque-free motion of the state (L, q) over ``time``: (L(time), q(time))."""
+        return free_flow(self.inertia, momentum, attitude, time)
+
+    def kinetic_energy(self, momentum) -> Float[Array, "..."]:
+        """L . Omega / 2 per body."""
+        return 0.5 * jnp.sum(momentum * self.angular_velocity(momentum), axis=-1)
 
     # ---------------------------------------------------------------------------- the torque
 
-    def body_torque(self, t, attitude, args) -> Float[Array, "... 3"]:
-        """The body-frame torque tau(t, q) of every body, shape (..., 3) for an attitude (..., 4).
-
-        Raises ValueError when the potential does not return a scalar or the torque function does
-        not return a (3,) vector (shapes are static: under jit too).
-        """
+    def _check_shapes(self, t, attitude, args):
         one = jax.ShapeDtypeStruct((4,), attitude.dtype)
         if self.potential is not None:
             shape = jax.eval_shape(self.potential, t, one, args).shape
             if shape != ():
                 raise ValueError(f"potential must return a scalar (the potential energy of one body), "
                                  f"got shape {shape}")
-            return _per_body(self._torque_of_potential, t, attitude, args).astype(attitude.dtype)
-        shape = jax.eval_shape(self.torque, t, one, args).shape
-        if shape != (3,):
-            raise ValueError(f"torque must return the body-frame torque of one body, shape (3,), got "
-                             f"shape {shape}")
-        return _per_body(self.torque, t, attitude, args).astype(attitude.dtype)
+        if self.torque is not None:
+            shape = jax.eval_shape(self.torque, t, one, args).shape
+            if shape != (3,):
+                raise ValueError(f"torque must return the body-frame torque of one body, shape (3,), got "
+                                 f"shape {shape}")
+        if self.momentum_torque is not None:
+            momentum = jax.ShapeDtypeStruct((3,), attitude.dtype)
+            shape = jax.eval_shape(self.momentum_torque, t, one, momentum, args).shape
+            if shape != (3,):
+                raise ValueError(f"momentum_torque must return the body-frame torque of one body, shape "
+                                 f"(3,), got shape {shape}")
+
+    def body_torque(self, t, attitude, args, momentum=None) -> Float[Array, "... 3"]:
+        """The total body-frame torque tau(t, q, L) of every body, (..., 3) for an attitude (..., 4).
+
+        ``momentum`` (..., 3), the body angular momentum, is needed when the term has a momentum
+        torque.  Raises ValueError when a function does not return the shape it should (shapes are
+        static: under jit too).
+        """
+        self._check_shapes(t, attitude, args)
+        if self.momentum_torque is not None and momentum is None:
+            raise ValueError("body_torque needs the momentum L: this term has a momentum_torque")
+        torque = jnp.zeros(attitude.shape[:-1] + (3,), attitude.dtype)
+        if self.potential is not None:
+            torque = torque + _per_body(self._torque_of_potential, t, attitude, args)
+        if self.torque is not None:
+            torque = torque + _per_body(self.torque, t, attitude, args)
+        if self.momentum_torque is not None:
+            torque = torque + _per_body_with_momentum(self.momentum_torque, t, attitude, momentum, args)
+        return torque.astype(attitude.dtype)
 
     def _torque_of_potential(self, t, attitude, args):
         gradient = jax.grad(self.potential, argnums=1)(t, attitude, args)
         return -0.5 * quaternion.multiply(quaternion.conjugate(attitude), gradient)[1:]
 
     def energy(self, t, y, args) -> Float[Array, "..."]:
-        """Kinetic plus potential energy, sum L_i^2 / (2 I_i) + V(t, q, args), per body (potential only)."""
+        """Kinetic plus potential energy, L . Omega / 2 + V(t, q, args), per body (needs a potential).
+
+        With only torques (no potential) use :meth:`kinetic_energy`.
+        """
         if self.potential is None:
-            raise ValueError("energy needs a potential; this term has a torque function")
+            raise ValueError("energy needs a potential; this term has only torque functions "
+                             "(kinetic_energy(L) gives L . Omega / 2)")
         momentum, attitude = y
-        kinetic = 0.5 * jnp.sum(momentum * momentum / self.inertia, axis=-1)
-        return kinetic + _per_body(self.potential, t, attitude, args)
+        return self.kinetic_energy(momentum) + _per_body(self.potential, t, attitude, args)
 
     # ------------------------------------------------------------------------- diffrax term
 
     def vf(self, t, y, args):
-        """(dL/dt, dq/dt) = (L x Omega + tau(t, q), q ⊗ (0, Omega) / 2), Omega = L / I."""
+        """(dL/dt, dq/dt) = (L x Omega + tau(t, q, L), q ⊗ (0, Omega) / 2), Omega = L / I."""
         momentum, attitude = y
-        omega = momentum / self.inertia
-        torque = self.body_torque(t, attitude, args)
+        omega = self.angular_velocity(momentum)
+        torque = self.body_torque(t, attitude, args, momentum)
         pure = jnp.concatenate([jnp.zeros_like(omega[..., :1]), omega], axis=-1)
         return jnp.cross(momentum, omega) + torque, 0.5 * quaternion.multiply(attitude, pure)
 
@@ -257,6 +358,15 @@ class RigidBodySplitting(diffrax.AbstractSolver):
     (put a 0 kick at both ends for a method that starts and ends with a free flow); ``order`` is
     informational.  The cost of a step is dominated by its free flows.
 
+    Torques that depend on L (``RigidBodyTerm(momentum_torque=...)``): the kick is the flow of
+    dL/dt = tau(t, q, L) at fixed q, exact for a torque affine in L (a matrix exponential), else one
+    step of ``kick_solver`` (default: ``diffrax.Tsit5()``, order 5, for the methods of order <= 4;
+    ``diffrax.Dopri8()``, order 8, for blanes_moan6 and your own coefficients).  The orders kept,
+    measured against Dopri8 in tests/test_torques.py: leapfrog and strang 2, yoshida4 and
+    blanes_moan4 4, and blanes_moan6 4, not 6: SRKN6a's sixth order rests on [B, [B, [B, A]]] = 0,
+    which holds for kicks that depend on q only, not for kicks that move L by a function of L.  The
+    sub-integrated kick is not time-symmetric, so such a method is no longer time-reversible.
+
     Fixed steps only: the method has no error estimate; use ``dt0`` with the default
     ``diffrax.ConstantStepSize()`` (an adaptive controller is refused by diffrax).  Dense output and
     ``SaveAt(ts=...)`` between steps interpolate linearly (|q| = 1 holds only at the steps).
@@ -265,11 +375,12 @@ class RigidBodySplitting(diffrax.AbstractSolver):
     kicks: tuple = eqx.field(static=True)
     flows: tuple = eqx.field(static=True)
     method_order: int | None = eqx.field(static=True)
+    kick_solver: diffrax.AbstractRungeKutta = eqx.field(static=True)
 
     term_structure: ClassVar = RigidBodyTerm
     interpolation_cls: ClassVar = diffrax.LocalLinearInterpolation
 
-    def __init__(self, method="blanes_moan6", *, kicks=None, flows=None, order=None):
+    def __init__(self, method="blanes_moan6", *, kicks=None, flows=None, order=None, kick_solver=None):
         if kicks is not None or flows is not None:
             if kicks is None or flows is None:
                 raise ValueError("give both kicks (n + 1 coefficients) and flows (n coefficients)")
@@ -289,9 +400,16 @@ class RigidBodySplitting(diffrax.AbstractSolver):
                 raise ValueError(f"unknown splitting method {method!r}; expected one of "
                                  f"{', '.join(METHODS)}, or kicks= and flows=")
             kicks, flows, order = METHODS[method]
+        if kick_solver is None:
+            # One step of order 5 (Tsit5) keeps orders up to 4, order 8 (Dopri8) anything higher.
+            kick_solver = diffrax.Tsit5() if order is not None and order <= 4 else diffrax.Dopri8()
+        if not isinstance(kick_solver, diffrax.AbstractRungeKutta):
+            raise ValueError(f"kick_solver must be an explicit diffrax Runge-Kutta solver (Tsit5, Dopri8, "
+                             f"...), got {type(kick_solver).__name__}")
         self.kicks = kicks
         self.flows = flows
         self.method_order = order
+        self.kick_solver = kick_solver
 
     def order(self, terms):
         return self.method_order
@@ -310,6 +428,20 @@ class RigidBodySplitting(diffrax.AbstractSolver):
     def func(self, terms, t0, y0, args):
         return terms.vf(t0, y0, args)
 
+    def kick(self, term, t, s, momentum, attitude, args):
+        """The flow of dL/dt = tau(t, q, L) over a time s at fixed attitude q and time t (the class doc)."""
+        if term.momentum_torque is None:
+            return momentum + s * term.body_torque(t, attitude, args)
+        # Shape errors are raised here, once, rather than inside the per-body maps below.
+        term.body_torque(t, attitude, args, momentum)
+        if term.linear_in_momentum:
+            return _affine_kick(term, t, s, momentum, attitude, args)
+        kick_term = diffrax.ODETerm(lambda _, momentum, attitude: term.body_torque(t, attitude, args, momentum))
+        zero = jnp.zeros((), s.dtype)
+        state = self.kick_solver.init(kick_term, zero, s, momentum, attitude)
+        momentum, *_ = self.kick_solver.step(kick_term, zero, s, momentum, attitude, state, made_jump=False)
+        return momentum
+
     def advance(self, term, t, h, y, args):
         """One step of size h (any sign) from the state y = (L, q) at time t."""
         momentum, attitude = y
@@ -322,19 +454,55 @@ class RigidBodySplitting(diffrax.AbstractSolver):
         kick_times = jnp.asarray(np.cumsum(self.flows), dtype)
 
         def kick(momentum, attitude, coefficient, time):
-            return momentum + (coefficient * h) * term.body_torque(time, attitude, args)
+            return self.kick(term, time, coefficient * h, momentum, attitude, args)
 
         if self.kicks[0] != 0:
             momentum = kick(momentum, attitude, kicks[0], t)
 
+        # The matrix exponential of the exact affine kick calls XLA's runtime (an LU solve), so the step
+        # cannot be one kernel (solver.step): then each free flow is one instead, its region given the
+        # moments and the state only (the torques' parameters are no business of it).
+        def free_motion(momentum, attitude, time):
+            return term.free_motion(momentum, attitude, time)
+
+        if term.momentum_torque is not None and term.linear_in_momentum:
+            def is_inertia(leaf):
+                return leaf is term.inertia
+
+            moments_only = eqx.filter(term, is_inertia, is_leaf=is_inertia)
+            region = one_kernel(lambda term, momentum, attitude, time: term.free_motion(momentum, attitude, time))
+
+            def free_motion(momentum, attitude, time):
+                return region(moments_only, momentum, attitude, time)
+
         def stage(state, coefficients):
             momentum, attitude = state
             flow, next_kick, time = coefficients
-            momentum, attitude = free_flow(term.inertia, momentum, attitude, flow * h)
+            momentum, attitude = free_motion(momentum, attitude, flow * h)
             return (kick(momentum, attitude, next_kick, t + time * h), attitude), None
 
         (momentum, attitude), _ = jax.lax.scan(stage, (momentum, attitude), (flows, kicks[1:], kick_times))
         return momentum.astype(dtype), attitude.astype(dtype)
+
+
+def _affine_kick(term, t, s, momentum, attitude, args):
+    """L(s) of dL/ds = A L + c at fixed (t, q): (L(s), 1) = expm(s [[A, c], [0, 0]]) (L, 1), per body."""
+
+    def one_body(attitude, momentum):
+        def torque(momentum):
+            return term.body_torque(t, attitude[None], args, momentum[None])[0]
+
+        zero = jnp.zeros_like(momentum)
+        constant = torque(zero)
+        matrix = jax.jacfwd(torque)(zero)
+        generator = jnp.zeros((4, 4), momentum.dtype)
+        generator = generator.at[:3, :3].set(s * matrix).at[:3, 3].set(s * constant)
+        flow = jax.scipy.linalg.expm(generator)
+        return flow[:3, :3] @ momentum + flow[:3, 3]
+
+    batch = momentum.shape[:-1]
+    moved = jax.vmap(one_body)(attitude.reshape((-1, 4)), momentum.reshape((-1, 3)))
+    return moved.reshape(batch + (3,))
 
 
 # --------------------------------------------------------------------------- the lean driver
@@ -370,6 +538,18 @@ def _checked_state(y0, term):
             jnp.broadcast_to(attitude, batch + (4,)).astype(dtype))
 
 
+def _check_initial_torque(term, t0, y0, args):
+    """ValueError when the torque at the (concrete) initial state is not finite; nothing when traced."""
+    momentum, attitude = y0
+    if _concrete((term, t0, momentum, attitude, args)) is None:
+        return
+    torque = term.body_torque(t0, attitude, args, momentum)
+    if _concrete(torque) is not None and not np.all(np.isfinite(np.asarray(torque))):
+        names = [name for name in ("potential", "torque", "momentum_torque") if getattr(term, name) is not None]
+        raise ValueError(f"the torque at the initial state is not finite (NaN or inf): check "
+                         f"{' and '.join(names)} at t0 = {float(t0)!r}")
+
+
 def splitting_trajectory(term, y0, *, dt, steps, t0=0.0, args=None, method="blanes_moan6"):
     r"""The states after each of ``steps`` fixed steps of a splitting method: a lean ``lax.scan``.
 
@@ -382,8 +562,9 @@ def splitting_trajectory(term, y0, *, dt, steps, t0=0.0, args=None, method="blan
     forward-mode derivatives; reverse mode through it stores every step (memory grows with ``steps``):
     for long reverse-mode runs use diffeqsolve with its ``RecursiveCheckpointAdjoint``.
 
-    Bad input: ``dt`` <= 0 or not finite, or a non-finite or zero initial state, raise ValueError
-    naming the argument when they are concrete; under jit the states are NaN instead.  The attitude
+    Bad input: ``dt`` <= 0 or not finite, a non-finite or zero initial state, or a torque that is not
+    finite at the initial state (a NaN-returning function) raise ValueError naming the argument when
+    they are concrete; under jit the states are NaN instead.  The attitude
     is normalised and the state broadcast to the batch of ``term.inertia``.
     """
     solver = method if isinstance(method, RigidBodySplitting) else RigidBodySplitting(method)
@@ -395,6 +576,7 @@ def splitting_trajectory(term, y0, *, dt, steps, t0=0.0, args=None, method="blan
     dtype = y0[0].dtype
     dt = _checked_step(dt).astype(dtype)
     t0 = jnp.asarray(t0, dtype)
+    _check_initial_torque(term, t0, y0, args)
 
     def trajectory(term, y0, dt, t0, args):
         def one_step(state, n):

@@ -409,10 +409,12 @@ def test_non_finite_state(which):
 
 
 def test_bad_term_and_method():
-    with pytest.raises(ValueError, match="exactly one of potential"):
+    with pytest.raises(ValueError, match="at least one of potential"):
         frbjax.RigidBodyTerm(INERTIA)
-    with pytest.raises(ValueError, match="exactly one of potential"):
-        frbjax.RigidBodyTerm(INERTIA, potential=heavy_top_potential, torque=lambda t, q, a: q[1:])
+    with pytest.raises(ValueError, match=re.escape("momentum_torque must be a function (t, q, L, args)")):
+        frbjax.RigidBodyTerm(INERTIA, momentum_torque=np.ones(3))
+    with pytest.raises(ValueError, match="kick_solver must be an explicit diffrax Runge-Kutta solver"):
+        frbjax.RigidBodySplitting("leapfrog", kick_solver=diffrax.Euler())
     with pytest.raises(ValueError, match="inertia"):
         frbjax.RigidBodyTerm([1.0, -2.0, 3.0], potential=heavy_top_potential)
     with pytest.raises(ValueError, match="unknown splitting method 'rk4'"):

@@ -1,0 +1,647 @@
+"""Spin state, inertia ratios and convex shape of a tumbling body from relative photometry.
+
+:func:`fit_lightcurve` inverts light curves (brightness at times t_k, with the unit vectors to the Sun
+and to the observer) for a torque-free motion and a convex shape, the tumbling generalisation of
+convex inversion (Kaasalainen & Torppa 2001; Kaasalainen, Torppa & Muinonen 2001; for tumblers
+Kaasalainen 2001, Pravec et al. 2005, and the GPU search of Mashchenko 2019, which integrates Euler's
+equations numerically where frbjax evaluates the exact motion).
+
+Parameters
+----------
+The motion (8 numbers, theta): moments (I1, I2, I3) = (exp theta_0, exp theta_1, 1) (only ratios are
+identifiable: I -> c I with L -> c L is the same motion); |L| = exp theta_2 (so that the time scale
+is |L| / I); the attitude at the epoch q0 = q_ref ⊗ exp(theta_{3:6} / 2); the body-frame direction of
+L at the epoch, l = exp-map of theta_{6:8} on the tangent plane at a reference direction l_ref.  The
+inertial direction of L is then R(q0) l, the energy (the mode: short-axis SAM or long-axis LAM) is
+sum l_i^2 / I_i, and the two periods follow (:func:`frbjax.lightcurve.tumbler_periods`).  A
+principal-axis rotator (``principal_axis=True``) is the same model with l = e3 and fixed moments: 4
+free numbers (|L|, the attitude), the period 2 pi / |L|.
+
+The shape: ``"convex"``, log-areas s on fixed normals (the icosphere's facet normals), regularised by
+the closure of the Gaussian image (sum A n = 0), the smoothness of s over neighbouring facets and its
+mean (the overall size is not observable in relative photometry); or ``"ellipsoid"``, the triaxial
+ellipsoid with semi-axes (1, exp s_0, exp s_1) along principal axes 1, 2, 3.
+
+Residuals
+---------
+Relative photometry: each light curve c has an unknown scale.  The residuals are in log flux,
+r_k = (log y_k - log m_k - b_c(k)) / sigma, with m the model flux (:func:`brightness`) and b_c the
+mean of log y - log m over the curve's samples (the scale eliminated in closed form, its dependence
+on the parameters kept: variable projection), sigma the relative noise.  The Jacobian is formed by
+forward mode through the exact motion (8 tangents); the shape's columns are analytic (the flux is
+linear in the areas).
+
+Search
+------
+The two periods make the cost landscape rugged: a model whose period is off by dP drifts in phase by
+T dP / P^2 over a record of length T.  Starting points are therefore generated on a grid of the two
+periods (log-uniform over the given ranges) times random other states (inertia ratios, mode,
+polhode phase, attitude): for given moments the ratio P_psi / P_phi fixes the energy (bisection) and
+P_psi then fixes |L|.  The shape of each start is the ellipsoid of the same inertia at uniform
+density.  All starts are evaluated on the first continuation window (the samples nearest the epoch)
+in one vmapped program (thousands of starts); the best ``n_refine`` are solved by optimistix's
+Levenberg-Marquardt under ``vmap`` on growing windows (continuation) with the ellipsoid shape (the
+first windows hold fewer samples than a convex shape has areas); for ``shape="convex"`` the convex
+shape, started from the Gaussian image of each fitted ellipsoid, is then solved with the motion on
+all the data.  The lowest cost wins.  Periods, moments and their standard errors come from the
+covariance (J^T J)^+ s^2 of the winner (s^2 the residual variance of the data rows).
+"""
+
+from __future__ import annotations
+
+import functools
+import math
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import numpy as np
+import optimistix as optx
+from jaxtyping import Array, Float
+
+from .. import _quaternion as quaternion
+from .._body import FreeRigidBody
+from ._brightness import LAWS, check_directions, facet_brightness
+from ._brightness import brightness as _forward
+from ._periods import momentum_from_periods, tumbler_periods
+from ._shape import ConvexShape, icosphere
+
+__all__ = ["LightcurveFit", "fit_lightcurve"]
+
+_WINDOWS = (0.1, 0.25, 0.5, 1.0)
+_MIN_WINDOW = 24
+_PRINCIPAL_INERTIA = (0.5, 0.75, 1.0)
+_SEARCH_SUBDIVISIONS = 1
+
+
+# ------------------------------------------------------------------------------------ the model
+
+
+def _tangent_basis(direction):
+    """Two unit vectors orthogonal to ``direction`` and to each other (numpy, (..., 2, 3))."""
+    direction = np.asarray(direction, float)
+    helper = np.where(np.abs(direction[..., :1]) < 0.9, np.array([1.0, 0, 0]), np.array([0, 1.0, 0]))
+    first = np.cross(direction, helper)
+    first /= np.linalg.norm(first, axis=-1, keepdims=True)
+    second = np.cross(direction, first)
+    return np.stack([first, second], -2)
+
+
+def _sphere_exp(base, tangent):
+    """exp map on the unit sphere: cos|v| base + sin|v| v/|v| (safe at v = 0)."""
+    squared = jnp.sum(tangent**2, -1, keepdims=True)
+    small = squared < 1e-12
+    safe = jnp.where(small, 1.0, squared)
+    norm = jnp.sqrt(safe)
+    cosine = jnp.where(small, 1 - squared / 2, jnp.cos(norm))
+    sinc = jnp.where(small, 1 - squared / 6, jnp.sin(norm) / norm)
+    return cosine * base + sinc * tangent
+
+
+def _body(theta, reference):
+    """The FreeRigidBody of motion parameters theta (8,) with the start's reference frame."""
+    attitude_ref, direction_ref, basis = reference
+    inertia = jnp.exp(jnp.concatenate([theta[:2], jnp.zeros(1, theta.dtype)]))
+    attitude = quaternion.multiply(attitude_ref, quaternion.exp_pure(theta[3:6]))
+    direction = _sphere_exp(direction_ref, theta[6:8] @ basis)
+    return FreeRigidBody(inertia, jnp.exp(theta[2]) * direction, attitude)
+
+
+def _ellipsoid_shape(shape_parameters, subdivisions):
+    return ConvexShape.ellipsoid(1.0, jnp.exp(shape_parameters[0]), jnp.exp(shape_parameters[1]), subdivisions)
+
+
+def _facet_fluxes(theta, reference, normals, data, law, c):
+    """S(mu, mu0) per sample and facet (N, F)."""
+    times, sun, observer = data["times"], data["sun"], data["observer"]
+    matrices = _body(theta, reference).rotation_matrix(times)
+    sun_body = jnp.einsum("tji,tj->ti", matrices, sun)
+    observer_body = jnp.einsum("tji,tj->ti", matrices, observer)
+    return facet_brightness(normals, sun_body, observer_body, law, c)
+
+
+def _safe_log(flux):
+    tiny = jnp.finfo(flux.dtype).tiny ** 0.5
+    return jnp.log(jnp.maximum(flux, tiny))
+
+
+def _log_flux_and_jacobian(parameters, reference, data, config):
+    """(log m (N,), d log m / d parameters (N, P)) for parameters = (theta (8), shape parameters)."""
+    kind, law, c, subdivisions = config
+    theta, shape_parameters = parameters[:8], parameters[8:]
+    if kind == "convex":
+        areas = jnp.exp(shape_parameters)
+
+        def log_flux(theta):
+            per_facet = _facet_fluxes(theta, reference, data["normals"], data, law, c)
+            flux = per_facet @ areas
+            return _safe_log(flux), (per_facet, flux)
+
+        jac_theta, (per_facet, flux) = jax.jacfwd(log_flux, has_aux=True)(theta)
+        # The flux is linear in the areas: d log m / d s_f = A_f S_f / m.
+        jac_shape = per_facet * areas / jnp.maximum(flux, jnp.finfo(flux.dtype).tiny ** 0.5)[:, None]
+        return _safe_log(flux), jnp.concatenate([jac_theta, jac_shape], 1)
+
+    def log_flux(parameters):
+        shape = _ellipsoid_shape(parameters[8:], subdivisions)
+        per_facet = _facet_fluxes(parameters[:8], reference, shape.normals, data, law, c)
+        value = _safe_log(per_facet @ shape.areas)
+        return value, value
+
+    jacobian, value = jax.jacfwd(log_flux, has_aux=True)(parameters)
+    return value, jacobian
+
+
+def _curve_mean(values, weights, curves):
+    """Weighted mean over each sample's light curve, at every sample: (N,) or (N, P)."""
+    expand = (lambda w: w) if values.ndim == 1 else (lambda w: w[:, None])
+    totals = curves.T @ (expand(weights) * values)
+    counts = curves.T @ weights
+    means = totals / expand(jnp.where(counts > 0, counts, 1.0))
+    return curves @ means
+
+
+def _residuals_and_jacobian(parameters, reference, data, weights, config):
+    """(r (R,), dr/dparameters (R, P)): data rows then the shape's regularisation rows."""
+    kind = config[0]
+    log_model, jac = _log_flux_and_jacobian(parameters, reference, data, config)
+    difference = data["log_brightness"] - log_model
+    offset = _curve_mean(difference, weights, data["curves"])
+    scale = weights / data["sigma"]
+    residual = scale * (difference - offset)
+    jacobian = -scale[:, None] * (jac - _curve_mean(jac, weights, data["curves"]))
+    if kind == "convex":
+        shape_parameters = parameters[8:]
+        areas = jnp.exp(shape_parameters)
+        normals, total = data["normals"], jnp.sum(jnp.exp(shape_parameters))
+        closure = areas @ normals / total
+        d_closure = (areas[:, None] * (normals - closure) / total).T  # (3, F)
+        smooth = data["laplacian"] @ shape_parameters
+        gauge = jnp.mean(shape_parameters, keepdims=True)
+        weights_reg = data["regularisation"]
+        reg = jnp.concatenate([weights_reg[0] * closure, weights_reg[1] * smooth, gauge])
+        d_reg = jnp.concatenate([weights_reg[0] * d_closure, weights_reg[1] * data["laplacian"],
+                                 jnp.full((1, areas.size), 1.0 / areas.size, areas.dtype)])
+        d_reg = jnp.concatenate([jnp.zeros((d_reg.shape[0], 8), d_reg.dtype), d_reg], 1)
+        residual = jnp.concatenate([residual, reg])
+        jacobian = jnp.concatenate([jacobian, d_reg])
+    jacobian = jacobian * data["free"]
+    finite = jnp.isfinite(residual)
+    return jnp.where(finite, residual, 0.0), jnp.where(finite[:, None] & jnp.isfinite(jacobian), jacobian, 0.0)
+
+
+@functools.partial(jax.custom_jvp, nondiff_argnums=(2,))
+def _least_squares_fn(parameters, args, config):
+    """(r, (r, J)) for optimistix; its JVP is J @ dp with J from one forward-mode pass."""
+    reference, data, weights = args
+    residual, jacobian = _residuals_and_jacobian(parameters, reference, data, weights, config)
+    return residual, (residual, jacobian)
+
+
+@_least_squares_fn.defjvp
+def _least_squares_fn_jvp(config, primals, tangents):
+    parameters, (reference, data, weights) = primals
+    residual, jacobian = _residuals_and_jacobian(parameters, reference, data, weights, config)
+    aux = (residual, jacobian)
+    return (residual, aux), (jacobian @ tangents[0], jax.tree.map(jnp.zeros_like, aux))
+
+
+def _solve_start(parameters, reference, data, masks, config, rtol, atol, max_steps):
+    """Levenberg-Marquardt on each window of ``masks`` in turn (continuation)."""
+    solver = optx.LevenbergMarquardt(rtol=rtol, atol=atol)
+    fn = lambda p, args: _least_squares_fn(p, args, config)  # noqa: E731
+
+    def stage(current, mask):
+        solution = optx.least_squares(fn, solver, current, args=(reference, data, mask), has_aux=True,
+                                      max_steps=max_steps, throw=False)
+        finite = jnp.all(jnp.isfinite(solution.value))
+        value = jnp.where(finite, solution.value, current)
+        return value, solution.result == optx.RESULTS.successful
+
+    parameters, ok = jax.lax.scan(stage, parameters, masks)
+    residual, jacobian = _residuals_and_jacobian(parameters, reference, data, masks[-1], config)
+    cost = 0.5 * jnp.sum(residual**2)
+    return parameters, jnp.where(jnp.isfinite(cost), cost, jnp.inf), ok[-1], residual, jacobian
+
+
+@functools.partial(jax.jit, static_argnames=("config", "rtol", "atol", "max_steps"))
+def _refine(parameters, references, data, masks, config, rtol, atol, max_steps):
+    solve = lambda p, ref: _solve_start(p, ref, data, masks, config, rtol, atol, max_steps)  # noqa: E731
+    return jax.vmap(solve)(parameters, references)
+
+
+@functools.partial(jax.jit, static_argnames=("config", "chunk"))
+def _search_costs(parameters, references, start_areas, data, mask, config, chunk):
+    """Cost of each start on the first window with its own shape (the ellipsoid of its inertia)."""
+    _, law, c, _ = config
+
+    def cost(item):
+        theta, reference, areas = item
+        per_facet = _facet_fluxes(theta[:8], reference, data["search_normals"], data, law, c)
+        difference = data["log_brightness"] - _safe_log(per_facet @ areas)
+        residual = mask * (difference - _curve_mean(difference, mask, data["curves"])) / data["sigma"]
+        value = 0.5 * jnp.sum(residual**2)
+        return jnp.where(jnp.isfinite(value), value, jnp.inf)
+
+    return jax.lax.map(cost, (parameters, references, start_areas), batch_size=chunk)
+
+
+@functools.partial(jax.jit, static_argnames="principal_axis")
+def _periods_and_jacobian(theta, reference, principal_axis):
+    """((P_psi, P_phi), LAM, their Jacobian in theta).  A principal-axis rotation has one period,
+    2 pi I3 / |L| (I3 = 1), reported as P_psi with P_phi infinite: the limit of the tumbler's
+    (P_psi, P_phi) at vanishing nutation is not it (1/P = 1/P_psi - 1/P_phi there, for SAM)."""
+
+    def periods(theta):
+        moving = _body(theta, reference)
+        p_psi, p_phi, long_axis = tumbler_periods(moving.inertia, moving.initial_angular_momentum)
+        if principal_axis:
+            p_psi, p_phi = 2 * jnp.pi / jnp.exp(theta[2]), jnp.asarray(jnp.inf, theta.dtype)
+        return jnp.stack([p_psi, p_phi]), long_axis
+
+    jacobian, (values, long_axis) = jax.jacfwd(lambda t: (periods(t)[0], periods(t)), has_aux=True)(theta)
+    return values, long_axis, jacobian
+
+
+# ------------------------------------------------------------------------------------ the result
+
+
+class LightcurveFit(eqx.Module):
+    """Result of :func:`fit_lightcurve`.
+
+    - ``body``: the fitted :class:`frbjax.FreeRigidBody` (time from the epoch), moments (I1, I2, 1);
+    - ``shape``: the fitted :class:`ConvexShape` (principal frame; relative size);
+    - ``epoch``: the reference time (model time t - epoch);
+    - ``periods`` (2,): (P_psi, P_phi), precession and rotation periods (principal axis: (P, inf));
+      ``period_sigma`` (2,): their standard errors from ``covariance``;
+    - ``long_axis_mode``: LAM (True) or SAM; ``energy_ratio``: E / E0 = 2 E I3 / |L|^2 (1 for a
+      principal-axis rotation about the largest moment);
+    - ``inertia`` (3,): fitted moments scaled to a largest of 1; ``inertia_sigma`` (3,);
+    - ``momentum_direction`` (3,): the inertial direction of L;
+    - ``parameters``: (theta (8), shape parameters) of the module docstring; ``covariance``: their
+      covariance (J^T J)^+ s^2;
+    - ``scales`` (C,): the fitted scale of each light curve (data = scale * model);
+    - ``residuals`` (N,): log(data) - log(scale * model) per sample (input order);
+    - ``cost``: half the sum of squared (weighted) residuals; ``success``: the solver converged;
+    - ``search_periods`` (S, 2), ``search_costs`` (S,): the periods of every start and its cost on the
+      first window (the search's landscape); ``refine_costs`` (n_refine,): final cost of the refined
+      starts.
+    """
+
+    body: FreeRigidBody
+    shape: ConvexShape
+    epoch: float
+    law: str = eqx.field(static=True)
+    c: float
+    periods: Float[Array, "2"]
+    period_sigma: Float[Array, "2"]
+    long_axis_mode: bool
+    energy_ratio: float
+    inertia: Float[Array, "3"]
+    inertia_sigma: Float[Array, "3"]
+    momentum_direction: Float[Array, "3"]
+    parameters: Float[Array, " P"]
+    covariance: Float[Array, "P P"]
+    scales: Float[Array, " C"]
+    residuals: Float[Array, " N"]
+    cost: float
+    success: bool
+    search_periods: Float[Array, "S 2"]
+    search_costs: Float[Array, " S"]
+    refine_costs: Float[Array, " K"]
+
+    def predict(self, times, sun, observer):
+        """The model brightness (unscaled: multiply by a light curve's scale) at ``times``."""
+        times = jnp.asarray(times)
+        return _forward(self.body, self.shape, times - self.epoch, sun, observer, self.law, self.c)
+
+    def shape_inertia(self):
+        """Principal moments of the fitted shape at uniform density (from its polyhedron, Minkowski's
+        problem), in the body's axes (the diagonal of its inertia tensor) scaled to a largest of 1,
+        beside ``inertia``; and the whole tensor (same scale)."""
+        _, tensor = self.shape.inertia()
+        diagonal = np.diag(tensor)
+        return diagonal / diagonal.max(), tensor / diagonal.max()
+
+
+# ------------------------------------------------------------------------------------ starts
+
+
+def _random_rotations(rng, count):
+    q = rng.normal(size=(count, 4))
+    q /= np.linalg.norm(q, axis=-1, keepdims=True)
+    return q * np.where(q[:, :1] < 0, -1, 1)
+
+
+def _rotate(q, v):
+    return np.asarray(jnp.einsum("...ij,...j->...i", quaternion.as_matrix(jnp.asarray(q)), jnp.asarray(v)))
+
+
+def _ellipsoid_axes(inertia):
+    """Semi-axes of the uniform ellipsoid with principal moments ``inertia`` (..., 3) (up to scale):
+    I1 ∝ b^2 + c^2, ... => a^2 ∝ I2 + I3 - I1, ..."""
+    squares = np.stack([inertia[..., 1] + inertia[..., 2] - inertia[..., 0],
+                        inertia[..., 0] + inertia[..., 2] - inertia[..., 1],
+                        inertia[..., 0] + inertia[..., 1] - inertia[..., 2]], -1)
+    return np.sqrt(np.maximum(squares, 1e-6))
+
+
+def _gaussian_image_areas(axes, normals, solid_angles):
+    """Facet areas of the ellipsoid with semi-axes ``axes`` on fixed normals: the area per solid angle
+    is 1/K = (abc)^2 / h(n)^4, h(n) = sqrt(sum a_i^2 n_i^2) its support function."""
+    support = np.sqrt(np.einsum("...i,fi->...f", axes**2, normals**2))
+    return solid_angles * np.prod(axes, -1)[..., None] ** 2 / support**4
+
+
+def _unit_normals(subdivisions):
+    vertices, faces = icosphere(subdivisions)
+    shape = ConvexShape.from_mesh(vertices, faces)
+    normals, areas = np.asarray(shape.normals), np.asarray(shape.areas)
+    return normals, areas * 4 * np.pi / areas.sum(), faces
+
+
+def _laplacian(faces):
+    """Graph Laplacian (F, F) of the facets sharing an edge: s_f - mean of its neighbours."""
+    count = len(faces)
+    edges: dict[tuple[int, int], list[int]] = {}
+    for index, face in enumerate(faces):
+        for i in range(3):
+            key = tuple(sorted((int(face[i]), int(face[(i + 1) % 3]))))
+            edges.setdefault(key, []).append(index)
+    matrix = np.eye(count)
+    neighbours = [[] for _ in range(count)]
+    for pair in edges.values():
+        if len(pair) == 2:
+            neighbours[pair[0]].append(pair[1])
+            neighbours[pair[1]].append(pair[0])
+    for index, around in enumerate(neighbours):
+        for other in around:
+            matrix[index, other] -= 1.0 / len(around)
+    return matrix
+
+
+# ------------------------------------------------------------------------------------ the fit
+
+
+def _validate(times, flux, sun, observer, lightcurve, magnitudes):
+    times = np.asarray(times, float)
+    if times.ndim != 1:
+        raise ValueError(f"times must be one-dimensional, got shape {times.shape}")
+    if not np.all(np.isfinite(times)):
+        raise ValueError("times has non-finite entries")
+    n = len(times)
+    flux = np.asarray(flux, float)
+    if flux.shape != (n,):
+        raise ValueError(f"brightness must have shape (N,) = ({n},) like times, got {flux.shape}")
+    if not np.all(np.isfinite(flux)):
+        raise ValueError("brightness has non-finite entries")
+    if not magnitudes and np.any(flux <= 0):
+        raise ValueError("brightness must be > 0 (its logarithm is fitted)")
+    for name, value in (("sun", sun), ("observer", observer)):
+        check_directions(name, jnp.asarray(value), n)
+    sun = np.broadcast_to(np.asarray(sun, float), (n, 3))
+    observer = np.broadcast_to(np.asarray(observer, float), (n, 3))
+    if np.any(np.sum(sun * observer, -1) <= -1 + 1e-9):
+        raise ValueError("sun and observer are opposite at some epochs (phase angle 180 degrees): no "
+                         "facet is both lit and seen")
+    if lightcurve is None:
+        lightcurve = np.zeros(n, int)
+    lightcurve = np.asarray(lightcurve)
+    if lightcurve.shape != (n,):
+        raise ValueError(f"lightcurve must have shape (N,) = ({n},) like times, got {lightcurve.shape}")
+    return times, flux, sun, observer, lightcurve
+
+
+def fit_lightcurve(
+    times,
+    brightness,
+    sun,
+    observer,
+    *,
+    lightcurve=None,
+    magnitudes: bool = False,
+    periods=None,
+    principal_axis: bool = False,
+    mode: str = "both",
+    inertia_range=(0.3, 0.98),
+    shape: str = "convex",
+    convex_subdivisions: int = 1,
+    law: str = "lommel_seeliger_lambert",
+    c: float = 0.1,
+    sigma: float = 0.01,
+    regularisation=(10.0, 1.0),
+    epoch: float | None = None,
+    period_grid=(16, 16),
+    starts_per_period: int = 16,
+    n_refine: int = 8,
+    seed: int = 0,
+    rtol: float = 1e-8,
+    atol: float = 1e-8,
+    max_steps: int = 100,
+    search_chunk: int = 256,
+    initial: FreeRigidBody | None = None,
+) -> LightcurveFit:
+    """Fit a tumbling (or principal-axis) body and its convex shape to light curves.
+
+    Arguments: ``times`` (N,); ``brightness`` (N,) fluxes (> 0), or magnitudes with ``magnitudes=True``
+    (flux = 10^(-0.4 m)); ``sun``, ``observer`` (N, 3) unit vectors from the body to the Sun and to the
+    observer (inertial frame; light-time corrected ``times`` are the caller's); ``lightcurve`` (N,)
+    integer label of each sample's light curve (one unknown scale each; default: one curve).
+
+    Search: ``periods``: ranges ((P_psi_min, P_psi_max), (P_phi_min, P_phi_max)) of the two periods
+    (principal axis: (P_min, P_max)), searched on a log-uniform ``period_grid`` (two numbers; one for
+    a principal axis) with ``starts_per_period`` random states each (inertia ratios in
+    ``inertia_range``, ``mode`` "SAM", "LAM" or "both", polhode phase, attitude); ``n_refine`` of the
+    best are refined by Levenberg-Marquardt on growing windows around ``epoch`` (default: the median
+    time).  ``shape``: "convex" (log-areas on the facet normals of an icosphere of
+    ``convex_subdivisions``, with ``regularisation`` = (closure weight, smoothness weight)) or
+    "ellipsoid".  ``initial``: a :class:`frbjax.FreeRigidBody` (time from the epoch), e.g. an earlier
+    fit, refined beside the search's best (its shape starts as the ellipsoid of its inertia).
+    ``law``, ``c``: the scattering law (:func:`brightness`); ``sigma``: the relative
+    noise (weights the data against the regularisation).
+
+    Runs in float64 when JAX has it enabled (recommended).  Module docstring: the parameters, the
+    residuals and the search.
+    """
+    if shape not in ("convex", "ellipsoid"):
+        raise ValueError(f"shape must be 'convex' or 'ellipsoid', got {shape!r}")
+    if law not in LAWS:
+        raise ValueError(f"law must be one of {LAWS}, got {law!r}")
+    if mode not in ("SAM", "LAM", "both"):
+        raise ValueError(f"mode must be 'SAM', 'LAM' or 'both', got {mode!r}")
+    if periods is None:
+        raise ValueError("periods: give the search ranges ((P_psi_min, P_psi_max), (P_phi_min, P_phi_max)), "
+                         "or (P_min, P_max) with principal_axis=True")
+    times, flux, sun, observer, lightcurve = _validate(times, brightness, sun, observer, lightcurve, magnitudes)
+    log_brightness = -0.4 * np.log(10.0) * flux if magnitudes else np.log(flux)
+    n = len(times)
+    dtype = jnp.result_type(float)
+    rng = np.random.default_rng(seed)
+    epoch = float(np.median(times)) if epoch is None else float(epoch)
+    labels, curve_index = np.unique(lightcurve, return_inverse=True)
+    curves = np.eye(len(labels))[curve_index]
+
+    # Continuation windows: the samples nearest the epoch.
+    distance = np.abs(times - epoch)
+    ranked = np.sort(distance)
+    masks = np.zeros((len(_WINDOWS), n))
+    for k, fraction in enumerate(_WINDOWS):
+        count = n if fraction >= 1 else min(n, max(math.ceil(fraction * n), _MIN_WINDOW))
+        masks[k] = distance <= ranked[count - 1]
+
+    # ---- starts: a grid of the periods times random states
+    if principal_axis:
+        low, high = (float(p) for p in periods)
+        grid = np.exp(np.linspace(np.log(low), np.log(high), int(np.atleast_1d(period_grid)[0])))
+        period_psi = np.repeat(grid, starts_per_period)
+        count = len(period_psi)
+        period_phi = np.full(count, np.inf)
+        inertia = np.broadcast_to(np.asarray(_PRINCIPAL_INERTIA), (count, 3))
+        momentum = np.zeros((count, 3))
+        momentum[:, 2] = 2 * np.pi * inertia[:, 2] / period_psi
+        valid = np.ones(count, bool)
+    else:
+        (psi_low, psi_high), (phi_low, phi_high) = periods
+        n_psi, n_phi = period_grid
+        psi_grid = np.exp(np.linspace(np.log(psi_low), np.log(psi_high), n_psi))
+        phi_grid = np.exp(np.linspace(np.log(phi_low), np.log(phi_high), n_phi))
+        period_psi, period_phi = (np.repeat(g.reshape(-1), starts_per_period)
+                                  for g in np.meshgrid(psi_grid, phi_grid, indexing="ij"))
+        count = len(period_psi)
+        ratios = np.sort(rng.uniform(*inertia_range, size=(count, 2)), -1)
+        inertia = np.concatenate([ratios, np.ones((count, 1))], -1)
+        if mode == "both":
+            long_axis = rng.random(count) < 0.5
+        else:
+            long_axis = np.full(count, mode == "LAM")
+        phase = rng.uniform(0, 2 * np.pi, count)
+        momentum, valid = (np.array(x) for x in jax.jit(jax.vmap(momentum_from_periods))(
+            jnp.asarray(inertia, dtype), jnp.asarray(period_psi, dtype), jnp.asarray(period_phi, dtype),
+            jnp.asarray(long_axis), jnp.asarray(phase, dtype)))
+        valid &= np.all(np.isfinite(momentum), -1)
+        momentum = np.where(valid[:, None], momentum, np.array([0.0, 0.0, 1.0]))
+    attitudes = _random_rotations(rng, count)
+    if initial is not None:
+        # The given motion as one more start, placed first; its cost is not searched but refined.
+        scale = float(np.max(np.asarray(initial.inertia)))
+        inertia = np.concatenate([np.asarray(initial.inertia)[None] / scale, inertia])
+        given = np.asarray(initial.initial_angular_momentum)[None] / scale
+        momentum = np.concatenate([given, momentum])
+        attitudes = np.concatenate([np.asarray(initial.initial_attitude)[None], attitudes])
+        period_psi = np.concatenate([[np.nan], period_psi])
+        period_phi = np.concatenate([[np.nan], period_phi])
+        valid = np.concatenate([[True], valid])
+        count += 1
+    momentum_norm = np.linalg.norm(momentum, axis=-1)
+    direction = momentum / momentum_norm[:, None]
+    if principal_axis:
+        direction = np.broadcast_to(np.array([0.0, 0.0, 1.0]), (count, 3)).copy()
+        if initial is not None:
+            direction[0] = momentum[0] / momentum_norm[0]
+    theta = np.zeros((count, 8))
+    theta[:, 0] = np.log(inertia[:, 0])
+    theta[:, 1] = np.log(inertia[:, 1])
+    theta[:, 2] = np.log(momentum_norm)
+    references = (attitudes, direction, _tangent_basis(direction))
+    axes = _ellipsoid_axes(inertia)
+
+    # ---- shapes
+    search_normals, search_solid, _ = _unit_normals(_SEARCH_SUBDIVISIONS)
+    start_areas = _gaussian_image_areas(axes, search_normals, search_solid)
+    if shape == "convex":
+        normals, solid_angles, faces = _unit_normals(convex_subdivisions)
+        laplacian = _laplacian(faces)
+    else:
+        normals = search_normals
+        laplacian = np.zeros((1, 1))
+    ellipsoid_start = np.log(axes[:, 1:] / axes[:, :1])
+    free = np.ones(8 + (len(normals) if shape == "convex" else 2))
+    ellipsoid_free = np.ones(10)
+    if principal_axis:
+        free[[0, 1, 6, 7]] = 0.0
+        ellipsoid_free[[0, 1, 6, 7]] = 0.0
+    data = dict(
+        times=times - epoch, sun=sun, observer=observer, log_brightness=log_brightness, curves=curves,
+        sigma=np.asarray(sigma), normals=normals, search_normals=search_normals, laplacian=laplacian,
+        regularisation=np.asarray(regularisation, float), free=free)
+    data = {key: jnp.asarray(value, dtype) for key, value in data.items()}
+    config = (shape, law, float(c), _SEARCH_SUBDIVISIONS)
+
+    # ---- the search: every start's cost on the first window
+    as_jax = lambda tree: jax.tree.map(lambda x: jnp.asarray(x, dtype), tree)  # noqa: E731
+    costs = np.asarray(_search_costs(as_jax(theta), as_jax(references), as_jax(start_areas), data,
+                                     jnp.asarray(masks[0], dtype), config, int(search_chunk)))
+    costs = np.where(valid, costs, np.inf)
+    best = np.argsort(costs, kind="stable")[:n_refine]
+    if initial is not None and 0 not in best:
+        best = np.concatenate([[0], best[:-1]])
+
+    refs = tuple(r[best] for r in references)
+    # The continuation windows are solved with the ellipsoid (2 shape parameters): the first windows
+    # hold fewer samples than a convex shape has areas.  A convex shape is then fitted on all the data
+    # from the Gaussian image of the fitted ellipsoid, on its fixed normals.
+    ellipsoid_data = dict(data, free=jnp.asarray(ellipsoid_free, dtype))
+    ellipsoid_config = ("ellipsoid",) + config[1:]
+    parameters0 = np.concatenate([theta[best], ellipsoid_start[best]], 1)
+    out = _refine(as_jax(parameters0), as_jax(refs), ellipsoid_data, jnp.asarray(masks, dtype), ellipsoid_config,
+                  rtol=float(rtol), atol=float(atol), max_steps=int(max_steps))
+    if shape == "convex":
+        fitted = np.asarray(out[0])
+        fitted_axes = np.concatenate([np.ones((len(best), 1)), np.exp(fitted[:, 8:])], 1)
+        log_areas = np.log(_gaussian_image_areas(fitted_axes, normals, solid_angles))
+        log_areas -= log_areas.mean(-1, keepdims=True)
+        parameters0 = np.concatenate([fitted[:, :8], log_areas], 1)
+        out = _refine(as_jax(parameters0), as_jax(refs), data, jnp.asarray(masks[-1:], dtype), config,
+                      rtol=float(rtol), atol=float(atol), max_steps=int(max_steps))
+    fitted, refine_costs, oks, residual_rows, jacobians = (np.asarray(x) for x in out)
+    winner = int(np.argmin(np.where(np.isfinite(refine_costs), refine_costs, np.inf)))
+    p = fitted[winner].astype(float)
+    reference = tuple(jnp.asarray(r[winner], dtype) for r in refs)
+    jacobian = jacobians[winner][:, free > 0]
+    residual = residual_rows[winner]
+    m = n
+    variance = float(np.sum(residual[:n] ** 2) / max(m - jacobian.shape[1], 1))
+    covariance = np.zeros((free.size, free.size))
+    covariance[np.ix_(free > 0, free > 0)] = np.linalg.pinv(jacobian.T @ jacobian) * variance
+
+    body = _body(jnp.asarray(p[:8], dtype), reference)
+    if shape == "convex":
+        fitted_shape = ConvexShape(jnp.asarray(normals, dtype), jnp.exp(jnp.asarray(p[8:], dtype)))
+    else:
+        fitted_shape = _ellipsoid_shape(jnp.asarray(p[8:], dtype), _SEARCH_SUBDIVISIONS)
+
+    # Periods, energy and their uncertainties (first order in the covariance).
+    theta_fit = jnp.asarray(p[:8], dtype)
+    period_values, lam, period_jacobian = (np.asarray(x) for x in _periods_and_jacobian(
+        theta_fit, reference, principal_axis))
+    period_jacobian = np.nan_to_num(period_jacobian, posinf=0.0, neginf=0.0)
+    period_sigma = np.sqrt(np.maximum(np.diag(period_jacobian @ covariance[:8, :8] @ period_jacobian.T), 0))
+    inertia_fit = np.exp(np.concatenate([p[:2], [0.0]]))
+    largest = np.argmax(inertia_fit)
+    moments = inertia_fit / inertia_fit[largest]
+    d_log = np.zeros((3, 8))
+    for j in range(2):
+        d_log[:, j] = (np.arange(3) == j).astype(float) - float(largest == j)
+    inertia_sigma = moments * np.sqrt(np.maximum(np.diag(d_log @ covariance[:8, :8] @ d_log.T), 0))
+    l_body = np.asarray(body.initial_angular_momentum)
+    momentum_direction = _rotate(np.asarray(body.initial_attitude), l_body / np.linalg.norm(l_body))
+    energy_ratio = float(np.sum(l_body**2 / inertia_fit) * inertia_fit.max() / np.sum(l_body**2))
+
+    # Scales and residuals of the fitted model, per curve.
+    log_model = np.log(np.maximum(np.asarray(
+        _forward(body, fitted_shape, data["times"], data["sun"], data["observer"], law, c)), 1e-300))
+    difference = log_brightness - log_model
+    offsets = (curves.T @ difference) / curves.sum(0)
+    residuals = difference - curves @ offsets
+
+    return LightcurveFit(
+        body=body, shape=fitted_shape, epoch=epoch, law=law, c=float(c),
+        periods=jnp.asarray(period_values), period_sigma=jnp.asarray(period_sigma),
+        long_axis_mode=bool(lam) and not principal_axis, energy_ratio=energy_ratio,
+        inertia=jnp.asarray(moments, dtype), inertia_sigma=jnp.asarray(inertia_sigma, dtype),
+        momentum_direction=jnp.asarray(momentum_direction, dtype), parameters=jnp.asarray(p, dtype),
+        covariance=jnp.asarray(covariance, dtype), scales=jnp.asarray(np.exp(offsets), dtype),
+        residuals=jnp.asarray(residuals, dtype), cost=float(refine_costs[winner]),
+        success=bool(oks[winner]), search_periods=jnp.asarray(np.stack([period_psi, period_phi], -1), dtype),
+        search_costs=jnp.asarray(costs, dtype), refine_costs=jnp.asarray(refine_costs, dtype))
+

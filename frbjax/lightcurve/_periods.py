@@ -1,0 +1,127 @@
+"""The two periods of a torque-free motion, and the motion with given periods.
+
+A free asymmetric body (moments sorted I1 < I2 < I3, angular momentum M = |L|, energy E) moves in one
+of two modes (Landau & Lifshitz, Mechanics, section 37; Kaasalainen 2001, A&A 376, 302; Pravec et al.
+2005, Icarus 173, 108):
+
+- short-axis mode (SAM), M^2 > 2 E I2: L circulates about the axis of the largest moment I3;
+- long-axis mode (LAM), M^2 < 2 E I2: L circulates about the axis of the smallest moment I1.
+
+The body-frame motion is periodic with the rotation period (of the Euler angle phi about the
+circulated axis)
+
+    P_phi = 4 K(k^2) sqrt(I1 I2 I3 / p),   SAM: p = (I3 - I2)(M^2 - 2 E I1),
+                                           k^2 = (I2 - I1)(2 E I3 - M^2) / p;
+                                           LAM: the same with I1 and I3 exchanged,
+
+and the angle psi of the precession about L advances at the rate (Euler angles about the circulated
+axis, with Landau's cn and sn of u = 4 K t / P_phi)
+
+    SAM: dpsi/dt = M (cn^2/(I3 - I1) + sn^2/(I3 - I2)) / (I1 cn^2/(I3 - I1) + I2 sn^2/(I3 - I2)),
+    LAM: the same with I1 and I3 exchanged,
+
+a rational function of sn^2 whose mean over one P_phi is a complete elliptic integral of the third
+kind, Pi(n | k^2) / K(k^2) (DLMF 19.2.8), giving the precession period P_psi = 2 pi / <dpsi/dt>.  A
+principal-axis rotation is the limit k -> 0 of either mode: P_psi = 2 pi I / M.
+"""
+
+from __future__ import annotations
+
+import jax
+import jax.numpy as jnp
+from jaxtyping import Array, Float
+
+from .. import special
+
+__all__ = ["tumbler_periods"]
+
+def _mode_quantities(sorted_inertia, momentum_squared, twice_energy, long_axis):
+    """(P_phi, <dpsi/dt> / M) for sorted moments; LAM exchanges I1 and I3."""
+    i1, i2, i3 = sorted_inertia[..., 0], sorted_inertia[..., 1], sorted_inertia[..., 2]
+    first = jnp.where(long_axis, i3, i1)
+    last = jnp.where(long_axis, i1, i3)
+    p = (last - i2) * (momentum_squared - twice_energy * first)
+    k2 = jnp.clip((i2 - first) * (twice_energy * last - momentum_squared) / p, 0.0, 1.0)
+    quarter = special.ellipk(k2)
+    period_phi = 4 * quarter * jnp.sqrt(i1 * i2 * i3 / p)
+    # dpsi/dt / M = (alpha + beta s) / (gamma + delta s), s = sn^2 u, is
+    # beta/delta + (alpha delta - beta gamma) / (gamma delta) / (1 - n s), n = -delta/gamma, whose mean
+    # over a period of u is that of 1 / (1 - n sn^2 u): Pi(n | k^2) / K(k^2).
+    alpha = 1 / (last - first)
+    beta = 1 / (last - i2) - alpha
+    gamma = first * alpha
+    delta = i2 / (last - i2) - gamma
+    characteristic = -delta / gamma
+    mean_rate = beta / delta + (alpha * delta - beta * gamma) / (gamma * delta) * (
+        special.ellippi(characteristic, k2) / quarter)
+    return period_phi, mean_rate
+
+
+def tumbler_periods(inertia: Float[Array, "... 3"], angular_momentum: Float[Array, "... 3"]):
+    """(P_psi, P_phi, long_axis_mode) of the free motion with moments ``inertia`` (any order) and
+    body-frame angular momentum ``angular_momentum`` (module docstring).
+
+    P_psi: the mean precession period of the body about L; P_phi: the period of the body-frame
+    motion (rotation about the circulated axis); ``long_axis_mode``: True for LAM.  In the units of
+    time of the motion; batched, differentiable.  On the separatrix P_phi is infinite.
+    """
+    inertia = jnp.asarray(inertia)
+    momentum = jnp.asarray(angular_momentum)
+    order = jnp.argsort(inertia, axis=-1)
+    sorted_inertia = jnp.take_along_axis(inertia, order, -1)
+    sorted_momentum = jnp.take_along_axis(momentum, order, -1)
+    momentum_squared = jnp.sum(sorted_momentum**2, -1)
+    twice_energy = jnp.sum(sorted_momentum**2 / sorted_inertia, -1)
+    long_axis = momentum_squared < twice_energy * sorted_inertia[..., 1]
+    period_phi, mean_rate = _mode_quantities(sorted_inertia, momentum_squared, twice_energy, long_axis)
+    norm = jnp.sqrt(momentum_squared)
+    return 2 * jnp.pi / (norm * mean_rate), period_phi, long_axis
+
+
+def momentum_from_periods(sorted_inertia, period_psi, period_phi, long_axis, polhode_phase, iterations=60):
+    """Body-frame L (|L| = M) of the motion with moments ``sorted_inertia`` (I1 < I2 < I3), in the given
+    mode, whose periods are (period_psi, period_phi), at the point ``polhode_phase`` (radians, the
+    Jacobi argument u = 2 K phase / pi) of its body-frame orbit; and whether such a motion exists.
+
+    The ratio P_psi / P_phi depends on the energy alone (for given moments): bisection on
+    d = 2 E / M^2 over the mode's interval (SAM: 1/I3 < d < 1/I2; LAM: 1/I2 < d < 1/I1); then M from
+    P_psi, which scales as 1/M.  Starting points of the period search.
+    """
+    i1, i2, i3 = sorted_inertia[..., 0], sorted_inertia[..., 1], sorted_inertia[..., 2]
+    target = period_psi / period_phi
+    one = jnp.ones_like(i1)
+
+    def ratio(d):
+        p_phi, rate = _mode_quantities(sorted_inertia, one, d, long_axis)
+        return 2 * jnp.pi / rate / p_phi
+
+    margin = 1e-9
+    low = jnp.where(long_axis, 1 / i2, 1 / i3) * (1 + margin)
+    high = jnp.where(long_axis, 1 / i1, 1 / i2) * (1 - margin)
+    f_low = ratio(low) - target
+
+    def bisect(_, bounds):
+        lo, hi = bounds
+        mid = (lo + hi) / 2
+        same = jnp.sign(ratio(mid) - target) == jnp.sign(f_low)
+        return jnp.where(same, mid, lo), jnp.where(same, hi, mid)
+
+    low_end, high_end = jax.lax.fori_loop(0, iterations, bisect, (low, high))
+    d = (low_end + high_end) / 2
+    exists = (jnp.sign(ratio(high) - target) != jnp.sign(f_low)) & jnp.isfinite(d)
+    # The body-frame orbit (Landau's solution, M = 1) at u = 2 K phase / pi.
+    first = jnp.where(long_axis, i3, i1)
+    last = jnp.where(long_axis, i1, i3)
+    p = (last - i2) * (1 - d * first)
+    k2 = jnp.clip((i2 - first) * (d * last - 1) / p, 0.0, 1.0)
+    sn, cn, dn, _ = special.ellipj(2 * special.ellipk(k2) * polhode_phase / jnp.pi, k2)
+    omega_first = jnp.sqrt(jnp.maximum((d * last - 1) / (first * (last - first)), 0)) * cn
+    omega_middle = jnp.sqrt(jnp.maximum((d * last - 1) / (i2 * (last - i2)), 0)) * sn
+    omega_last = jnp.sqrt(jnp.maximum((1 - d * first) / (last * (last - first)), 0)) * dn
+    unit = jnp.stack([first * omega_first, i2 * omega_middle, last * omega_last], -1)
+    # LAM: 'first' is axis 3 and 'last' axis 1.
+    unit = jnp.where(long_axis[..., None], unit[..., ::-1], unit)
+    unit = unit / jnp.linalg.norm(unit, axis=-1, keepdims=True)
+    p_phi_unit, rate_unit = _mode_quantities(sorted_inertia, one, d, long_axis)
+    norm = (2 * jnp.pi / rate_unit) / period_psi
+    return unit * norm[..., None], exists

@@ -1,0 +1,245 @@
+"""Convex shapes as Gaussian images: facet normals and areas in the body's principal frame.
+
+For a convex body the disk-integrated brightness under any scattering law that depends only on the
+local angles (mu, mu0) is a sum over the facets that are both lit and seen, so the brightness depends
+on the shape only through its Gaussian image: the outward unit normals n_i and the areas A_i
+(Kaasalainen & Torppa 2001, Icarus 153, 24).  A Gaussian image closes, sum_i A_i n_i = 0, and by
+Minkowski's theorem determines the convex polyhedron up to a translation; :meth:`ConvexShape.polyhedron`
+builds it back (Little 1983; Lamberg 1993): the support heights h minimise
+
+    Phi(h) = sum_i A_i h_i - log V(h),
+
+a convex function (V^(1/3) is concave in h by the Brunn-Minkowski inequality), whose stationarity
+condition dV/dh_i = a_i(h) = A_i V says that the actual facet areas a_i(h) are proportional to the
+given ones.  V(h) and a_i(h) come from the half-space intersection {x : n_i . x <= h_i} (qhull, on
+the host); optimistix's BFGS does the minimisation in log h (the origin stays inside).
+"""
+
+from __future__ import annotations
+
+import functools
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import numpy as np
+import optimistix as optx
+from jaxtyping import Array, Float, Int
+
+__all__ = ["ConvexShape", "mesh_inertia", "icosphere"]
+
+
+def icosphere(subdivisions: int = 2) -> tuple[np.ndarray, np.ndarray]:
+    """A triangulated unit sphere: (vertices (V, 3), faces (F, 3) counter-clockwise seen from outside).
+
+    The icosahedron with each triangle split into four ``subdivisions`` times and the new vertices
+    pushed onto the sphere: F = 20 * 4**subdivisions facets of nearly equal size.
+    """
+    golden = (1 + 5**0.5) / 2
+    vertices = [(-1, golden, 0), (1, golden, 0), (-1, -golden, 0), (1, -golden, 0),
+                (0, -1, golden), (0, 1, golden), (0, -1, -golden), (0, 1, -golden),
+                (golden, 0, -1), (golden, 0, 1), (-golden, 0, -1), (-golden, 0, 1)]
+    faces = [(0, 11, 5), (0, 5, 1), (0, 1, 7), (0, 7, 10), (0, 10, 11), (1, 5, 9), (5, 11, 4),
+             (11, 10, 2), (10, 7, 6), (7, 1, 8), (3, 9, 4), (3, 4, 2), (3, 2, 6), (3, 6, 8),
+             (3, 8, 9), (4, 9, 5), (2, 4, 11), (6, 2, 10), (8, 6, 7), (9, 8, 1)]
+    vertices = [np.asarray(v, float) / np.linalg.norm(v) for v in vertices]
+    for _ in range(subdivisions):
+        midpoints: dict[tuple[int, int], int] = {}
+
+        def midpoint(i, j):
+            key = (min(i, j), max(i, j))
+            if key not in midpoints:
+                middle = vertices[i] + vertices[j]
+                vertices.append(middle / np.linalg.norm(middle))
+                midpoints[key] = len(vertices) - 1
+            return midpoints[key]
+
+        refined = []
+        for i, j, k in faces:
+            ij, jk, ki = midpoint(i, j), midpoint(j, k), midpoint(k, i)
+            refined += [(i, ij, ki), (j, jk, ij), (k, ki, jk), (ij, jk, ki)]
+        faces = refined
+    return np.asarray(vertices), np.asarray(faces, dtype=np.int32)
+
+
+def _facets(vertices, faces):
+    """(normals, areas) of the triangles of a closed convex mesh, normals turned outward."""
+    corners = vertices[..., faces, :]  # (..., F, 3, 3)
+    cross = jnp.cross(corners[..., 1, :] - corners[..., 0, :], corners[..., 2, :] - corners[..., 0, :])
+    twice_area = jnp.linalg.norm(cross, axis=-1)
+    normals = cross / jnp.where(twice_area > 0, twice_area, 1.0)[..., None]
+    # Faces may come in either orientation: a convex body's outward normal points away from its
+    # centroid (any interior point; the vertex mean is one).
+    outward = jnp.sum(normals * (jnp.mean(corners, -2) - jnp.mean(vertices, -2, keepdims=True)), -1)
+    normals = jnp.where(outward[..., None] < 0, -normals, normals)
+    return normals, twice_area / 2
+
+
+def mesh_inertia(vertices: Float[Array, "... V 3"], faces: Int[Array, "F 3"]) -> tuple[Array, Array, Array]:
+    """(volume, centre of mass (3,), inertia tensor (3, 3) about the centre of mass) of a closed mesh
+    at unit density.
+
+    Exact for the polyhedron: the sum over the tetrahedra (c, v0, v1, v2) from an interior point c,
+    each with volume det/6 and second moment integral int x x^T dV = V/20 (sum_i v_i v_i^T +
+    (sum_i v_i)(sum_i v_i)^T) (vertices relative to c, c itself among them at 0); I = tr(C) 1 - C.
+    Faces may be in either orientation (convex meshes: each is turned outward).
+    """
+    vertices = jnp.asarray(vertices)
+    faces = np.asarray(faces)
+    centre = jnp.mean(vertices, -2, keepdims=True)
+    corners = (vertices - centre)[..., faces, :]  # (..., F, 3, 3)
+    volumes = jnp.linalg.det(corners) / 6
+    # The orientation of each face: its tetrahedron's volume is positive for an outward face.
+    volumes = jnp.abs(volumes)
+    total = jnp.sum(volumes, -1)
+    corner_sum = jnp.sum(corners, -2)  # (..., F, 3)
+    centroid = jnp.sum(volumes[..., None] * corner_sum / 4, -2) / total[..., None]
+    second = (jnp.einsum("...fi,...fj->...fij", corner_sum, corner_sum)
+              + jnp.einsum("...fki,...fkj->...fij", corners, corners))
+    second_moment = jnp.sum(volumes[..., None, None] * second / 20, -3)
+    # About the centre of mass (parallel axis theorem on the second moment).
+    second_moment = second_moment - total[..., None, None] * jnp.einsum("...i,...j->...ij", centroid, centroid)
+    eye = jnp.eye(3, dtype=second_moment.dtype)
+    inertia = jnp.trace(second_moment, axis1=-2, axis2=-1)[..., None, None] * eye - second_moment
+    return total, centroid + centre[..., 0, :], inertia
+
+
+class ConvexShape(eqx.Module):
+    """A convex body as its Gaussian image: unit outward facet normals and facet areas.
+
+    ``ConvexShape(normals, areas)``: ``normals`` (..., F, 3) unit vectors in the body's principal
+    frame (the frame of :class:`frbjax.FreeRigidBody`: x_space = R(t) x_body), ``areas`` (..., F) >= 0.
+    Leading dimensions are a batch of shapes (sharing F).  Only (normals, areas) enter the brightness
+    (:func:`frbjax.lightcurve.brightness`); the polyhedron itself, for drawing or for its inertia, is
+    recovered by :meth:`polyhedron` (Minkowski's problem).
+    """
+
+    normals: Float[Array, "... F 3"]
+    areas: Float[Array, "... F"]
+
+    @classmethod
+    def from_mesh(cls, vertices: Float[Array, "... V 3"], faces: Int[Array, "F 3"]) -> "ConvexShape":
+        """The Gaussian image of a closed convex triangulated surface (``faces`` index ``vertices``;
+        either orientation): n = e1 x e2 / |e1 x e2|, A = |e1 x e2| / 2 per triangle.  Differentiable
+        in the vertices."""
+        normals, areas = _facets(jnp.asarray(vertices), np.asarray(faces))
+        return cls(normals, areas)
+
+    @classmethod
+    def ellipsoid(cls, a, b, c, subdivisions: int = 3) -> "ConvexShape":
+        """The triaxial ellipsoid x^2/a^2 + y^2/b^2 + z^2/c^2 = 1 (semi-axes along principal axes 1, 2,
+        3), triangulated: the icosphere of ``subdivisions`` (20 * 4**subdivisions facets) stretched by
+        (a, b, c).  Differentiable in a, b, c; a batch of ellipsoids from arrays a, b, c."""
+        unit_vertices, faces = icosphere(subdivisions)
+        axes = jnp.stack(jnp.broadcast_arrays(jnp.asarray(a), jnp.asarray(b), jnp.asarray(c)), -1)
+        vertices = unit_vertices * axes[..., None, :].astype(jnp.result_type(axes, float))
+        return cls.from_mesh(vertices, faces)
+
+    @property
+    def total_area(self) -> Array:
+        """Sum of the facet areas."""
+        return jnp.sum(self.areas, -1)
+
+    def closure(self) -> Array:
+        """sum_i A_i n_i / sum_i A_i: zero for the Gaussian image of a closed surface."""
+        return jnp.sum(self.areas[..., None] * self.normals, -2) / self.total_area[..., None]
+
+    def polyhedron(self, *, rtol: float = 1e-10, atol: float = 1e-10, max_steps: int = 2000):
+        """The convex polyhedron with this Gaussian image (Minkowski's problem): (vertices (V, 3), faces
+        (T, 3)), a triangulated surface centred on its centroid, numpy.
+
+        Solves min_h sum_i A_i h_i - log V(h) (module docstring) with optimistix's BFGS in log h, V(h)
+        and its gradient a(h) from qhull's half-space intersection, then scales the polytope so that
+        its total area is that of the image.  Facets whose area is negligible may be absent.  One
+        shape at a time (no batch dimension).
+        """
+        normals = np.asarray(self.normals, dtype=float)
+        areas = np.asarray(self.areas, dtype=float)
+        if normals.ndim != 2:
+            raise ValueError("polyhedron: one shape at a time (normals (F, 3))")
+        # A facet of (nearly) zero area would leave its height free to run off: a floor keeps it
+        # just touching the polytope.
+        weights = np.maximum(areas / areas.sum(), 1e-9)
+        weights = weights / weights.sum()
+        log_heights = _minkowski_heights(normals, weights, rtol, atol, max_steps)
+        vertices, faces, _, _ = _halfspace_polytope(normals, np.exp(log_heights))
+        current = _triangle_areas(vertices, faces).sum()
+        vertices = vertices * np.sqrt(areas.sum() / current)
+        _, centroid, _ = (np.asarray(x) for x in mesh_inertia(vertices, faces))
+        return vertices - centroid, faces
+
+    def inertia(self, density: float = 1.0):
+        """(volume, inertia tensor (3, 3) about the centroid) of the polyhedron of :meth:`polyhedron`
+        at uniform ``density``, in the frame of the normals: compare its diagonal (or eigenvalues)
+        with fitted moments (ratios)."""
+        vertices, faces = self.polyhedron()
+        volume, _, inertia = mesh_inertia(vertices, faces)
+        return np.asarray(volume), density * np.asarray(inertia)
+
+
+def _triangle_areas(vertices, faces):
+    corners = vertices[faces]
+    return np.linalg.norm(np.cross(corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0]), axis=-1) / 2
+
+
+def _halfspace_polytope(normals, heights):
+    """(vertices, faces, volume, facet areas a_i) of {x : n_i . x <= h_i}, h > 0 (origin inside)."""
+    from scipy.spatial import ConvexHull, HalfspaceIntersection
+
+    halfspaces = np.concatenate([normals, -heights[:, None]], axis=1)
+    points = HalfspaceIntersection(halfspaces, np.zeros(3)).intersections
+    hull = ConvexHull(points)
+    faces = hull.simplices
+    triangle_areas = _triangle_areas(points, faces)
+    # Each hull triangle lies in the plane of the half-space whose normal it shares.
+    owner = np.argmax(hull.equations[:, :3] @ normals.T, axis=1)
+    facet_areas = np.bincount(owner, weights=triangle_areas, minlength=len(normals))
+    # Orient the triangles outward (qhull's simplices are unordered).
+    corners = points[faces]
+    cross = np.cross(corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0])
+    flip = np.sum(cross * hull.equations[:, :3], -1) < 0
+    faces = np.where(flip[:, None], faces[:, ::-1], faces)
+    return points, faces, hull.volume, facet_areas
+
+
+def _volume_and_areas(log_heights, normals):
+    # Trial points of the line search may be far out: heights are kept finite.
+    heights = np.exp(np.clip(np.asarray(log_heights), -30.0, 30.0))
+    _, _, volume, areas = _halfspace_polytope(np.asarray(normals), heights)
+    return np.asarray(volume, log_heights.dtype), areas.astype(log_heights.dtype)
+
+
+def _host_volume(log_heights, normals):
+    shapes = (jax.ShapeDtypeStruct((), log_heights.dtype), jax.ShapeDtypeStruct(log_heights.shape, log_heights.dtype))
+    return jax.pure_callback(_volume_and_areas, shapes, log_heights, normals)
+
+
+@jax.custom_jvp
+def _log_volume(log_heights, normals):
+    volume, _ = _host_volume(log_heights, normals)
+    return jnp.log(volume)
+
+
+@_log_volume.defjvp
+def _log_volume_jvp(primals, tangents):
+    # dV/dh_i = a_i(h) (the facet areas): d log V / d log h_i = a_i h_i / V.
+    log_heights, normals = primals
+    volume, areas = _host_volume(log_heights, normals)
+    gradient = areas * jnp.exp(log_heights) / volume
+    return jnp.log(volume), jnp.dot(gradient, tangents[0])
+
+
+@functools.partial(jax.jit, static_argnames=("rtol", "atol", "max_steps"))
+def _minkowski_solve(normals, weights, rtol, atol, max_steps):
+    def objective(log_heights, args):
+        return jnp.dot(weights, jnp.exp(log_heights)) - _log_volume(log_heights, normals)
+
+    # At the minimum sum_i w_i h_i = sum_i a_i h_i / V = 3 (sum_i w_i = 1): start there, h_i = 3.
+    start = jnp.full(weights.shape, jnp.log(3.0), weights.dtype)
+    solution = optx.minimise(objective, optx.BFGS(rtol=rtol, atol=atol), start, max_steps=max_steps,
+                             throw=False)
+    return solution.value
+
+
+def _minkowski_heights(normals, weights, rtol, atol, max_steps):
+    return np.asarray(_minkowski_solve(jnp.asarray(normals), jnp.asarray(weights), rtol, atol, max_steps))

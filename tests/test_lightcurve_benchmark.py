@@ -1,0 +1,27 @@
+"""Smoke run of benchmarks/lightcurve.py (--quick): both parts measured, finite, written out.
+
+The quick sizes are those of tests/test_lightcurve_fit.py (its compiled solver is reused through
+JAX's persistent cache); what they can show must hold: RK4 reaches the flux tolerance on its ladder
+of steps, frbjax's flux agrees with it, and the synthetic tumbler's periods come back.
+"""
+
+from __future__ import annotations
+
+import json
+
+from _benchmark_runs import finite_positive, run_quick
+
+
+def test_lightcurve_benchmark_quick(tmp_path, request):
+    run_quick("lightcurve.py", tmp_path, request)
+    result = json.loads((tmp_path / "lightcurve.json").read_text())
+    assert (tmp_path / "lightcurve.png").stat().st_size > 0
+    forward = result["forward"]
+    for key in ("frbjax_samples_per_second", "rk4_samples_per_second", "speedup"):
+        assert finite_positive(forward[key]), key
+    assert forward["rk4_max_relative_flux_error"] < 1e-5
+    inversion = result["inversion"]
+    assert finite_positive(inversion["compiled_seconds"])
+    # The SAM case of tests/test_lightcurve_fit.py: P_psi to 3.3e-5, P_phi to 2.0e-3 (measured).
+    assert inversion["period_relative_error"][0] < 5e-5
+    assert inversion["period_relative_error"][1] < 2.5e-3
