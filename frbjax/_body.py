@@ -173,6 +173,10 @@ def _working_dtype(inertia, angular_momentum):
     return jnp.result_type(inertia, angular_momentum, float)
 
 
+# Principal components of L within this many ulp of |L| come from rounding the change of frame.
+_FRAME_ROUNDING = 64
+
+
 def _matrix_product(first, second):
     """first @ second for (..., 3, 3) arrays, as elementwise products and additions (no dot)."""
     return sum_last(first[..., :, None, :] * jnp.swapaxes(second, -1, -2)[..., None, :, :])
@@ -221,6 +225,12 @@ def _prepare(inertia, angular_momentum, attitude, axes=None):
         permutation, sorted_inertia, momentum_working = working_frame(inertia, angular_momentum)
     else:
         principal_momentum = _apply(jnp.swapaxes(axes, -1, -2), angular_momentum)
+        # Components left by rounding the change of frame (a tensor's L along a principal axis, or in
+        # the plane of two equal moments, gets ~1e-17 across it) are zeros: the body is then exactly
+        # a uniform rotation, as given, not a nutation of rounding size whose derivatives cancel.
+        size = jnp.sqrt(sum_last(principal_momentum * principal_momentum))[..., None]
+        rounding = _FRAME_ROUNDING * jnp.finfo(principal_momentum.dtype).eps * size
+        principal_momentum = jnp.where(jnp.abs(principal_momentum) <= rounding, 0, principal_momentum)
         permutation, sorted_inertia, momentum_working = working_frame(inertia, principal_momentum)
         permutation = _matrix_product(axes, permutation)
     norm_squared = sum_last(momentum_working**2)

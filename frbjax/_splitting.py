@@ -45,6 +45,7 @@ from jaxtyping import Array, Float
 
 from . import _quaternion as quaternion
 from ._free_flow import free_flow
+from ._inertia import InertiaTensor
 from ._kernel import one_kernel
 
 __all__ = ["METHODS", "RigidBodySplitting", "RigidBodyTerm", "splitting_trajectory"]
@@ -190,12 +191,13 @@ class RigidBodyTerm(diffrax.AbstractTerm):
     The functions are written for one body; the term maps them over the leading dimensions of the
     state with ``args`` shared (per-body parameters: ``jax.vmap`` the whole solve).  ``inertia``
     (..., 3) are the principal moments (> 0, finite), broadcasting with the state's leading
-    dimensions; ``y = (L, q)`` with L (..., 3) in the body frame and q (..., 4) must carry the full
+    dimensions, or an `InertiaTensor` (``RigidBodyTerm.from_inertia_tensor``: the state and the torques
+    are then those of the tensor's body frame); ``y = (L, q)`` with L (..., 3) in the body frame and q (..., 4) must carry the full
     batch shape.  Everything that uses the moments goes through :meth:`angular_velocity` and the
     free flow.
     """
 
-    inertia: Float[Array, "... 3"]
+    inertia: Float[Array, "... 3"] | InertiaTensor
     potential: _Function | None
     torque: _Function | None
     momentum_torque: _Function | None
@@ -213,14 +215,15 @@ class RigidBodyTerm(diffrax.AbstractTerm):
                                ("momentum_torque", momentum_torque)):
             if function is not None and not callable(function):
                 raise ValueError(f"{name} must be a function {signatures[name]}")
-        inertia = jnp.asarray(inertia)
-        if inertia.ndim == 0 or inertia.shape[-1] != 3:
-            raise ValueError(f"inertia must have shape (..., 3), got shape {tuple(inertia.shape)}")
-        if not jnp.issubdtype(inertia.dtype, jnp.floating):
-            inertia = inertia.astype(float)
-        value = _concrete(inertia)
-        if value is not None and not (np.all(np.isfinite(value)) and np.all(np.asarray(value) > 0)):
-            raise ValueError("inertia: the principal moments of inertia must be finite and > 0")
+        if not isinstance(inertia, InertiaTensor):
+            inertia = jnp.asarray(inertia)
+            if inertia.ndim == 0 or inertia.shape[-1] != 3:
+                raise ValueError(f"inertia must have shape (..., 3), got shape {tuple(inertia.shape)}")
+            if not jnp.issubdtype(inertia.dtype, jnp.floating):
+                inertia = inertia.astype(float)
+            value = _concrete(inertia)
+            if value is not None and not (np.all(np.isfinite(value)) and np.all(np.asarray(value) > 0)):
+                raise ValueError("inertia: the principal moments of inertia must be finite and > 0")
         if linear_in_momentum is None:
             linear_in_momentum = bool(getattr(momentum_torque, "linear_in_momentum", False))
         self.inertia = inertia
@@ -231,8 +234,16 @@ class RigidBodyTerm(diffrax.AbstractTerm):
 
     # --------------------------------------------------------------------------- the moments
 
+    @classmethod
+    def from_inertia_tensor(cls, inertia_tensor, **functions) -> RigidBodyTerm:
+        """The term of a body with inertia tensor ``inertia_tensor`` (..., 3, 3) in its body frame:
+        ``RigidBodyTerm(InertiaTensor(inertia_tensor), **functions)``; L, q, torques in that frame."""
+        return cls(InertiaTensor(inertia_tensor), **functions)
+
     def angular_velocity(self, momentum) -> Float[Array, "... 3"]:
-        """Omega = L / I, the body angular velocity of a body angular momentum L (..., 3)."""
+        """Omega = I^-1 L, the body angular velocity of a body angular momentum L (..., 3)."""
+        if isinstance(self.inertia, InertiaTensor):
+            return self.inertia.angular_velocity(momentum)
         return momentum / self.inertia
 
     def free_motion(self, momentum, attitude, time):
@@ -531,8 +542,9 @@ def _checked_state(y0, term):
     concrete = _concrete(attitude)
     if concrete is not None and not np.all(np.any(np.asarray(concrete) != 0, axis=-1)):
         raise ValueError("y0[1] (attitude) must be a non-zero quaternion")
-    dtype = jnp.result_type(momentum, attitude, term.inertia, float)
-    batch = jnp.broadcast_shapes(momentum.shape[:-1], attitude.shape[:-1], term.inertia.shape[:-1])
+    moments = term.inertia.principal_moments if isinstance(term.inertia, InertiaTensor) else term.inertia
+    dtype = jnp.result_type(momentum, attitude, moments, float)
+    batch = jnp.broadcast_shapes(momentum.shape[:-1], attitude.shape[:-1], moments.shape[:-1])
     attitude = attitude / jnp.linalg.norm(attitude, axis=-1, keepdims=True)
     return (jnp.broadcast_to(momentum, batch + (3,)).astype(dtype),
             jnp.broadcast_to(attitude, batch + (4,)).astype(dtype))

@@ -16,8 +16,9 @@ exact (a matrix exponential; :class:`~frbjax.RigidBodySplitting`).  The torques 
 potential (uniform gravity, gravity gradient) also give it, ``.potential(t, q, args)``, for
 ``RigidBodyTerm(potential=...)``: the kick is then a plain L += s tau and the splitting symplectic.
 
-Torques that need the angular velocity Omega = L / I, or the inertia itself, take the principal
-moments ``inertia`` (3,) of the body they act on, the same as the term's.  Matrices (damping,
+Torques that need the angular velocity Omega = I^-1 L, or the inertia itself, take the inertia of
+the body they act on, the same as the term's: principal moments (3,) or an ``InertiaTensor`` of one
+body (3, 3) in its body frame.  Matrices (damping,
 magnetic tensor, gains) are given as a scalar (times the identity), three diagonal entries or a 3 x
 3 matrix, all in the body frame.  Vectors fixed in space (a field, an orbit position) are given as a
 (3,) array or as a function of time ``t -> (3,)``.
@@ -33,6 +34,7 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, Float
 
+from ._inertia import InertiaTensor
 from ._quaternion import as_matrix, conjugate, multiply
 
 __all__ = [
@@ -62,13 +64,20 @@ def _is_concrete(value) -> bool:
 
 
 def _moments(inertia):
+    """(J, J^-1) as (3, 3) matrices of one body: from principal moments (3,) or an InertiaTensor."""
+    if isinstance(inertia, InertiaTensor):
+        if inertia.matrix.shape != (3, 3):
+            raise ValueError(f"inertia must be the inertia tensor of one body, shape (3, 3), got shape "
+                             f"{tuple(inertia.matrix.shape)}")
+        axes, moments = inertia.principal_axes, inertia.principal_moments
+        return inertia.matrix, (axes / moments) @ axes.T
     inertia = _float_array(inertia)
     if inertia.shape != (3,):
-        raise ValueError(f"inertia must be the three principal moments, shape (3,), got shape "
-                         f"{tuple(inertia.shape)}")
+        raise ValueError(f"inertia must be the three principal moments, shape (3,), or an InertiaTensor, "
+                         f"got shape {tuple(inertia.shape)}")
     if _is_concrete(inertia) and not (np.all(np.isfinite(inertia)) and np.all(np.asarray(inertia) > 0)):
         raise ValueError("inertia: the principal moments of inertia must be finite and > 0")
-    return inertia
+    return jnp.diag(inertia), jnp.diag(1 / inertia)
 
 
 def _vector(value, name):
@@ -252,7 +261,8 @@ class GravityGradient(AbstractTorque):
     r"""The gravity-gradient torque of a point mass (gravitational parameter ``mu``) at the origin.
 
     With the body's centre of mass at ``position(t)`` r (space frame) and n = R(q)^T r / |r| the unit
-    vector to it from the attracting body, in the body frame, J = diag(inertia):
+    vector to it from the attracting body, in the body frame, J the inertia tensor (diag(inertia)
+    for principal moments):
 
         tau = (3 mu / |r|^3) n x (J n),        V(q) = (3 mu / (2 |r|^3)) n . J n
 
@@ -264,7 +274,8 @@ class GravityGradient(AbstractTorque):
     Wiley (1986), section 8.1.
     """
 
-    inertia: Float[Array, "3"]
+    inertia: Float[Array, "3 3"]
+    inverse_inertia: Float[Array, "3 3"]
     position: Callable
     mu: Float[Array, ""]
 
@@ -274,7 +285,7 @@ class GravityGradient(AbstractTorque):
                 raise ValueError("GravityGradient needs mu (the gravitational parameter) unless the position "
                                  "is a CircularOrbit")
             mu = position.rate**2 * position.radius**3
-        self.inertia = _moments(inertia)
+        self.inertia, self.inverse_inertia = _moments(inertia)
         self.position = _function_of_time(position, "position")
         self.mu = jnp.asarray(mu, dtype=float)
 
@@ -285,12 +296,12 @@ class GravityGradient(AbstractTorque):
 
     def __call__(self, t, q, L, args):
         direction, strength = self._direction_and_strength(t, q)
-        return strength * jnp.cross(direction, self.inertia * direction)
+        return strength * jnp.cross(direction, self.inertia @ direction)
 
     def potential(self, t, q, args):
         """V(t, q) = (3 mu / (2 |r|^3)) n . J n."""
         direction, strength = self._direction_and_strength(t, q)
-        return 0.5 * strength * (direction @ (self.inertia * direction))
+        return 0.5 * strength * (direction @ (self.inertia @ direction))
 
 
 class LinearDamping(AbstractTorque):
@@ -305,15 +316,16 @@ class LinearDamping(AbstractTorque):
     1.5 (Rayleigh's dissipation function).
     """
 
-    inertia: Float[Array, "3"]
+    inertia: Float[Array, "3 3"]
+    inverse_inertia: Float[Array, "3 3"]
     damping: Float[Array, "3 3"]
 
     def __init__(self, inertia, damping):
-        self.inertia = _moments(inertia)
+        self.inertia, self.inverse_inertia = _moments(inertia)
         self.damping = _positive_semidefinite(damping, "damping")
 
     def __call__(self, t, q, L, args):
-        return -self.damping @ (L / self.inertia)
+        return -self.damping @ (self.inverse_inertia @ L)
 
 
 class EddyCurrent(AbstractTorque):
@@ -332,18 +344,19 @@ class EddyCurrent(AbstractTorque):
     34-53 (the magnetic tensor and this torque).
     """
 
-    inertia: Float[Array, "3"]
+    inertia: Float[Array, "3 3"]
+    inverse_inertia: Float[Array, "3 3"]
     tensor: Float[Array, "3 3"]
     field: Callable
 
     def __init__(self, inertia, tensor, field):
-        self.inertia = _moments(inertia)
+        self.inertia, self.inverse_inertia = _moments(inertia)
         self.tensor = _positive_semidefinite(tensor, "tensor (the magnetic tensor)")
         self.field = _function_of_time(field, "field")
 
     def __call__(self, t, q, L, args):
         field = _body(q, self.field(t))
-        return jnp.cross(self.tensor @ jnp.cross(L / self.inertia, field), field)
+        return jnp.cross(self.tensor @ jnp.cross(self.inverse_inertia @ L, field), field)
 
 
 class PDController(AbstractTorque):
@@ -362,7 +375,8 @@ class PDController(AbstractTorque):
     Vehicle Dynamics and Control*, 2nd ed., AIAA (2008), section 7.3.
     """
 
-    inertia: Float[Array, "3"]
+    inertia: Float[Array, "3 3"]
+    inverse_inertia: Float[Array, "3 3"]
     proportional: Float[Array, "3 3"]
     derivative: Float[Array, "3 3"]
     target: Float[Array, "4"]
@@ -370,7 +384,7 @@ class PDController(AbstractTorque):
 
     def __init__(self, inertia, proportional, derivative, *, target=(1.0, 0.0, 0.0, 0.0),
                  target_rate=(0.0, 0.0, 0.0)):
-        self.inertia = _moments(inertia)
+        self.inertia, self.inverse_inertia = _moments(inertia)
         self.proportional = _positive_semidefinite(proportional, "proportional (the gain K_p)")
         self.derivative = _positive_semidefinite(derivative, "derivative (the gain K_d)")
         target = jnp.asarray(target, dtype=float)
@@ -385,7 +399,7 @@ class PDController(AbstractTorque):
         error = multiply(conjugate(self.target), q)
         # The sign is piecewise constant: no derivative flows through it.
         side = jnp.where(error[0] >= 0, 1.0, -1.0)
-        rate_error = L / self.inertia - self.target_rate
+        rate_error = self.inverse_inertia @ L - self.target_rate
         return -side * (self.proportional @ error[1:]) - self.derivative @ rate_error
 
 
@@ -403,12 +417,13 @@ class BDot(AbstractTorque):
     *Fundamentals of Spacecraft Attitude Determination and Control*, Springer (2014), section 7.5.
     """
 
-    inertia: Float[Array, "3"]
+    inertia: Float[Array, "3 3"]
+    inverse_inertia: Float[Array, "3 3"]
     gain: Float[Array, ""]
     field: Callable
 
     def __init__(self, inertia, gain, field):
-        self.inertia = _moments(inertia)
+        self.inertia, self.inverse_inertia = _moments(inertia)
         gain = jnp.asarray(gain, dtype=float)
         if gain.shape != ():
             raise ValueError(f"gain must be a scalar, got shape {tuple(gain.shape)}")
@@ -422,5 +437,5 @@ class BDot(AbstractTorque):
         space_field, space_rate = jax.jvp(self.field, (t,), (jnp.ones_like(t),))
         matrix_transposed = as_matrix(q).T
         field = matrix_transposed @ space_field
-        seen_rate = matrix_transposed @ space_rate - jnp.cross(L / self.inertia, field)
+        seen_rate = matrix_transposed @ space_rate - jnp.cross(self.inverse_inertia @ L, field)
         return jnp.cross(-self.gain * seen_rate, field)
