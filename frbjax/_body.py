@@ -462,7 +462,7 @@ class FreeRigidBody(eqx.Module):
     permutation: Float[Array, "... 3 3"]
     regime: Int[Array, "..."]
     principal_axes: Float[Array, "... 3 3"] | None
-    inertia_tensor: InertiaTensor | None
+    inertia_tensor: Float[Array, "... 3 3"] | None
     _constants: dict
     _attitude_map: Float[Array, "... 4 4"]
 
@@ -486,7 +486,9 @@ class FreeRigidBody(eqx.Module):
         axes = None if tensor is None else tensor.principal_axes
         for name, value in _construct(inertia, angular_momentum, attitude, axes).items():
             setattr(self, name, value)
-        self.inertia_tensor = tensor
+        # The matrix alone (one array: each array argument costs a dispatch): the rule of the
+        # derivatives needs its tangent, the moments and axes are the fields above.
+        self.inertia_tensor = None if tensor is None else tensor.matrix
 
     @classmethod
     def from_inertia_tensor(cls, inertia_tensor, angular_momentum, attitude=None) -> FreeRigidBody:
@@ -496,7 +498,7 @@ class FreeRigidBody(eqx.Module):
         ``angular_momentum`` $L$ (..., 3) and ``attitude`` $q$ (..., 4) (body to space) are those of the
         tensor's body frame, and so are every method's outputs ($\Omega = T^{-1} L$).  ``inertia`` is
         then the principal moments (ascending), ``principal_axes`` their directions (columns, body
-        coordinates) and ``inertia_tensor`` the `InertiaTensor`.  Evaluating costs what a body built
+        coordinates) and ``inertia_tensor`` the (symmetrised) tensor.  Evaluating costs what a body built
         from principal moments costs: the change of frame is folded into the per-body data.
         Derivatives with respect to every tensor entry are finite and correct, repeated moments
         included (`InertiaTensor`; docs/theory.md §12).
@@ -547,7 +549,7 @@ class FreeRigidBody(eqx.Module):
         # the tangent), and cutting them keeps forward mode from computing them.
         prepared = jax.lax.stop_gradient(_body_of(dict(
             (name, getattr(self, name)) for name in _FIELDS if name != "inertia_tensor")))
-        return through_principal_frame(motion, evaluate, self.inertia_tensor.matrix, prepared,
+        return through_principal_frame(motion, evaluate, self.inertia_tensor, prepared,
                                        (self.initial_angular_momentum, self.initial_attitude, t))
 
     def _angular_momentum(self, t):
