@@ -231,6 +231,8 @@ def main():
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--quick", action="store_true", help="tiny sizes (a smoke run)")
     parser.add_argument("--no-orekit", action="store_true")
+    parser.add_argument("--cost-only", action="store_true",
+                        help="measure the cost row again and keep the other rows of the existing JSON")
     parser.add_argument("--output-dir", type=Path, default=HERE / "results")
     args = parser.parse_args()
     if args.quick:
@@ -244,6 +246,13 @@ def main():
         quick=args.quick,
     )
     start = time.perf_counter()
+    if args.cost_only:
+        path = args.output_dir / "inertia_tensor.json"
+        result = json.loads(path.read_text())
+        result["cost"] = cost_row(sizes["bodies"], sizes["times"], sizes["repeats"], sizes["calls"])
+        print("cost", json.dumps(result["cost"], indent=1), flush=True)
+        path.write_text(json.dumps(result, indent=2) + "\n")
+        return
     result["cost"] = cost_row(sizes["bodies"], sizes["times"], sizes["repeats"], sizes["calls"])
     print("cost", json.dumps(result["cost"], indent=1), flush=True)
     result["accuracy"] = accuracy_row(sizes["sweep"], sizes["sweep_times"])
