@@ -33,3 +33,20 @@ def held(lock_path):
             yield
         finally:
             fcntl.flock(handle, fcntl.LOCK_UN)
+
+
+def first_call_locked(lock_path, function):
+    """``function`` whose first call in this process holds the lock (the compilation); later calls
+    run as they are (the program is compiled, or loaded from the persistent cache)."""
+    compiled = False
+
+    def call(*args, **kwargs):
+        nonlocal compiled
+        if compiled:
+            return function(*args, **kwargs)
+        with held(lock_path):
+            result = function(*args, **kwargs)
+        compiled = True
+        return result
+
+    return call

@@ -83,26 +83,26 @@ def errors(fit, inertia, omega):
 
 # ----------------------------------------------------------------------------------- one compilation
 
-_compiled_here = False
-
 
 @pytest.fixture(scope="session")
 def _lock_path(tmp_path_factory):
     return _compile_lock.path(tmp_path_factory)
 
 
+_fit_once = None
+
+
 @pytest.fixture
 def fit(_lock_path):
+    """fit_attitude at the module's sizes; the first call compiles under the lock."""
+    global _fit_once
+    if _fit_once is None:
+        _fit_once = _compile_lock.first_call_locked(_lock_path, fit_attitude)
+
     def run(times, q, **options):
-        global _compiled_here
         assert len(times) == CI_SAMPLES  # one compiled program for the module
         options.setdefault("n_starts", N_STARTS)
-        if _compiled_here:
-            return fit_attitude(times, q, **options)
-        with _compile_lock.held(_lock_path):
-            result = fit_attitude(times, q, **options)
-        _compiled_here = True
-        return result
+        return _fit_once(times, q, **options)
 
     return run
 

@@ -87,27 +87,26 @@ def tilted_problem(seed, n=CI_SAMPLES, noise=NOISE, periods=5.0, tilt_degrees=20
     return times, q, observed_rates, tensor, omega, attitude
 
 
-_compiled_here = False
-
-
 @pytest.fixture(scope="session")
 def _lock_path(tmp_path_factory):
     return _compile_lock.path(tmp_path_factory)
 
 
+_fit_once = None
+
+
 @pytest.fixture
 def fit(_lock_path):
+    """fit_attitude(inertia="tensor") at the module's sizes; the first call compiles under the lock."""
+    global _fit_once
+    if _fit_once is None:
+        _fit_once = _compile_lock.first_call_locked(_lock_path, fit_attitude)
+
     def run(times, q, **options):
-        global _compiled_here
         assert len(times) == CI_SAMPLES
         options.setdefault("n_starts", N_STARTS)
         options.setdefault("attitude_sigma", NOISE)
-        if _compiled_here:
-            return fit_attitude(times, q, inertia="tensor", **options)
-        with _compile_lock.held(_lock_path):
-            result = fit_attitude(times, q, inertia="tensor", **options)
-        _compiled_here = True
-        return result
+        return _fit_once(times, q, inertia="tensor", **options)
 
     return run
 
