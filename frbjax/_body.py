@@ -17,6 +17,7 @@ from ._fusion import materialise, sum_last, when_any
 from ._inertia import InertiaTensor, through_principal_frame
 from ._regimes import UNIFORM, classify, constants, evaluate, evaluate_once, orbit_constants
 from ._regimes import reference as regime_reference
+from ._uniform import uniform_momentum, uniform_spin
 
 
 def working_frame(inertia, momentum):
@@ -228,9 +229,13 @@ def _prepare(inertia, angular_momentum, attitude, axes=None):
         # Components left by rounding the change of frame (a tensor's L along a principal axis, or in
         # the plane of two equal moments, gets ~1e-17 across it) are zeros: the body is then exactly
         # a uniform rotation, as given, not a nutation of rounding size whose derivatives cancel.
+        # Zeros in value only: x - x keeps the component's tangent (the tilt of the axes moves L off
+        # a principal plane or axis at first order).
         size = jnp.sqrt(sum_last(principal_momentum * principal_momentum))[..., None]
         rounding = _FRAME_ROUNDING * jnp.finfo(principal_momentum.dtype).eps * size
-        principal_momentum = jnp.where(jnp.abs(principal_momentum) <= rounding, 0, principal_momentum)
+        principal_momentum = jnp.where(jnp.abs(principal_momentum) <= rounding,
+                                       principal_momentum - jax.lax.stop_gradient(principal_momentum),
+                                       principal_momentum)
         permutation, sorted_inertia, momentum_working = working_frame(inertia, principal_momentum)
         permutation = _matrix_product(axes, permutation)
     norm_squared = sum_last(momentum_working**2)
@@ -289,67 +294,26 @@ def _angular_velocity(inertia, axes, momentum):
     return _apply(axes, _apply(jnp.swapaxes(axes, -1, -2), momentum) / inertia)
 
 
-def _sphere_drift(inertia, axes, momentum):
-    """dL/dt of a sphere to first order in the change of its moments: exactly 0, with that derivative.
-
-    A sphere rotates uniformly, but moments changed by dI make dL/dt = L x Omega = -L x (dI L) / I^2,
-    constant to first order (the variational equation of a sphere has a constant forcing), so that
-    L(t) = L0 + t L0 x (Omega0 - L0 / I_1) is exact to first order: the bracket is an exact zero for
-    equal moments (the same division twice) whose derivative is -dI L0 / I^2 up to a multiple of L0.
-    Computed in the principal frame (where the divisions agree bit for bit) and zero for every body
-    that is not a sphere (whose uniform rotations keep the derivatives of the rigid spin).
-    """
-    principal = momentum if axes is None else _apply(jnp.swapaxes(axes, -1, -2), momentum)
-    rate = jnp.cross(principal, principal / inertia - principal / inertia[..., :1])
-    sphere = (inertia[..., 0] == inertia[..., 1]) & (inertia[..., 1] == inertia[..., 2])
-    rate = jnp.where(sphere[..., None], rate, 0)
-    return rate if axes is None else _apply(axes, rate)
-
-
 def _uniform_momentum(uniform, inertia, axes, momentum, t):
-    """L0 (+ t dL/dt of ``_sphere_drift``, exactly 0, where a batch has a sphere)."""
+    """L0 where the body rotates uniformly, with the derivatives of the motion (``_uniform``)."""
     shape = jnp.broadcast_shapes(uniform.shape, jnp.shape(t)) + (3,)
 
-    def with_sphere(momentum):
-        drift = _sphere_drift(inertia, axes, momentum)
-        return jnp.broadcast_to(momentum + jnp.asarray(t)[..., None] * drift, shape)
+    def with_uniform(momentum):
+        return uniform_momentum(inertia, momentum, t, axes)
 
-    spheres = uniform & (inertia[..., 0] == inertia[..., 2]) & (inertia[..., 1] == inertia[..., 2])
-    return when_any(spheres, with_sphere, lambda momentum: jnp.broadcast_to(momentum, shape), momentum)
-
-
-def _sphere_turn(omega, drift_rate, t):
-    """phi(t) = int_0^t exp(-hat(Omega0) (t - s)) (s b) ds, b = (dL/dt) / I, of a sphere's drift.
-
-    The attitude of a sphere whose angular velocity grows as Omega0 + s b (b perpendicular to
-    Omega0) is q0 ⊗ exp(t Omega0 / 2) ⊗ exp(phi / 2) to first order, with phi = C1 b - C2 Omega0 x b,
-    C1 = (1 - cos x) / w^2 = t^2 (2 sin^2(x/2) / x^2), C2 = (x - sin x) / w^3 = t^3 (x - sin x) / x^3,
-    w = |Omega0|, x = w t; their series below x^2 = 0.01 (C2's form cancels there).  Exactly 0 with b.
-    """
-    x2 = sum_last(omega * omega) * t**2
-    small = x2 < 0.01
-    x = jnp.sqrt(jnp.where(small, 1, x2))
-    half_sinc = jnp.where(small, 1 - x2 / 24 + x2**2 / 1920, jnp.sin(x / 2) / (x / 2))
-    first = 0.5 * t**2 * half_sinc**2
-    third = jnp.where(small, 1 / 6 - x2 / 120 + x2**2 / 5040 - x2**3 / 362880,
-                      (x - jnp.sin(x)) / jnp.where(small, 1, x2 * x))
-    second = t**3 * third
-    return first[..., None] * drift_rate - second[..., None] * jnp.cross(omega, drift_rate)
+    # Most batches have no uniformly rotating body: then its derivative rule is not traced at all.
+    return when_any(uniform, with_uniform, lambda momentum: jnp.broadcast_to(momentum, shape), momentum)
 
 
 def _uniform_attitude(uniform, inertia, axes, momentum, attitude, t, moving):
-    """``moving`` where the body does not rotate uniformly, q0 ⊗ exp(t Omega0 / 2) where it does
-    (⊗ exp(phi / 2) of ``_sphere_turn``, exactly 1, for its first-order derivatives)."""
+    """``moving`` where the body does not rotate uniformly, q0 ⊗ exp(t Omega0 / 2) where it does,
+    with the derivatives of the motion (``_uniform``)."""
 
     def with_uniform(moving):
-        omega = _angular_velocity(inertia, axes, momentum)
         time = jnp.broadcast_to(t, uniform.shape)
-        spin = quaternion.exp_pure(omega * time[..., None])
-        turn = _sphere_turn(omega, _sphere_drift(inertia, axes, momentum) / inertia[..., :1], time)
-        spin = quaternion.multiply(spin, quaternion.exp_pure(turn))
+        spin = uniform_spin(inertia, momentum, time, axes)
         return jnp.where(uniform[..., None], quaternion.multiply(attitude, spin), moving)
 
-    # Most batches have no uniformly rotating body: then its trigonometry is not evaluated at all.
     return when_any(uniform, with_uniform, lambda moving: moving, moving)
 
 
@@ -442,15 +406,19 @@ class FreeRigidBody(eqx.Module):
     changes formula, the derivatives are those of the formula taken, i.e. one-sided along it:
 
     - uniform rotation $q_0 \otimes \exp(\Omega t / 2)$ wherever $\Omega$ is parallel to $L$ ($L = 0$,
-      $L$ along a principal axis or in the plane of two equal moments): derivatives that keep
-      $\Omega$ parallel to $L$ (in $t$, in $q_0$, in $L$ along the axis, in moments that stay equal) are
-      exact, and at $L = 0$ all of them are (the motion is $q_0 \otimes \exp(t L / 2I) + O(|L|^2)$);
-      those that leave it (a transverse component of $L$, which starts a nutation) are those of the
-      rigid spin: finite, not the limit of the nutating motion's.  A sphere is the exception: its
-      derivatives in every direction, unequal changes of the moments included, are those of the
-      motion (docs/theory.md §12);
+      $L$ along a principal axis or in the plane of two equal moments, a sphere): the first derivatives
+      in every direction are those of the motion, including those that start a nutation (a transverse
+      component of $L$, unequal changes of the moments, a tilt of an inertia tensor's axes): the
+      uniform formula's derivative rule is the closed-form solution of the variational equations
+      (docs/theory.md §6).  Second derivatives there are those of that first-order rule;
     - the separatrix ($2 E I_2 = |L|^2$ exactly, rounding included): derivatives that keep the body on
-      it are exact, the others miss the (finite) change of the elliptic parameter.
+      it are exact, the others miss the (finite) change of the elliptic parameter;
+    - a known loss of digits: an exactly symmetric body ($I_1 = I_2$ or $I_2 = I_3$) whose unit $L$ is
+      within $\epsilon$ of the plane of its equal moments but not in it.  Its derivative with respect to
+      an unequal change of the equal moments (which makes the elliptic parameter $m \propto
+      \delta I / \epsilon^2$) is the difference of terms $1/\epsilon^2$ larger: wrong by about
+      $10^{-16} / \epsilon^2$ relative ($10^{-4}$ at $\epsilon = 10^{-6}$, O(1) at $10^{-8}$).  The other
+      derivatives there are exact, and so is every derivative in the plane ($\epsilon = 0$).
 
     tests/test_gradients_body.py checks all of them against 32-digit references.
     """

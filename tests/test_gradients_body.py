@@ -18,19 +18,14 @@ Error measure per point and input coordinate j (the accuracy target is 1e-9; TOL
 
 CONVENTION at the branch points (documented here and checked: finite everywhere).  frbjax evaluates
 uniform rotation q0 ⊗ exp(Omega t / 2) whenever Omega is parallel to L (L = 0, L along a principal
-axis, a sphere) and the separatrix formulas when d I2 = 1 exactly.  The derivatives there are those of
-the formula taken, i.e. one-sided ones along the branch:
+axis, in the plane of two equal moments, a sphere) and the separatrix formulas when d I2 = 1 exactly.
 
-* L = 0: exact (the motion is q0 ⊗ exp(t L/(2I)) + O(|L|^2)), checked with the smooth points;
-* L along a principal axis: the derivatives along the branch (with respect to t, q0, the component of
-  L along the axis) are exact; those that leave it (a transverse component of L, which starts the
-  nutation) are those of the rigid spin, not of the motion (finite, wrong by O(1));
-* a sphere: every derivative is exact, unequal changes of the moments included (the uniform formula
-  carries the sphere's first-order drift, an exact zero in value: docs/theory.md §12), so the sphere
-  is checked in every column;
+* uniform rotation: every first derivative is exact, those that start a nutation (a transverse
+  component of L, unequal changes of the moments) included: the derivative rule of the uniform formula
+  solves the variational equations in closed form (frbjax._uniform, docs/theory.md §6), so these
+  points are checked in every column;
 * on the separatrix: derivatives that keep d I2 = 1 are exact, the others miss the (finite) change of
-  the elliptic parameter.
-The t and q0 columns keep the branch at every branch point and are checked there at TOL.
+  the elliptic parameter; the t and q0 columns keep the branch and are checked there at TOL.
 
 Second derivatives: d^2 y/dt^2 (forward over forward) at every point against the equations of motion
 applied to the 32-digit values; the Hessian of (L(t), q(t)) in (I, L, t) at three points against
@@ -80,7 +75,9 @@ TOL_HESSIAN = {"major": 1e-11, "minor unsorted": 1e-11, "separatrix -1e-03": 2e-
 DATA = pathlib.Path(__file__).resolve().parent / "data" / "gradient_references.json"
 INPUTS = ["I1", "I2", "I3", "L1", "L2", "L3", "qw", "qx", "qy", "qz", "t"]
 BRANCH_COLUMNS = slice(6, 11)  # q0 and t: exact at the branch points too (CONVENTION)
-EXACT_BRANCH_POINTS = ("sphere",)  # branch points whose derivatives are exact in every column
+# Branch points whose derivatives are exact in every column: all but the separatrix (CONVENTION).
+EXACT_BRANCH_POINTS = ("sphere", "spin axis 1", "spin axis 2", "spin axis 3", "spin axis 2 unsorted",
+                       "I1=I2 spin axis 3", "I1=I2 spin in plane")
 
 # Compiler options on CPU (module docstring); other backends compile with their defaults.
 FORWARD_OPTIONS = {"xla_cpu_use_fusion_emitters": False}
