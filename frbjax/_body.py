@@ -301,7 +301,7 @@ def _uniform_momentum(uniform, inertia, axes, momentum, t):
     def with_uniform(momentum):
         return uniform_momentum(inertia, momentum, t, axes)
 
-    # Most batches have no uniformly rotating body: then its derivative rule is not traced at all.
+    # Most batches have no uniformly rotating body: then its derivative rule is not evaluated at all.
     return when_any(uniform, with_uniform, lambda momentum: jnp.broadcast_to(momentum, shape), momentum)
 
 
