@@ -410,7 +410,9 @@ class FreeRigidBody(eqx.Module):
       in every direction are those of the motion, including those that start a nutation (a transverse
       component of $L$, unequal changes of the moments, a tilt of an inertia tensor's axes): the
       uniform formula's derivative rule is the closed-form solution of the variational equations
-      (docs/theory.md §6).  Second derivatives there are those of that first-order rule;
+      (docs/theory.md §6).  Second derivatives there: in $t$ and mixed with $t$ those of the motion,
+      in the other directions those of the first-order rule (without the nutation's second-order
+      terms; the attitude's are not exactly symmetric there);
     - the separatrix ($2 E I_2 = |L|^2$ exactly, rounding included): derivatives that keep the body on
       it are exact, the others miss the (finite) change of the elliptic parameter;
     - a known loss of digits: an exactly symmetric body ($I_1 = I_2$ or $I_2 = I_3$) whose unit $L$ is

@@ -25,7 +25,10 @@ $$\varphi_\perp = \tfrac{1}{|L_0|}\, n \times \big(e^{-t \hat\Omega_0} \delta L_
 n \cdot \varphi = t\,\big((n / I) \cdot \delta L_0 - |L_0| \textstyle\sum_i n_i^2\, \delta I_i / I_i^2\big),$$
 
 each term written with its factor $|L_0|$ cancelled, so that $L_0 = 0$ (any unit $n$) gives
-$\varphi = t\,\delta L_0 / I$.  Second derivatives are those of this first-order rule.
+$\varphi = t\,\delta L_0 / I$.  Second derivatives are those of this first-order expansion (its
+coefficients held at the uniform rotation): exact in $t$ and mixed with $t$; in the other directions
+without the motion's second-order terms (symmetric for $L$, not exactly for the attitude, whose rule
+is a product).
 """
 
 from __future__ import annotations
@@ -106,6 +109,12 @@ def _response(moments, momentum, t, d_moments, d_momentum):
     return d_angular_momentum, perpendicular + parallel * unit
 
 
+def _frozen(moments, momentum):
+    """The uniform rotation whose variational equations the rules solve, as constants: differentiated
+    again, the rules give the second derivatives of the first-order expansion about it."""
+    return jax.lax.stop_gradient(moments), jax.lax.stop_gradient(momentum)
+
+
 def _shape(moments, momentum, t):
     return jnp.broadcast_shapes(moments.shape[:-1], momentum.shape[:-1], jnp.shape(t)) + (3,)
 
@@ -138,7 +147,7 @@ def _uniform_momentum_jvp(primals, tangents):
     d_principal = _principal(axes, d_momentum)
     if axes is not None:
         d_principal = d_principal + _principal(d_axes, momentum)
-    d_angular_momentum, _ = _response(moments, principal, t, d_moments, d_principal)
+    d_angular_momentum, _ = _response(*_frozen(moments, principal), t, d_moments, d_principal)
     if axes is not None:
         # L(t) = R P(t): dR P + R dP(t), P(t) = R^T L0.
         d_angular_momentum = _times(d_axes, principal) + _times(axes, d_angular_momentum)
@@ -173,9 +182,12 @@ def _uniform_spin_jvp(primals, tangents):
     d_principal = _principal(axes, d_momentum)
     if axes is not None:
         d_principal = d_principal + _principal(d_axes, momentum)
-    _, turn = _response(moments, principal, t, d_moments, d_principal)
-    # In the principal frame q(t) ⊗ exp(phi / 2) to first order, and dq/dt = q ⊗ (0, Omega0 / 2).
-    rate = turn + jnp.asarray(d_t, moments.dtype)[..., None] * (principal / moments)
+    _, turn = _response(*_frozen(moments, principal), t, d_moments, d_principal)
+    # In the principal frame q(t) ⊗ exp(phi / 2) to first order, and dq/dt = q ⊗ (0, Omega(t) / 2),
+    # Omega(t) = L(t) / I with L(t) of uniform_momentum: Omega0 in value, and its derivative (the
+    # mixed second derivative in t) is that of the motion, as is d/dt of phi.
+    velocity = uniform_momentum(moments, principal, t) / moments
+    rate = turn + jnp.asarray(d_t, moments.dtype)[..., None] * velocity
     if axes is None:
         return spin, quaternion.multiply(spin, _pure(rate / 2))
     # The body-frame spin is r ⊗ s ⊗ conj(r) (r: the axes as a quaternion): its tangent gains the
