@@ -106,7 +106,7 @@ def first_derivatives():
         finite = np.all(np.isfinite(jacobian), axis=(-2, -1))
         per_point = []
         for k, name in enumerate(names):
-            partial = kinds[k] == "branch" and name not in _tests.EXACT_BRANCH_POINTS  # the separatrix
+            partial = kinds[k] == "branch" and name in _tests.ONE_SIDED_BRANCH_POINTS
             row = np.where(np.arange(11) >= 6, errors[k], 0) if partial else errors[k]
             worst = int(np.argmax(row))
             per_point.append(dict(name=name, kind=kinds[k], finite=bool(finite[k]),
@@ -117,10 +117,10 @@ def first_derivatives():
             compile=timing, all_finite=bool(finite.all()),
             worst_generic_and_smooth=max(p["worst_relative_error"] for p in away),
             worst_near_separatrix=max(p["worst_relative_error"] for p in near),
-            worst_uniform_rotation=max(p["worst_relative_error"] for p in per_point
-                                       if p["name"] in _tests.EXACT_BRANCH_POINTS),
+            worst_uniform_rotation=max(p["worst_relative_error"] for p in per_point if p["kind"] == "branch"
+                                       and p["name"] not in _tests.ONE_SIDED_BRANCH_POINTS),
             worst_separatrix_q0_t_columns=max(p["worst_relative_error"] for p in per_point
-                                              if p["kind"] == "branch" and p["name"] not in _tests.EXACT_BRANCH_POINTS),
+                                              if p["name"] in _tests.ONE_SIDED_BRANCH_POINTS),
             points=per_point)
         print(f"{mode}: compile {timing['wall_s']:.0f} s; finite everywhere {finite.all()}; worst relative "
               f"error: generic/smooth {summary[mode]['worst_generic_and_smooth']:.1e}, near the separatrix "

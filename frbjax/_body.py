@@ -9,10 +9,10 @@ import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
-from jax.custom_derivatives import SymbolicZero
 from jaxtyping import Array, Float, Int
 
 from . import _quaternion as quaternion
+from ._frame import angular_velocity, dot as _dot, matrix_product, matrix_times as _apply, to_principal
 from ._fusion import materialise, sum_last, when_any
 from ._inertia import InertiaTensor, through_principal_frame
 from ._regimes import UNIFORM, classify, constants, evaluate, evaluate_once, orbit_constants
@@ -46,55 +46,6 @@ def working_frame(inertia, momentum):
     s3 = jnp.where(momentum[..., 2] < 0, -1.0, 1.0).astype(inertia.dtype)
     flips = jnp.stack([s1, s1 * s3, s3], -1)
     return permutation * flips[..., None, :], sorted_inertia, momentum * flips
-
-
-@jax.custom_jvp
-def _apply(matrix, vector):
-    """matrix @ vector over broadcast leading dimensions: (..., n, n) and (..., n) -> (..., n).
-
-    The value is one fused product and sum over the last axis (the fastest form for a per-body matrix
-    at many times).  Its derivative is written by ``_apply_by_rows`` (see ``_apply_jvp``).
-    """
-    return sum_last(matrix * vector[..., None, :])
-
-
-def _dot(first, second):
-    """sum_j first[..., j] * second[..., j] as additions of (...)-shaped products, over j in order.
-
-    Unlike a reduction over a trailing axis (or a product with a broadcast), its transpose in reverse
-    mode is again products and additions of (...)-shaped arrays, never a reduction.
-    """
-    total = first[..., 0] * second[..., 0]
-    for j in range(1, second.shape[-1]):
-        total = total + first[..., j] * second[..., j]
-    return total
-
-
-def _apply_by_rows(matrix, vector):
-    """matrix @ vector as n ``_dot`` of (...)-shaped arrays."""
-    return jnp.stack([_dot(matrix[..., i, :], vector) for i in range(vector.shape[-1])], -1)
-
-
-@functools.partial(_apply.defjvp, symbolic_zeros=True)
-def _apply_jvp(primals, tangents):
-    """d(M v) = dM v + M dv, both by rows.
-
-    For a per-body matrix and many times, reverse mode then gives the matrix's cotangent as n * n sums
-    over the times of products of (...)-shaped arrays.  Through the (..., n, n) product of the value,
-    XLA materialised the broadcast matrix and the product at every time and reduced them: a third of
-    a quaternion gradient's run time.  (Writing the value by rows instead cost 5% of an evaluation.)
-    """
-    matrix, vector = primals
-    matrix_tangent, vector_tangent = tangents
-    terms = []
-    if not isinstance(matrix_tangent, SymbolicZero):
-        terms.append(_apply_by_rows(matrix_tangent, vector))
-    if not isinstance(vector_tangent, SymbolicZero):
-        terms.append(_apply_by_rows(matrix, vector_tangent))
-    value = _apply(matrix, vector)
-    if not terms:
-        return value, jnp.zeros_like(value)
-    return value, sum(terms[1:], terms[0])
 
 
 @jax.custom_jvp
@@ -178,11 +129,6 @@ def _working_dtype(inertia, angular_momentum):
 _FRAME_ROUNDING = 64
 
 
-def _matrix_product(first, second):
-    """first @ second for (..., 3, 3) arrays, as elementwise products and additions (no dot)."""
-    return sum_last(first[..., :, None, :] * jnp.swapaxes(second, -1, -2)[..., None, :, :])
-
-
 def _prepare(inertia, angular_momentum, attitude, axes=None):
     """Broadcast, checked (NaN for invalid bodies) and normalised inputs and the working frame:
     (inertia, angular_momentum, attitude, valid, frame, sorted inertia, unit L, |L|, regime).
@@ -225,7 +171,7 @@ def _prepare(inertia, angular_momentum, attitude, axes=None):
     if axes is None:
         permutation, sorted_inertia, momentum_working = working_frame(inertia, angular_momentum)
     else:
-        principal_momentum = _apply(jnp.swapaxes(axes, -1, -2), angular_momentum)
+        principal_momentum = to_principal(axes, angular_momentum)
         # Components left by rounding the change of frame (a tensor's L along a principal axis, or in
         # the plane of two equal moments, gets ~1e-17 across it) are zeros: the body is then exactly
         # a uniform rotation, as given, not a nutation of rounding size whose derivatives cancel.
@@ -237,7 +183,7 @@ def _prepare(inertia, angular_momentum, attitude, axes=None):
                                        principal_momentum - jax.lax.stop_gradient(principal_momentum),
                                        principal_momentum)
         permutation, sorted_inertia, momentum_working = working_frame(inertia, principal_momentum)
-        permutation = _matrix_product(axes, permutation)
+        permutation = matrix_product(axes, permutation)
     norm_squared = sum_last(momentum_working**2)
     moving = norm_squared > 0
     norm = jnp.sqrt(jnp.where(moving, norm_squared, 1))
@@ -285,13 +231,6 @@ def _construct(inertia, angular_momentum, attitude, axes=None):
         _constants=consts,
         _attitude_map=attitude_map,
     )
-
-
-def _angular_velocity(inertia, axes, momentum):
-    """Omega = L / I for principal body axes, R (R^T L / I) for principal axes R in the body frame."""
-    if axes is None:
-        return momentum / inertia
-    return _apply(axes, _apply(jnp.swapaxes(axes, -1, -2), momentum) / inertia)
 
 
 def _uniform_momentum(uniform, inertia, axes, momentum, t):
@@ -551,7 +490,7 @@ class FreeRigidBody(eqx.Module):
     def angular_velocity(self, t) -> Float[Array, "... 3"]:
         r"""Body-frame angular velocity $\Omega(t) = I^{-1} L(t)$ ($L / I$ for principal moments)."""
         return self._through_tensor(
-            lambda body, t: _angular_velocity(body.inertia, body.principal_axes, body._angular_momentum(t)), t)
+            lambda body, t: angular_velocity(body.inertia, body.principal_axes, body._angular_momentum(t)), t)
 
     @_compiled
     def quaternion(self, t) -> Float[Array, "... 4"]:

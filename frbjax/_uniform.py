@@ -39,6 +39,7 @@ import jax
 import jax.numpy as jnp
 
 from . import _quaternion as quaternion
+from ._frame import angular_velocity, matrix_product, matrix_times, to_body, to_principal
 from ._fusion import sum_last
 
 # |kappa t^2| below which each function is its Taylor series: where the closed forms lose more than
@@ -119,14 +120,12 @@ def _shape(moments, momentum, t):
     return jnp.broadcast_shapes(moments.shape[:-1], momentum.shape[:-1], jnp.shape(t)) + (3,)
 
 
-def _times(matrix, vector):
-    """matrix @ vector over leading dimensions, as products and additions (``_fusion.sum_last``)."""
-    return sum_last(matrix * vector[..., None, :])
-
-
-def _principal(axes, vector):
-    """R^T v (v itself where axes is None: the body axes are principal)."""
-    return vector if axes is None else _times(jnp.swapaxes(axes, -1, -2), vector)
+def _in_principal_frame(axes, momentum, d_axes, d_momentum):
+    """(R^T L0, its tangent dR^T L0 + R^T dL0): the turn of the axes moves L0 in the principal frame."""
+    principal, d_principal = to_principal(axes, momentum), to_principal(axes, d_momentum)
+    if axes is not None:
+        d_principal = d_principal + to_principal(d_axes, momentum)
+    return principal, d_principal
 
 
 @jax.custom_jvp
@@ -143,21 +142,12 @@ def uniform_momentum(moments, momentum, t, axes=None):
 def _uniform_momentum_jvp(primals, tangents):
     moments, momentum, t, axes = primals
     d_moments, d_momentum, _, d_axes = tangents  # L is constant in t
-    principal = _principal(axes, momentum)
-    d_principal = _principal(axes, d_momentum)
-    if axes is not None:
-        d_principal = d_principal + _principal(d_axes, momentum)
+    principal, d_principal = _in_principal_frame(axes, momentum, d_axes, d_momentum)
     d_angular_momentum, _ = _response(*_frozen(moments, principal), t, d_moments, d_principal)
     if axes is not None:
         # L(t) = R P(t): dR P + R dP(t), P(t) = R^T L0.
-        d_angular_momentum = _times(d_axes, principal) + _times(axes, d_angular_momentum)
+        d_angular_momentum = matrix_times(d_axes, principal) + to_body(axes, d_angular_momentum)
     return uniform_momentum(moments, momentum, t, axes), d_angular_momentum
-
-
-def _angular_velocity(moments, momentum, axes):
-    """Omega0 = R (R^T L0 / I) in the body frame."""
-    principal = _principal(axes, momentum) / moments
-    return principal if axes is None else _times(axes, principal)
 
 
 @jax.custom_jvp
@@ -165,7 +155,7 @@ def uniform_spin(moments, momentum, t, axes=None):
     """exp(t Omega0 / 2) (body frame, ``axes`` as in ``uniform_momentum``), with the derivatives of
     the motion: the attitude of a uniform rotation is q0 ⊗ uniform_spin."""
     t = jnp.asarray(t, moments.dtype)
-    rotation = t[..., None] * _angular_velocity(moments, momentum, axes)
+    rotation = t[..., None] * angular_velocity(moments, axes, momentum)
     return quaternion.exp_pure(jnp.broadcast_to(rotation, _shape(moments, momentum, t)))
 
 
@@ -178,10 +168,7 @@ def _uniform_spin_jvp(primals, tangents):
     moments, momentum, t, axes = primals
     d_moments, d_momentum, d_t, d_axes = tangents
     spin = uniform_spin(moments, momentum, t, axes)
-    principal = _principal(axes, momentum)
-    d_principal = _principal(axes, d_momentum)
-    if axes is not None:
-        d_principal = d_principal + _principal(d_axes, momentum)
+    principal, d_principal = _in_principal_frame(axes, momentum, d_axes, d_momentum)
     _, turn = _response(*_frozen(moments, principal), t, d_moments, d_principal)
     # In the principal frame q(t) ⊗ exp(phi / 2) to first order, and dq/dt = q ⊗ (0, Omega(t) / 2),
     # Omega(t) = L(t) / I with L(t) of uniform_momentum: Omega0 in value, and its derivative (the
@@ -192,9 +179,9 @@ def _uniform_spin_jvp(primals, tangents):
         return spin, quaternion.multiply(spin, _pure(rate / 2))
     # The body-frame spin is r ⊗ s ⊗ conj(r) (r: the axes as a quaternion): its tangent gains the
     # commutator with the axes' own turn w = vee(dR R^T) (body frame), and rate is turned by R.
-    turn_of_axes = sum_last(d_axes[..., :, None, :] * axes[..., None, :, :])  # dR R^T, skew
+    turn_of_axes = matrix_product(d_axes, jnp.swapaxes(axes, -1, -2))  # dR R^T, skew
     w = jnp.stack([turn_of_axes[..., 2, 1], turn_of_axes[..., 0, 2], turn_of_axes[..., 1, 0]], -1)
     half_w = jnp.broadcast_to(_pure(w / 2), spin.shape)
     d_spin = (quaternion.multiply(half_w, spin) - quaternion.multiply(spin, half_w)
-              + quaternion.multiply(spin, _pure(_times(axes, rate) / 2)))
+              + quaternion.multiply(spin, _pure(to_body(axes, rate) / 2)))
     return spin, d_spin

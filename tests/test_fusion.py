@@ -1,4 +1,4 @@
-"""frbjax._fusion (fusion boundaries that survive jax.vmap); the JVP rules of _body._apply, _normalised.
+"""frbjax._fusion (fusion boundaries that survive jax.vmap); the JVP rules of _frame.matrix_times, _body._normalised.
 
 Under jax.vmap a conditional with a batched predicate becomes a select of both branches; the
 library's fusion boundaries (``materialise``) and the conditionals that skip unneeded work
@@ -15,7 +15,8 @@ import numpy as np
 from jax.test_util import check_grads
 
 from frbjax import FreeRigidBody
-from frbjax._body import _apply, _normalised
+from frbjax._body import _normalised
+from frbjax._frame import matrix_times as _apply
 from frbjax._fusion import anywhere, materialise
 
 
@@ -60,7 +61,7 @@ def test_body_keeps_its_conditionals_under_vmap():
 
 
 def test_apply_value_and_derivatives():
-    """_apply's value is matrix @ vector (bit for bit the sums over j in order) and its custom JVP
+    """matrix_times's value is matrix @ vector (bit for bit the sums over j in order) and its custom JVP
     gives the derivatives of the product to all orders, in both arguments, with broadcasting."""
     rng = np.random.default_rng(3)
     matrix = jnp.asarray(rng.normal(size=(5, 4, 4)))
