@@ -15,6 +15,7 @@ from . import _quaternion as quaternion
 from ._frame import angular_velocity, dot as _dot, matrix_product, matrix_times as _apply, to_principal
 from ._fusion import materialise, sum_last, when_any
 from ._inertia import InertiaTensor, through_principal_frame
+from ._precession import precessing, precession
 from ._regimes import UNIFORM, classify, constants, evaluate, evaluate_once, orbit_constants
 from ._regimes import reference as regime_reference
 from ._uniform import uniform_momentum, uniform_spin
@@ -244,6 +245,27 @@ def _uniform_momentum(uniform, inertia, axes, momentum, t):
     return when_any(uniform, with_uniform, lambda momentum: jnp.broadcast_to(momentum, shape), momentum)
 
 
+def _precessing_momentum(band, inertia, axes, momentum, t, moving):
+    """``moving`` where the body does not take the precession branch (``_precession``: a symmetric body
+    next to the plane of its equal moments), the regular precession where it does."""
+
+    def with_precession(moving):
+        return jnp.where(band[..., None], precession(band, inertia, momentum, t, axes, attitude=False)[0], moving)
+
+    # Most batches have no such body: then nothing of the branch is evaluated.
+    return when_any(band, with_precession, lambda moving: moving, moving)
+
+
+def _precessing_attitude(band, inertia, axes, momentum, attitude, t, moving):
+    """``moving`` where the body does not take the precession branch, q0 ⊗ s(t) where it does."""
+
+    def with_precession(moving):
+        _, spin = precession(band, inertia, momentum, t, axes)
+        return jnp.where(band[..., None], quaternion.multiply(attitude, spin), moving)
+
+    return when_any(band, with_precession, lambda moving: moving, moving)
+
+
 def _uniform_attitude(uniform, inertia, axes, momentum, attitude, t, moving):
     """``moving`` where the body does not rotate uniformly, q0 ⊗ exp(t Omega0 / 2) where it does,
     with the derivatives of the motion (``_uniform``)."""
@@ -275,6 +297,8 @@ def motion_once(inertia, angular_momentum, attitude, t, with_attitude=True, axes
     axes = None if axes is None else jnp.broadcast_to(axes, inertia.shape + (3,))
     fixed = _uniform_momentum(uniform, inertia, axes, angular_momentum, t)
     momentum = jnp.where(uniform[..., None], fixed, moving)
+    band = precessing(inertia, axes, angular_momentum, uniform)
+    momentum = _precessing_momentum(band, inertia, axes, angular_momentum, t, momentum)
     if not with_attitude:
         return momentum, None
     # q = q0 ⊗ P ⊗ conj(q̂(0)) ⊗ q̂(tau) ⊗ conj(P) (docs/theory.md §8), where P ⊗ (w, v) ⊗ conj(P) =
@@ -283,6 +307,7 @@ def motion_once(inertia, angular_momentum, attitude, t, with_attitude=True, axes
     change = materialise(quaternion.multiply(quaternion.conjugate(chart_start), chart_now))
     change = jnp.concatenate([change[..., :1], _apply(permutation, change[..., 1:])], -1)
     moving = _normalised(materialise(quaternion.multiply(attitude, change)))
+    moving = _precessing_attitude(band, inertia, axes, angular_momentum, attitude, t, moving)
     return momentum, _uniform_attitude(uniform, inertia, axes, angular_momentum, attitude, t, moving)
 
 
@@ -354,14 +379,14 @@ class FreeRigidBody(eqx.Module):
       terms; the attitude's are not exactly symmetric there);
     - the separatrix ($2 E I_2 = |L|^2$ exactly, rounding included): derivatives that keep the body on
       it are exact, the others miss the (finite) change of the elliptic parameter;
-    - a known loss of digits: an exactly symmetric body ($I_1 = I_2$ or $I_2 = I_3$) whose unit $L$ is
-      within $\epsilon$ of the plane of its equal moments but not in it.  Its derivative with respect to
-      an unequal change of the equal moments (which makes the elliptic parameter $m \propto
-      \delta I / \epsilon^2$) is the difference of terms $1/\epsilon^2$ larger: wrong by about
-      $10^{-16} / \epsilon^2$ relative ($10^{-4}$ at $\epsilon = 10^{-6}$, O(1) at $10^{-8}$).  The other
-      derivatives there are exact, and so is every derivative in the plane ($\epsilon = 0$).
+    - a symmetric body ($I_1 = I_2$ or $I_2 = I_3$ exactly) whose unit $L$ is within $1/8$ of the plane
+      of its equal moments but not in it: its regular precession, with its first-order neighbours off
+      the symmetric bodies (docs/theory.md §6), where the elliptic formulas' derivative in an unequal
+      change of the equal moments would lose digits as $10^{-16} / (e \cdot n)^2$.  Every first
+      derivative there is that of the motion; second derivatives too, except the one taken twice in the
+      unequal direction of the equal moments (the expansion is linear in it).
 
-    tests/test_gradients_body.py checks all of them against 32-digit references.
+    tests/test_gradients_body.py checks all of them against 32-digit (60 next to that plane) references.
     """
 
     inertia: Float[Array, "... 3"]
@@ -423,10 +448,15 @@ class FreeRigidBody(eqx.Module):
     def _uniform(self):
         return self.regime == UNIFORM
 
+    def _precessing(self):
+        return precessing(self.inertia, self.principal_axes, self.initial_angular_momentum, self._uniform())
+
     def _momentum_from(self, t, unit_working):
         moving = self.momentum_norm[..., None] * _apply(self.permutation, unit_working)
         fixed = _uniform_momentum(self._uniform(), self.inertia, self.principal_axes,
                                   self.initial_angular_momentum, t)
+        moving = _precessing_momentum(self._precessing(), self.inertia, self.principal_axes,
+                                      self.initial_angular_momentum, t, moving)
         return jnp.where(self._uniform()[..., None], jnp.broadcast_to(fixed, moving.shape), moving)
 
     def _attitude_from(self, t, tau, particular):
@@ -435,6 +465,9 @@ class FreeRigidBody(eqx.Module):
         # Three products and the chart leave |q| - 1 at up to ~20 ulp; renormalising costs little and
         # keeps |q| = 1 and rotation_matrix (which assumes it) at the ulp level.
         moving = _normalised(materialise(moving))
+        # A symmetric body next to the plane of its equal moments: the regular precession (_precession).
+        moving = _precessing_attitude(self._precessing(), self.inertia, self.principal_axes,
+                                      self.initial_angular_momentum, self.initial_attitude, t, moving)
         uniform = jnp.broadcast_to(self._uniform(), tau.shape)
         # Uniform rotation about a principal direction (or L = 0): q(t) = q0 ⊗ exp(t Omega0 / 2).
         return _uniform_attitude(uniform, self.inertia, self.principal_axes, self.initial_angular_momentum,

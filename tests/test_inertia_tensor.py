@@ -248,7 +248,12 @@ UNIFORM_BODIES = ("principal_axis", "symmetry_axis", "equal_moments_plane")
 # nutation's functions of kappa t^2 take their closed forms (|kappa t^2| up to 19 and 9).
 LONG_BODIES = ("principal_axis_long", "middle_axis_long")
 LONG_TAU = np.array([20.0, 40.0])
-STENCIL_BODIES = DERIVATIVE_BODIES + UNIFORM_BODIES + ("principal_plane",) + LONG_BODIES
+# Axisymmetric tensors whose unit L is e . n = 1e-6 and 1e-3 from the plane of the equal moments
+# (frbjax._precession).  The motion bends on the scale of 1 there too (only the elliptic parameter
+# moves as dT / (e . n)^2): the stencil agreed with the variational equations integrated alongside the
+# motion (Dopri8, the same tolerances) to 7e-13 (dL) and 1.7e-12 (dq).
+NEAR_PLANE_BODIES = ("near_plane_oblate_1e-06", "near_plane_prolate_1e-03")
+STENCIL_BODIES = DERIVATIVE_BODIES + UNIFORM_BODIES + ("principal_plane",) + LONG_BODIES + NEAR_PLANE_BODIES
 SPECIAL_BODIES = ("zero_momentum", "zero_momentum_sphere")
 # Unit-|L| times of the derivative checks; the sign alternates from body to body.
 DERIVATIVE_TAU = np.array([1.5, 4.0])
@@ -266,6 +271,11 @@ def derivative_bodies(seed=SEED):
         (tensor, 0.66 * rotation[:, 0] + 0.88 * rotation[:, 2], attitude),
         (tensor, 1.1 * rotation[:, 0], attitude),
         (tensor, -rotation[:, 1], attitude),
+        (oblate, 0.8 * oblate_rotation @ np.array([0.6, 0.8, 1e-6]), attitude),
+    ]
+    prolate, _, _, _, prolate_rotation = bodies["axisymmetric_prolate"]
+    rows += [
+        (prolate, 1.3 * prolate_rotation @ np.array([-1e-3, 0.6, -0.8]), attitude),
         (tensor, np.zeros(3), attitude),
         (bodies["sphere"][0], np.zeros(3), attitude),
     ]
@@ -384,6 +394,8 @@ DERIVATIVE_TOLERANCE = {
     "principal_plane": (1.4e-12, 1.6e-11),  # measured dL 9.4e-13, dq 1.0e-11
     "principal_axis_long": (1.8e-12, 5e-12),  # measured dL 1.2e-12, dq 3.2e-12
     "middle_axis_long": (1e-9, 1e-10),  # measured dL 6.6e-10, dq 6.5e-11: the reference's own error
+    "near_plane_oblate_1e-06": (1e-12, 2e-12),  # measured dL 7.0e-13, dq 1.3e-12
+    "near_plane_prolate_1e-03": (7e-13, 2.5e-12),  # measured dL 4.7e-13, dq 1.7e-12
 }
 
 

@@ -16,6 +16,13 @@ dL/dt = L x (L / I), dq/dt = 1/2 q ⊗ (0, L / I) (tests/_reference.py ``mp_fiel
 * d/dq0 and d/dt: exact, from the same solution: q(t) = (q0/|q0|) ⊗ r(t) is linear in the normalised
   q0, and dy/dt is the right-hand side of the equations at t.
 
+Symmetric bodies next to the plane of their equal moments (the points "... near plane ..."), where
+frbjax's elliptic parameter moves as dI / (e . n)^2, take h = FINE_STEP at FINE_DPS digits
+(``precision``): their differences are then exact far below the test's tolerance (truncation
+h^2 y'''/6 ~ 1e-56, solver error 10^-FINE_DPS / h ~ 1e-32) with no assumption on how fast the motion
+bends in that direction (on the scale of 1, as it turns out, like everywhere else).
+``--only NAME ...`` recomputes the named points and keeps the others of the existing file.
+
 Nothing here uses a formula of frbjax.  ``kind`` says how tests/test_gradients_body.py uses a point:
 "generic" and "smooth" points (the implementation's formulas are smooth there) are compared with
 frbjax at 1e-9; "branch" points (frbjax takes a limiting branch: uniform rotation, the separatrix
@@ -41,6 +48,8 @@ import _reference as ref  # noqa: E402
 
 DPS = 32
 STEP = "1e-10"
+FINE_DPS = 60
+FINE_STEP = "1e-28"
 DIGITS = 22
 OUTPUT = os.path.join(HERE, "gradient_references.json")
 
@@ -87,6 +96,15 @@ def points():
         ("L1 = 0 unsorted", "smooth", _point([2.0, 3.0, 1.0], [0.6, 0.8, 0.0])),
         ("t = 0", "smooth", _point([1.0, 2.0, 3.0], GENERIC_L, t=0.0)),
         ("L = 0", "smooth", _point([1.0, 2.0, 3.0], [0.0, 0.0, 0.0])),
+    ]
+    # Symmetric bodies whose L is e . n = 1e-4 ... 1e-8 from the plane of their equal moments, not in it
+    # (frbjax takes the regular precession with its first-order neighbours there, frbjax._precession):
+    # both orders of the moments, |L| != 1, negative and long times.
+    out += [
+        ("I1=I2 near plane 1e-4", "smooth", _point([1.2, 1.2, 2.1], [0.6, 0.8, 1e-4])),
+        ("I1=I2 near plane 1e-8", "smooth", _point([1.2, 1.2, 2.1], [0.6, 0.8, 1e-8])),
+        ("I1=I3 near plane 1e-6 unsorted", "smooth", _point([2.1, 1.2, 2.1], [1.2, -1e-6, -1.6], t=-2.3)),
+        ("I2=I3 near plane 1e-3 long", "smooth", _point([0.7, 1.9, 1.9], [-2e-3, 0.5, 0.9], t=40.0)),
     ]
     # Branch points: frbjax uses a limiting formula there (documented); finite derivatives only.
     separatrix = ref.separatrix_momentum((1.0, 2.0, 3.0), 0.0, 0.0)
@@ -138,11 +156,16 @@ def _outputs(inertia, momentum, q0, t):
     return L + omega + q + _matrix_bilinear(q, q), (L, q, omega)
 
 
-def reference(x):
+def precision(name):
+    """(digits, difference step) of the point ``name`` (module docstring)."""
+    return (FINE_DPS, FINE_STEP) if "near plane" in name else (DPS, STEP)
+
+
+def reference(x, dps=DPS, step=STEP):
     """(values (19,), Jacobian (19, 11)) as mpf, at x (11 floats)."""
-    with mpmath.workdps(DPS):
+    with mpmath.workdps(dps):
         x = [mpmath.mpf(v) for v in x]
-        h = mpmath.mpf(STEP)
+        h = mpmath.mpf(step)
         inertia, momentum, q_raw, t = x[:3], x[3:6], x[6:10], x[10]
         norm = mpmath.sqrt(sum(v * v for v in q_raw))
         q0 = [v / norm for v in q_raw]
@@ -174,7 +197,7 @@ def reference(x):
 
 def _task(item):
     name, kind, x = item
-    values, jacobian = timed(name, reference, x)
+    values, jacobian = timed(name, reference, x, *precision(name))
     return dict(name=name, kind=kind, x=x, values=[text(v) for v in values],
                 jacobian=[[text(v) for v in row] for row in jacobian])
 
@@ -193,12 +216,24 @@ def timed(name, compute, *arguments):
 
 
 def write_references(description, task, items, output, default_processes, **metadata):
-    """Map ``task`` over ``items`` on a process pool (--processes) and write the records with metadata."""
+    """Map ``task`` over ``items`` on a process pool (--processes) and write the records with metadata;
+    with --only NAME ..., recompute those points and keep the existing file's others."""
     parser = argparse.ArgumentParser(description=description)
     parser.add_argument("--processes", type=int, default=default_processes)
+    parser.add_argument("--only", nargs="+", metavar="NAME")
     arguments = parser.parse_args()
+    kept, listed = {}, [item[0] for item in items]
+    if arguments.only:
+        with open(output) as handle:
+            kept = {record["name"]: record for record in json.load(handle)["points"]}
+        unknown = set(arguments.only) - set(listed)
+        if unknown:
+            parser.error(f"no such points: {sorted(unknown)}")
+        items = [item for item in items if item[0] in arguments.only or item[0] not in kept]
     with multiprocessing.Pool(arguments.processes) as pool:
-        records = pool.map(task, items, chunksize=1)
+        computed = {record["name"]: record for record in pool.map(task, items, chunksize=1)}
+    # In the order of ``items``; kept points that ``items`` no longer lists are dropped.
+    records = [computed[name] if name in computed else kept[name] for name in listed]
     with open(output, "w") as handle:
         json.dump(dict(metadata, points=records), handle, indent=1)
     print("wrote", output)
@@ -206,6 +241,7 @@ def write_references(description, task, items, output, default_processes, **meta
 
 def main():
     write_references(__doc__.splitlines()[0], _task, points(), OUTPUT, 2, dps=DPS, step=STEP,
+                     fine=dict(dps=FINE_DPS, step=FINE_STEP, points="near plane"),
                      outputs="L(3), Omega(3), q(4), R(9) row-major", inputs="I(3), L(3), q0(4), t")
 
 
