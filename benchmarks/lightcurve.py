@@ -14,9 +14,12 @@
    prediction error.
 
 Writes benchmarks/results/lightcurve.json and lightcurve.png (the data and the fit, the search's
-landscape over the two periods).  ``--quick``: tiny sizes (a smoke test).
+landscape over the two periods).  ``--quick``: tiny sizes (a smoke test).  ``--forward-only``: part 1
+alone, with frbjax in float32 too (its flux against float64's), into lightcurve_forward_<backend>.json:
+the run for an accelerator (``--bodies 16384`` on a GPU: JAX's default device is the GPU there).
 
     .venv/bin/python benchmarks/lightcurve.py [--quick] [--output-dir DIR]
+    python benchmarks/lightcurve.py --forward-only --bodies 16384          # on a GPU machine
 """
 
 from __future__ import annotations
@@ -93,7 +96,7 @@ def _flux_from_attitudes(attitudes, normals, areas, sun, observer):
     return facet_brightness(normals, sun_body, observer_body) @ areas
 
 
-def forward_throughput(n_bodies, repeats):
+def forward_throughput(n_bodies, repeats, single_precision=False):
     times, sun, observer, _ = problems.geometry(24, per_night=18)
     order = np.argsort(times)  # nights may overlap: RK4 steps from one sample to the next
     times, sun, observer = times[order] - times[order[0]], sun[order], observer[order]
@@ -143,13 +146,33 @@ def forward_throughput(n_bodies, repeats):
             break
     rk4_seconds = timed(chosen[1]) if chosen else math.nan
     samples = n_bodies * len(times)
+    single = {}
+    if single_precision:
+        # frbjax in float32 (inputs rounded to float32, the shape's too): its flux against float64's.
+        single_shape = ConvexShape(jnp.asarray(shape.normals, jnp.float32), jnp.asarray(shape.areas, jnp.float32))
+        single_args = [a.astype(jnp.float32) for a in args]
+
+        @jax.jit
+        def exact_single(inertia, momentum, attitude, times, sun, observer):
+            return brightness(FreeRigidBody(inertia, momentum, attitude), single_shape, times, sun, observer)
+
+        flux = np.asarray(exact_single(*single_args), np.float64)
+        jax.block_until_ready(exact_single(*single_args))
+        best = math.inf
+        for _ in range(repeats):
+            start = time.perf_counter()
+            jax.block_until_ready(exact_single(*single_args))
+            best = min(best, time.perf_counter() - start)
+        single = {"float32_seconds": best, "float32_samples_per_second": samples / best,
+                  "float32_max_relative_flux_difference": float(np.max(np.abs(flux / reference - 1))),
+                  "float32_median_relative_flux_difference": float(np.median(np.abs(flux / reference - 1)))}
     return {
         "bodies": n_bodies, "times": len(times), "facets": int(shape.areas.shape[0]), "span_days": float(times[-1]),
         "frbjax_seconds": exact_seconds, "frbjax_samples_per_second": samples / exact_seconds,
         "rk4_ladder": ladder, "rk4_steps_per_day": chosen[0] if chosen else None,
         "rk4_max_relative_flux_error": chosen[2] if chosen else None,
         "rk4_seconds": rk4_seconds, "rk4_samples_per_second": samples / rk4_seconds,
-        "speedup": rk4_seconds / exact_seconds,
+        "speedup": rk4_seconds / exact_seconds, **single,
     }
 
 
@@ -237,23 +260,28 @@ def main():
     parser.add_argument("--refine", type=int, default=16)
     parser.add_argument("--width", type=float, default=0.01)
     parser.add_argument("--shape", default="ellipsoid")
+    parser.add_argument("--forward-only", action="store_true", help="part 1 alone, float32 too (module docstring)")
     arguments = parser.parse_args()
+    machine = {"backend": jax.default_backend(), "device": str(jax.devices()[0]),
+               "device_kind": jax.devices()[0].device_kind, "cpus": os.cpu_count(),
+               "platform": platform.platform(), "jax": jax.__version__}
     if arguments.quick:
         # The sizes of tests/test_lightcurve_fit.py: its compiled programs are reused (JAX's cache).
         arguments.bodies, arguments.per_night, arguments.grid, arguments.states, arguments.refine = 4, 8, 3, 32, 8
         arguments.width = 0.005
     arguments.output_dir.mkdir(parents=True, exist_ok=True)
-    throughput = forward_throughput(arguments.bodies, 1 if arguments.quick else 3)
+    throughput = forward_throughput(arguments.bodies, 1 if arguments.quick else 3, arguments.forward_only)
     print(json.dumps(throughput, indent=1), flush=True)
+    if arguments.forward_only:
+        output = {"machine": machine, "quick": arguments.quick, "forward": throughput}
+        path = arguments.output_dir / f"lightcurve_forward_{machine['backend']}.json"
+        path.write_text(json.dumps(output, indent=1) + "\n")
+        return
     summary, result, data, periods = inversion(arguments.per_night, arguments.grid, arguments.states,
                                                arguments.refine, arguments.width, arguments.shape)
     print(json.dumps(summary, indent=1), flush=True)
     plot(arguments.output_dir / "lightcurve.png", result, data, periods)
-    output = {
-        "machine": {"backend": jax.default_backend(), "device": str(jax.devices()[0]), "cpus": os.cpu_count(),
-                    "platform": platform.platform(), "jax": jax.__version__},
-        "quick": arguments.quick, "forward": throughput, "inversion": summary,
-    }
+    output = {"machine": machine, "quick": arguments.quick, "forward": throughput, "inversion": summary}
     (arguments.output_dir / "lightcurve.json").write_text(json.dumps(output, indent=1) + "\n")
 
 

@@ -15,7 +15,7 @@ from . import _quaternion as quaternion
 from ._frame import angular_velocity, dot as _dot, matrix_product, matrix_times as _apply, to_principal
 from ._fusion import materialise, sum_last, when_any
 from ._inertia import InertiaTensor, through_principal_frame
-from ._precession import precessing, precession
+from ._precession import precessing, with_precession_derivatives
 from ._regimes import UNIFORM, classify, constants, evaluate, evaluate_once, orbit_constants
 from ._regimes import reference as regime_reference
 from ._uniform import uniform_momentum, uniform_spin
@@ -245,27 +245,6 @@ def _uniform_momentum(uniform, inertia, axes, momentum, t):
     return when_any(uniform, with_uniform, lambda momentum: jnp.broadcast_to(momentum, shape), momentum)
 
 
-def _precessing_momentum(band, inertia, axes, momentum, t, moving):
-    """``moving`` where the body does not take the precession branch (``_precession``: a symmetric body
-    next to the plane of its equal moments), the regular precession where it does."""
-
-    def with_precession(moving):
-        return jnp.where(band[..., None], precession(band, inertia, momentum, t, axes, attitude=False)[0], moving)
-
-    # Most batches have no such body: then nothing of the branch is evaluated.
-    return when_any(band, with_precession, lambda moving: moving, moving)
-
-
-def _precessing_attitude(band, inertia, axes, momentum, attitude, t, moving):
-    """``moving`` where the body does not take the precession branch, q0 ⊗ s(t) where it does."""
-
-    def with_precession(moving):
-        _, spin = precession(band, inertia, momentum, t, axes)
-        return jnp.where(band[..., None], quaternion.multiply(attitude, spin), moving)
-
-    return when_any(band, with_precession, lambda moving: moving, moving)
-
-
 def _uniform_attitude(uniform, inertia, axes, momentum, attitude, t, moving):
     """``moving`` where the body does not rotate uniformly, q0 ⊗ exp(t Omega0 / 2) where it does,
     with the derivatives of the motion (``_uniform``)."""
@@ -278,7 +257,7 @@ def _uniform_attitude(uniform, inertia, axes, momentum, attitude, t, moving):
     return when_any(uniform, with_uniform, lambda moving: moving, moving)
 
 
-def motion_once(inertia, angular_momentum, attitude, t, with_attitude=True, axes=None):
+def _motion_once(inertia, angular_momentum, attitude, t, with_attitude=True, axes=None):
     """(L(t), q(t)) (q None unless ``with_attitude``) of bodies evaluated at one time each.
 
     The one-time path (``_regimes.evaluate_once``): the per-body constants are elementwise formulas,
@@ -297,8 +276,6 @@ def motion_once(inertia, angular_momentum, attitude, t, with_attitude=True, axes
     axes = None if axes is None else jnp.broadcast_to(axes, inertia.shape + (3,))
     fixed = _uniform_momentum(uniform, inertia, axes, angular_momentum, t)
     momentum = jnp.where(uniform[..., None], fixed, moving)
-    band = precessing(inertia, axes, angular_momentum, uniform)
-    momentum = _precessing_momentum(band, inertia, axes, angular_momentum, t, momentum)
     if not with_attitude:
         return momentum, None
     # q = q0 ⊗ P ⊗ conj(q̂(0)) ⊗ q̂(tau) ⊗ conj(P) (docs/theory.md §8), where P ⊗ (w, v) ⊗ conj(P) =
@@ -307,8 +284,41 @@ def motion_once(inertia, angular_momentum, attitude, t, with_attitude=True, axes
     change = materialise(quaternion.multiply(quaternion.conjugate(chart_start), chart_now))
     change = jnp.concatenate([change[..., :1], _apply(permutation, change[..., 1:])], -1)
     moving = _normalised(materialise(quaternion.multiply(attitude, change)))
-    moving = _precessing_attitude(band, inertia, axes, angular_momentum, attitude, t, moving)
     return momentum, _uniform_attitude(uniform, inertia, axes, angular_momentum, attitude, t, moving)
+
+
+def _once_inputs(inertia, angular_momentum, attitude, t, with_attitude, axes):
+    """(inertia, axes, L0, unit q0, t) of ``motion_once``'s bodies, validated and broadcast."""
+    inertia, angular_momentum, attitude = _prepare(inertia, angular_momentum, attitude, axes)[:3]
+    axes = None if axes is None else jnp.broadcast_to(axes, inertia.shape + (3,))
+    return inertia, axes, angular_momentum, attitude, jnp.asarray(t, inertia.dtype)
+
+
+def _once_precessing(inertia, angular_momentum, attitude, t, with_attitude, axes):
+    prepared = _prepare(inertia, angular_momentum, attitude, axes)
+    axes = None if axes is None else jnp.broadcast_to(axes, prepared[0].shape + (3,))
+    return precessing(prepared[0], axes, prepared[1], prepared[-1] == UNIFORM)
+
+
+# A symmetric body next to the plane of its equal moments keeps the values of the elliptic formulas and
+# takes the derivatives of its regular precession's expansion (frbjax._precession).
+motion_once = with_precession_derivatives(
+    _motion_once, lambda with_attitude: "state" if with_attitude else "momentum alone", _once_precessing,
+    _once_inputs, nondiff_argnums=(4,))
+
+
+def _series_inputs(body, t):
+    return (body.inertia, body.principal_axes, body.initial_angular_momentum, body.initial_attitude,
+            jnp.asarray(t, body.inertia.dtype))
+
+
+def _series_precessing(body, t):
+    return body._precessing()
+
+
+def _precession_derivatives(outputs):
+    """For the evaluations of a FreeRigidBody through its series: ``with_precession_derivatives``."""
+    return lambda method: with_precession_derivatives(method, outputs, _series_precessing, _series_inputs)
 
 
 def _compiled(method):
@@ -380,11 +390,12 @@ class FreeRigidBody(eqx.Module):
     - the separatrix ($2 E I_2 = |L|^2$ exactly, rounding included): derivatives that keep the body on
       it are exact, the others miss the (finite) change of the elliptic parameter;
     - a symmetric body ($I_1 = I_2$ or $I_2 = I_3$ exactly) whose unit $L$ is within $1/8$ of the plane
-      of its equal moments but not in it: its regular precession, with its first-order neighbours off
-      the symmetric bodies (docs/theory.md §6), where the elliptic formulas' derivative in an unequal
-      change of the equal moments would lose digits as $10^{-16} / (e \cdot n)^2$.  Every first
-      derivative there is that of the motion; second derivatives too, except the one taken twice in the
-      unequal direction of the equal moments (the expansion is linear in it).
+      of its equal moments but not in it: the values are the elliptic formulas', the derivatives those
+      of its regular precession with its first-order neighbours off the symmetric bodies
+      (docs/theory.md §6; the elliptic formulas' derivative in an unequal change of the equal moments
+      would lose digits as $10^{-16} / (e \cdot n)^2$).  Every first derivative there is that of the
+      motion; second derivatives too, except the one taken twice in the unequal direction of the equal
+      moments (the expansion is linear in it).
 
     tests/test_gradients_body.py checks all of them against 32-digit (60 next to that plane) references.
     """
@@ -455,8 +466,6 @@ class FreeRigidBody(eqx.Module):
         moving = self.momentum_norm[..., None] * _apply(self.permutation, unit_working)
         fixed = _uniform_momentum(self._uniform(), self.inertia, self.principal_axes,
                                   self.initial_angular_momentum, t)
-        moving = _precessing_momentum(self._precessing(), self.inertia, self.principal_axes,
-                                      self.initial_angular_momentum, t, moving)
         return jnp.where(self._uniform()[..., None], jnp.broadcast_to(fixed, moving.shape), moving)
 
     def _attitude_from(self, t, tau, particular):
@@ -465,9 +474,6 @@ class FreeRigidBody(eqx.Module):
         # Three products and the chart leave |q| - 1 at up to ~20 ulp; renormalising costs little and
         # keeps |q| = 1 and rotation_matrix (which assumes it) at the ulp level.
         moving = _normalised(materialise(moving))
-        # A symmetric body next to the plane of its equal moments: the regular precession (_precession).
-        moving = _precessing_attitude(self._precessing(), self.inertia, self.principal_axes,
-                                      self.initial_angular_momentum, self.initial_attitude, t, moving)
         uniform = jnp.broadcast_to(self._uniform(), tau.shape)
         # Uniform rotation about a principal direction (or L = 0): q(t) = q0 ⊗ exp(t Omega0 / 2).
         return _uniform_attitude(uniform, self.inertia, self.principal_axes, self.initial_angular_momentum,
@@ -494,16 +500,19 @@ class FreeRigidBody(eqx.Module):
         return through_principal_frame(motion, evaluate, self.inertia_tensor, prepared,
                                        (self.initial_angular_momentum, self.initial_attitude, t))
 
+    @_precession_derivatives("momentum")
     def _angular_momentum(self, t):
         t, tau = self._time(t)
         unit_working, _ = evaluate(self._constants, tau, attitude=False)
         return self._momentum_from(t, unit_working)
 
+    @_precession_derivatives("attitude")
     def _quaternion(self, t):
         t, tau = self._time(t)
         particular, _ = evaluate(self._constants, tau)
         return self._attitude_from(t, tau, particular)
 
+    @_precession_derivatives("state")
     def _state(self, t):
         t, tau = self._time(t)
         particular, unit_working = evaluate(self._constants, tau)

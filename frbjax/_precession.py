@@ -21,22 +21,28 @@ $J w = (u \cdot w) u - (v \cdot w) v$, so $x(t) = F_1 + A F_2$ with the repeated
 $F_k = \int_0^t (t - s)^{k-1}/(k-1)!\, f(s)\, ds$ (``response_functions`` of $(2\nu t)^2$).  The
 attitude is $q(t) \otimes \exp(\varphi/2)$, $\varphi = Q \psi$: across $n = L_0/|L_0|$ the
 conservation of the angular momentum in space gives $\psi \times L_0 = -x$; along it
-$n \cdot \psi = \alpha\, n \cdot F_2 + (\gamma - \alpha)(n \cdot e)(e \cdot F_2) + \Delta \int_0^t
-n \cdot (\cos(2\nu s) J L_0 + \sin(2\nu s) e \times J L_0)\, ds$.
+$n \cdot \psi = (\gamma - \alpha)(n \cdot e)(e \cdot F_2) + \Delta \int_0^t
+n \cdot (\cos(2\nu s) J L_0 + \sin(2\nu s) e \times J L_0)\, ds$ ($f$ and $A$ map across $L_0$).
 
-The functions here are that first-order expansion off the symmetric bodies, written as ordinary
+``precession`` is that first-order expansion off the symmetric bodies, written as ordinary
 differentiable functions of the moments (their equal pair through its mean and $\Delta$), $L_0$, $t$
 and the axes: every derivative of first order is that of the motion, and so are those of second
-order except the one twice in the unequal direction (the expansion is linear in $\Delta$).
+order except the one twice in the unequal direction (the expansion is linear in $\Delta$).  Its
+values are those of the elliptic formulas (to rounding), so the bodies keep those values and take
+the expansion's derivatives only (``with_precession_derivatives``): evaluating costs nothing more.
 """
 
 from __future__ import annotations
 
+import functools
+
+import jax
 import jax.numpy as jnp
+from jax.custom_derivatives import SymbolicZero
 
 from . import _quaternion as quaternion
 from ._frame import dot, to_body
-from ._fusion import sum_last
+from ._fusion import sum_last, when_any
 from ._uniform import response_functions
 
 # Symmetric bodies whose unit L is closer than this to the plane of the equal moments take the
@@ -71,51 +77,139 @@ def precessing(inertia, axes, momentum, uniform):
 def precession(band, inertia, momentum, t, axes=None, attitude=True):
     """(L(t), s(t)) of the bodies in ``band`` (body frame; q(t) = q0 ⊗ s(t); s None unless
     ``attitude``): the module docstring's first-order expansion.  Other bodies get a stand-in (finite,
-    not to be used).  ``t`` broadcasts against the bodies' batch shape."""
+    not to be used).  ``t`` broadcasts against the bodies' batch shape.
+
+    Written in components along (u, v, e) (a right-handed frame per body), where J L0 = (l_u, -l_v, 0),
+    L0 x J L0 = (l_e l_v, l_e l_u, -2 l_u l_v), L0 x (e x J L0) = (-l_e l_u, l_e l_v, l_u^2 - l_v^2) and
+    L0 x e = (l_v, -l_u, 0): scalars over bodies and times, a few fused loops with their derivatives."""
     dtype = inertia.dtype
     inertia = jnp.where(band[..., None], inertia, jnp.asarray(_SAFE_INERTIA, dtype))
     momentum = jnp.where(band[..., None], momentum, jnp.asarray(_SAFE_MOMENTUM, dtype))
     odd = _odd_axis(inertia).astype(dtype)
-    first, second = jnp.roll(odd, 1, -1), jnp.roll(odd, 2, -1)
+    first, second = jnp.roll(odd, 1, -1), jnp.roll(odd, 2, -1)  # (u, v, e) cyclic: right-handed
     axis, u, v = (to_body(axes, w) for w in (odd, first, second))
-    equal = sum_last((1 - odd) * inertia) / 2  # the mean of the equal pair: exact in value
-    alpha, gamma = 1 / equal, 1 / sum_last(odd * inertia)
+    alpha = 2 / sum_last((1 - odd) * inertia)  # 1 / the equal pair's mean (exact in value)
+    gap = 1 / sum_last(odd * inertia) - alpha
     # (1/I_u - 1/I_v)/2: zero in value, the unequal change of the pair in its tangent.
     unequal = (sum_last(first / inertia) - sum_last(second / inertia)) / 2
+    l_u, l_v, l_e = dot(u, momentum), dot(v, momentum), dot(axis, momentum)
+    size = jnp.sqrt(l_u * l_u + l_v * l_v + l_e * l_e)
 
-    t = jnp.asarray(t, dtype)[..., None]
-    gap = (gamma - alpha)[..., None]
-    along = dot(axis, momentum)[..., None]
-    rate = gap * along  # nu
-    angle = rate * t
-    cosine, sine = jnp.cos(angle), jnp.sin(angle)
+    # Functions of time: Q(t) turns by -nu t about e; the repeated integrals of cos and sin(2 nu s).
+    t = jnp.asarray(t, dtype)
+    half = gap * l_e * t / 2
+    half_cosine, half_sine = jnp.cos(half), jnp.sin(half)
+    cosine, sine = 1 - 2 * half_sine * half_sine, 2 * half_sine * half_cosine  # of nu t
+    double = 4 * half  # 2 nu t
+    f1, f2, f3, _ = response_functions(double * double, oscillating=True)
+    once_cosine, once_sine = t * f1, t * double * f2  # F1 = once_cosine f_c + once_sine f_s
+    twice_cosine, twice_sine = t * t * f2, t * t * double * f3  # F2 likewise
+    # x = F1 + A F2 = F1 + (e . F2) gap L0 x e, f_c = unequal L0 x J L0, f_s = unequal L0 x (e x J L0).
+    along_twice = unequal * (twice_sine * (l_u * l_u - l_v * l_v) - 2 * twice_cosine * l_u * l_v)  # e . F2
+    drift = gap * along_twice
+    x_u = unequal * l_e * (once_cosine * l_v - once_sine * l_u) + drift * l_v
+    x_v = unequal * l_e * (once_cosine * l_u + once_sine * l_v) - drift * l_u
+    x_e = unequal * (once_sine * (l_u * l_u - l_v * l_v) - 2 * once_cosine * l_u * l_v)
 
-    def turned(w):  # Q(t) w: by -nu t about the symmetry axis
-        w_along = dot(axis, w)[..., None]
-        w_across = w - w_along * axis
-        return w_along * axis + cosine * w_across - sine * jnp.cross(axis, w_across)
+    def turned(w_u, w_v, w_e):
+        """Q(t) w in the body frame from w's components along (u, v, e)."""
+        return ((cosine * w_u + sine * w_v)[..., None] * u + (cosine * w_v - sine * w_u)[..., None] * v
+                + w_e[..., None] * axis)
 
-    reflected = dot(u, momentum)[..., None] * u - dot(v, momentum)[..., None] * v  # J L0
-    spun = jnp.cross(axis, reflected)
-    unequal = unequal[..., None]
-    cosine_forcing = unequal * jnp.cross(momentum, reflected)
-    sine_forcing = unequal * jnp.cross(momentum, spun)
-    double = 2 * angle
-    f1, f2, f3, _ = response_functions(double * double)
-    once = t * (f1 * cosine_forcing + double * f2 * sine_forcing)  # F1
-    twice = t * t * (f2 * cosine_forcing + double * f3 * sine_forcing)  # F2
-    across_axis = jnp.cross(momentum, axis)
-    response = once + gap * dot(axis, twice)[..., None] * across_axis  # x = F1 + A F2
-    angular_momentum = turned(momentum + response)
+    angular_momentum = turned(l_u + x_u, l_v + x_v, l_e + x_e)
     if not attitude:
         return angular_momentum, None
 
-    size = jnp.sqrt(sum_last(momentum * momentum))[..., None]
-    unit = momentum / size
-    perpendicular = -jnp.cross(unit, response) / size
-    parallel = (alpha[..., None] * dot(unit, twice)[..., None] + gap * dot(unit, axis)[..., None] * dot(axis, twice)[..., None]
-                + unequal * t * (f1 * dot(unit, reflected)[..., None] + double * f2 * dot(unit, spun)[..., None]))
-    turn = turned(perpendicular + parallel * unit)
-    spin = quaternion.multiply(quaternion.exp_pure(t * alpha[..., None] * momentum), quaternion.exp_pure(angle * axis))
-    half_turn = jnp.concatenate([jnp.zeros_like(turn[..., :1]), turn / 2], -1)
-    return angular_momentum, spin + quaternion.multiply(spin, half_turn)
+    # psi = -n x x / |L0| + (n . psi) n (n . F2 = n . x = 0: f_c, f_s and L0 x e are across L0).
+    n_u, n_v, n_e = l_u / size, l_v / size, l_e / size
+    parallel = gap * n_e * along_twice + unequal * (once_cosine * (l_u * l_u - l_v * l_v)
+                                                    + 2 * once_sine * l_u * l_v) / size
+    psi_u = -(n_v * x_e - n_e * x_v) / size + parallel * n_u
+    psi_v = -(n_e * x_u - n_u * x_e) / size + parallel * n_v
+    psi_e = -(n_u * x_v - n_v * x_u) / size + parallel * n_e
+    # s(t) = exp(t alpha L0 / 2) ⊗ exp(nu t e / 2) in (u, v, e) components, then s ⊗ (1, phi / 2).
+    spin_angle = alpha * size * t / 2
+    spin_cosine, spin_sine = jnp.cos(spin_angle), jnp.sin(spin_angle)
+    crossed = spin_sine * half_sine  # coefficient of n x e = (n_v, -n_u, 0)
+    s_w = spin_cosine * half_cosine - crossed * n_e
+    s_u = spin_sine * half_cosine * n_u + crossed * n_v
+    s_v = spin_sine * half_cosine * n_v - crossed * n_u
+    s_e = spin_cosine * half_sine + spin_sine * half_cosine * n_e
+    # phi = Q psi, taken along (u, v, e) (the frame of s's components) and halved.
+    p_u, p_v, p_e = (cosine * psi_u + sine * psi_v) / 2, (cosine * psi_v - sine * psi_u) / 2, psi_e / 2
+    w = s_w - (s_u * p_u + s_v * p_v + s_e * p_e)
+    c_u = s_u + s_w * p_u + (s_v * p_e - s_e * p_v)
+    c_v = s_v + s_w * p_v + (s_e * p_u - s_u * p_e)
+    c_e = s_e + s_w * p_e + (s_u * p_v - s_v * p_u)
+    vector = c_u[..., None] * u + c_v[..., None] * v + c_e[..., None] * axis
+    return angular_momentum, jnp.concatenate([w[..., None], vector], -1)
+
+
+def _jvp(function, primals, tangents):
+    """jax.jvp over the arguments whose tangents are not symbolic zeros (the others held fixed), so that
+    a derivative in t alone does not differentiate a prebuilt body's per-body data."""
+    leaves, tree = jax.tree.flatten(primals)
+    tangent_leaves = jax.tree.leaves(tangents, is_leaf=lambda leaf: isinstance(leaf, SymbolicZero))
+    moved = [k for k, tangent in enumerate(tangent_leaves) if not isinstance(tangent, SymbolicZero)]
+
+    def of_moved(*values):
+        arguments = list(leaves)
+        for k, value in zip(moved, values):
+            arguments[k] = value
+        return function(*jax.tree.unflatten(tree, arguments))
+
+    if not moved:
+        value = function(*primals)
+        return value, jax.tree.map(jnp.zeros_like, value)
+    return jax.jvp(of_moved, [leaves[k] for k in moved], [tangent_leaves[k] for k in moved])
+
+
+def _expansion(band, outputs):
+    """(inertia, axes, momentum, attitude, t) -> ``outputs`` of the expansion: "momentum" L(t),
+    "attitude" q0 ⊗ s(t), "state" both, "momentum alone" (L(t), None)."""
+
+    def evaluate(inertia, axes, momentum, attitude, t):
+        angular_momentum, spin = precession(band, inertia, momentum, t, axes, attitude=outputs != "momentum")
+        if outputs == "momentum":
+            return angular_momentum
+        if outputs == "momentum alone":
+            return angular_momentum, None
+        attitude = quaternion.multiply(attitude, spin)
+        return attitude if outputs == "attitude" else (angular_momentum, attitude)
+
+    return evaluate
+
+
+def with_precession_derivatives(function, outputs, band_of, inputs_of, nondiff_argnums=()):
+    """``function`` with its own values and, for the bodies in ``band_of(*args)`` (a per-body mask), the
+    derivatives of the expansion at ``inputs_of(*args)`` = (inertia, axes, momentum, attitude, t)
+    instead of its own: a custom JVP, so that evaluating costs nothing more.  ``outputs`` says what
+    ``function`` returns (see ``_expansion``), or gives it from the nondiff arguments."""
+    wrapped = jax.custom_jvp(function, nondiff_argnums=nondiff_argnums)
+
+    def rule(*arguments):
+        static, (primals, tangents) = arguments[:-2], arguments[-2:]
+        everything = _merge(static, primals, nondiff_argnums)
+        value, tangent = _jvp(lambda *moving: function(*_merge(static, moving, nondiff_argnums)), primals, tangents)
+        band = band_of(*everything)
+        kind = outputs(*static) if callable(outputs) else outputs
+
+        def along_precession(tangent):
+            inputs, d_inputs = _jvp(lambda *moving: inputs_of(*_merge(static, moving, nondiff_argnums)),
+                                    primals, tangents)
+            _, precessing = jax.jvp(_expansion(band, kind), inputs, d_inputs)
+            return jax.tree.map(lambda new, old: jnp.where(band[..., None], new, old), precessing, tangent)
+
+        # Most batches have no such body: then the expansion is not evaluated at all.
+        return value, when_any(band, along_precession, lambda tangent: tangent, tangent)
+
+    wrapped.defjvp(rule, symbolic_zeros=True)
+    return functools.wraps(function)(lambda *arguments: wrapped(*arguments))
+
+
+def _merge(static, moving, positions):
+    """The full argument list from the nondiff arguments (at ``positions``) and the others."""
+    arguments, static, moving = [], list(static), list(moving)
+    for k in range(len(static) + len(moving)):
+        arguments.append(static.pop(0) if k in positions else moving.pop(0))
+    return arguments

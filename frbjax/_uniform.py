@@ -51,13 +51,13 @@ _SERIES_TERMS = 14
 _LARGEST_GROWTH = 700.0
 
 
-def response_functions(y):
+def response_functions(y, oscillating=False):
     """(f1, f2, f3, f4)(y) = sum_k (-y)^k / (2k + j)!, j = 1, 2, 3, 4: at x = sqrt(y), sin x / x,
     (1 - cos x) / x^2, (x - sin x) / x^3 and (x^2/2 - 1 + cos x) / x^4 (sinh and cosh of sqrt(-y)
     for y < 0; DLMF 4.19.1-2, 4.33.1-2).  With x = w t they give the repeated integrals of cos(w s)
     and sin(w s) over [0, t] that the variational solutions (here and in ``_precession``) need, without
-    dividing by a small w."""
-    growing = y < 0
+    dividing by a small w.  ``oscillating``: y >= 0 is known (the sinh branch is not evaluated)."""
+    growing = jnp.zeros_like(y, bool) if oscillating else y < 0
 
     def taylor(j):
         terms = [(-1) ** k / math.factorial(2 * k + j) for k in range(_SERIES_TERMS)]
@@ -68,8 +68,11 @@ def response_functions(y):
 
     # Safe-where: the closed forms see only |y| >= 1 (the series cover the rest).
     x = jnp.sqrt(jnp.where(jnp.abs(y) < 1, 1, jnp.where(growing, jnp.minimum(-y, _LARGEST_GROWTH**2), y)))
-    sin_x = jnp.where(growing, jnp.sinh(x), jnp.sin(x))
-    half = jnp.where(growing, jnp.sinh(x / 2), jnp.sin(x / 2))
+    if oscillating:
+        sin_x, half = jnp.sin(x), jnp.sin(x / 2)
+    else:
+        sin_x = jnp.where(growing, jnp.sinh(x), jnp.sin(x))
+        half = jnp.where(growing, jnp.sinh(x / 2), jnp.sin(x / 2))
     half_squared = x * x / 2
     closed = (sin_x / x, 2 * half * half / (x * x), jnp.where(growing, sin_x - x, x - sin_x) / (x * x * x),
               jnp.where(growing, 2 * half * half - half_squared, half_squared - 2 * half * half) / (x * x * x * x))
