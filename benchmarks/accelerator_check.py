@@ -43,13 +43,15 @@ def bodies(rng, n):
     """The throughput benchmark's n random bodies, then the hard ones below."""
     inertia, momentum, attitude = random_bodies(rng, n)
     hard_inertia = np.array([[1.0, 2.0, 3.0]] * 4 + [[1.0, 1.0 + 1e-12, 3.0], [1.0, 2.0, 3.0], [2.0, 2.0, 2.0],
-                                                     [1.0, 2.0, 3.0]])
+                                                     [1.0, 2.0, 3.0], [1.2, 1.2, 2.1], [0.7, 1.9, 1.9]])
     # For I = (1, 2, 3) the separatrix is L3 = sqrt(3) L1: relative 1e-10 off it on both sides, on it
     # (within rounding), then spin near the major axis, a nearly symmetric body, uniform rotation
-    # about an axis, a sphere, L = 0.
+    # about an axis, a sphere, L = 0, and two symmetric bodies next to the plane of their equal
+    # moments (their derivatives are the precession's, frbjax._precession).
     on = 0.5 * np.sqrt(3.0)
     hard_momentum = np.array([[0.5, 1.0, on * (1 + 1e-10)], [0.5, 1.0, on * (1 - 1e-10)], [0.5, 1.0, on],
-                              [1.0, 1e-9, 1e-9], [0.3, 0.4, 0.5], [0.0, 1.0, 0.0], [0.3, 0.4, 0.5], [0.0, 0.0, 0.0]])
+                              [1.0, 1e-9, 1e-9], [0.3, 0.4, 0.5], [0.0, 1.0, 0.0], [0.3, 0.4, 0.5], [0.0, 0.0, 0.0],
+                              [0.6, 0.8, 1e-3], [-2e-3, 0.5, 0.9]])
     hard_attitude = np.tile([1.0, 0.0, 0.0, 0.0], (len(hard_inertia), 1))
     return (np.concatenate([inertia, hard_inertia]), np.concatenate([momentum, hard_momentum]),
             np.concatenate([attitude, hard_attitude]))

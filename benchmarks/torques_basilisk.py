@@ -41,6 +41,10 @@ runs the script; say which when quoting.
 
 Usage: python benchmarks/torques_basilisk.py [--quick] [--parts basilisk energy debris]
        [--without-basilisk] [--output-dir DIR] [--repeats N]
+       python benchmarks/torques_basilisk.py --parts batch [--batch-bodies N]   # e.g. on a GPU
+
+``--parts batch`` runs the batch rows alone on JAX's default device (a GPU where there is one), at the
+one-body settings recorded in benchmarks/results/torques_basilisk.json, into torques_batch_<backend>.json.
 """
 
 from __future__ import annotations
@@ -554,11 +558,37 @@ def plot_debris(results, path):
 # ----------------------------------------------------------------------------------------- main
 
 
+def batch_part(repeats, bodies, source):
+    """The batch rows alone, on JAX's default device (a GPU where there is one): each problem's fastest
+    methods of ``source`` (a torques_basilisk.json) at their one-body settings, ``bodies`` satellites.
+    Basilisk's one-body time is quoted from ``source``, which says the machine it ran on."""
+    recorded = json.loads(Path(source).read_text())
+    results = {"final_time": recorded["final_time"], "target_error": TARGET_ERROR, "bodies_in_batch": bodies,
+               "source": str(source), "source_machine": recorded["machine"], "problems": {}}
+    for name, damped in (("damped", True), ("undamped", False)):
+        entry = recorded["problems"][name]
+        term = satellite_term(damped)
+        rk, splitting = frbjax_programs(term, recorded["final_time"])
+        rows = {}
+        for kind, fastest in entry["fastest_at_target"].items():
+            if kind.startswith("frbjax") and fastest and not (damped and kind == "frbjax splitting"):
+                rows[fastest[1]] = batch(term, rk, splitting, entry, fastest[1], bodies, repeats)
+        basilisk = entry["fastest_at_target"].get("Basilisk")
+        per_body = min(row["seconds_per_body"] for row in rows.values())
+        results["problems"][name] = {
+            "batch": rows, "fastest_seconds_per_body_in_batch": per_body,
+            "basilisk_one_body_seconds_from_source": basilisk[0] if basilisk else None,
+            "basilisk_over_frbjax_per_body_batch": basilisk[0] / per_body if basilisk else None}
+        print(f"{name}: {results['problems'][name]}", flush=True)
+    return results
+
+
 def main(argv=None):
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--quick", action="store_true", help="smoke test: small sizes")
     parser.add_argument("--parts", nargs="+", default=["basilisk", "energy", "debris"],
-                        choices=["basilisk", "energy", "debris"])
+                        choices=["basilisk", "energy", "debris", "batch"])
+    parser.add_argument("--batch-bodies", type=int, default=1024, help="the batch part's satellites")
     parser.add_argument("--without-basilisk", action="store_true", help="leave Basilisk's rows out")
     parser.add_argument("--repeats", type=int, default=3)
     parser.add_argument("--debris-days", type=float, default=YEAR / DAY, help="the debris run's length")
@@ -580,6 +610,10 @@ def main(argv=None):
         results = dict(basilisk_part(args.quick, args.repeats, with_basilisk), machine=machine)
         (args.output_dir / "torques_basilisk.json").write_text(json.dumps(results, indent=1) + "\n")
         plot_basilisk(results, args.output_dir / "torques_basilisk.png")
+    if "batch" in args.parts:
+        results = dict(batch_part(args.repeats, args.batch_bodies, RESULTS / "torques_basilisk.json"),
+                       machine=dict(machine, backend=jax.default_backend(), device_kind=jax.devices()[0].device_kind))
+        (args.output_dir / f"torques_batch_{jax.default_backend()}.json").write_text(json.dumps(results, indent=1) + "\n")
     if "energy" in args.parts:
         results = dict(energy_part(args.quick, args.repeats), machine=machine)
         (args.output_dir / "torques_energy.json").write_text(json.dumps(results) + "\n")
