@@ -123,12 +123,12 @@ def forward_throughput(n_bodies, repeats, single_precision=False):
             return jax.vmap(one)(inertia, momentum, attitude)
         return run
 
-    def timed(function):
-        jax.block_until_ready(function(*args))
+    def timed(function, arguments=args):
+        jax.block_until_ready(function(*arguments))
         best = math.inf
         for _ in range(repeats):
             start = time.perf_counter()
-            jax.block_until_ready(function(*args))
+            jax.block_until_ready(function(*arguments))
             best = min(best, time.perf_counter() - start)
         return best
 
@@ -157,12 +157,7 @@ def forward_throughput(n_bodies, repeats, single_precision=False):
             return brightness(FreeRigidBody(inertia, momentum, attitude), single_shape, times, sun, observer)
 
         flux = np.asarray(exact_single(*single_args), np.float64)
-        jax.block_until_ready(exact_single(*single_args))
-        best = math.inf
-        for _ in range(repeats):
-            start = time.perf_counter()
-            jax.block_until_ready(exact_single(*single_args))
-            best = min(best, time.perf_counter() - start)
+        best = timed(exact_single, single_args)
         single = {"float32_seconds": best, "float32_samples_per_second": samples / best,
                   "float32_max_relative_flux_difference": float(np.max(np.abs(flux / reference - 1))),
                   "float32_median_relative_flux_difference": float(np.median(np.abs(flux / reference - 1)))}
