@@ -393,7 +393,7 @@ class FreeRigidBody(eqx.Module):
       of its equal moments but not in it: the values are the elliptic formulas', the derivatives those
       of its regular precession with its first-order neighbours off the symmetric bodies
       (docs/theory.md §6; the elliptic formulas' derivative in an unequal change of the equal moments
-      would lose digits as $10^{-16} / (e \cdot n)^2$).  Every first derivative there is that of the
+      would lose digits as $10^{-16} / (e \cdot n)^2$, in a change of $e \cdot n$ as $10^{-16} / (e \cdot n)$).  Every first derivative there is that of the
       motion; second derivatives too, except the one taken twice in the unequal direction of the equal
       moments (the expansion is linear in it).
 

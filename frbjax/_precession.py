@@ -9,7 +9,8 @@ $$L(t) = Q(t)\, L_0, \qquad q(t) = q_0 \otimes \exp(t \alpha L_0 / 2) \otimes \e
 $Q(t)$ the rotation by $-\nu t$ about $e$ ($\Omega = \alpha L + \nu e$).  The elliptic formulas give the
 same motion ($m = 0$), but where $L_0$ is close to the plane of the equal moments their derivative in
 an unequal change of those moments, $\delta I_u = -\delta I_v$, is the difference of terms
-$1/(e \cdot n)^2$ larger than itself.  Here that derivative is the solution of the variational
+$1/(e \cdot n)^2$ larger than itself (and the one in a change of $e \cdot n$ loses about
+$10^{-16} / (e \cdot n)$).  Here that derivative is the solution of the variational
 equations of the precession, linear with coefficients that are constant in the frame that turns with
 $Q$: with $x = Q^{\mathsf T} \delta L$ and $\Delta = (1/I_u - 1/I_v)/2$ (zero in value, its tangent the
 change),
