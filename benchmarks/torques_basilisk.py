@@ -313,25 +313,33 @@ def basilisk_part(quick, repeats, with_basilisk):
         frbjax_best = min((f for k, f in fastest.items() if k.startswith("frbjax") and f), default=None)
         entry["basilisk_over_frbjax_one_body"] = (fastest["Basilisk"][0] / frbjax_best[0]
                                                   if frbjax_best and fastest["Basilisk"] else None)
-        entry["batch"] = {}
-        for kind in ("frbjax splitting", "frbjax diffrax"):
-            if kind == "frbjax splitting" and damped and not quick:
-                # Its matrix-exponential kicks cost about 100 us a step per body in a batch too
-                # (measured with 64 bodies): minutes for 1024, and one body's Tsit5 is faster anyway.
-                entry["batch_splitting"] = "left out: the exact damping kicks cost as much per body in a batch"
-                continue
-            if fastest[kind]:
-                entry["batch"][fastest[kind][1]] = batch(term, rk, splitting, entry, fastest[kind][1], bodies, repeats)
-        if entry["batch"]:
-            per_body = min(run["seconds_per_body"] for run in entry["batch"].values())
-            entry["fastest_seconds_per_body_in_batch"] = per_body
-            entry["basilisk_over_frbjax_per_body_batch"] = (fastest["Basilisk"][0] / per_body
-                                                            if fastest["Basilisk"] else None)
+        entry.update(batch_rows(term, rk, splitting, entry, damped, quick, bodies, repeats))
         print(f"  {name}: fastest at {TARGET_ERROR:g}: {fastest}; Basilisk / frbjax one body "
               f"{entry['basilisk_over_frbjax_one_body']}, per body in a batch "
               f"{entry.get('basilisk_over_frbjax_per_body_batch')}", flush=True)
         results["problems"][name] = entry
     return results
+
+
+def batch_rows(term, rk, splitting, entry, damped, quick, bodies, repeats):
+    """The batch rows of one problem: its fastest frbjax methods at ``entry``'s one-body settings, and
+    the per-body time against Basilisk's one body."""
+    fastest = entry["fastest_at_target"]
+    rows = {"batch": {}}
+    for kind in ("frbjax splitting", "frbjax diffrax"):
+        if kind == "frbjax splitting" and damped and not quick:
+            # Its matrix-exponential kicks cost about 100 us a step per body in a batch too
+            # (measured with 64 bodies): minutes for 1024, and one body's Tsit5 is faster anyway.
+            rows["batch_splitting"] = "left out: the exact damping kicks cost as much per body in a batch"
+            continue
+        if fastest[kind]:
+            rows["batch"][fastest[kind][1]] = batch(term, rk, splitting, entry, fastest[kind][1], bodies, repeats)
+    if rows["batch"]:
+        per_body = min(run["seconds_per_body"] for run in rows["batch"].values())
+        rows["fastest_seconds_per_body_in_batch"] = per_body
+        rows["basilisk_over_frbjax_per_body_batch"] = (fastest["Basilisk"][0] / per_body
+                                                       if fastest["Basilisk"] else None)
+    return rows
 
 
 def batch(term, rk, splitting, entry, method, bodies, repeats):
@@ -559,9 +567,9 @@ def plot_debris(results, path):
 
 
 def batch_part(repeats, bodies, source):
-    """The batch rows alone, on JAX's default device (a GPU where there is one): each problem's fastest
-    methods of ``source`` (a torques_basilisk.json) at their one-body settings, ``bodies`` satellites.
-    Basilisk's one-body time is quoted from ``source``, which says the machine it ran on."""
+    """The batch rows alone (``batch_rows``), on JAX's default device (a GPU where there is one), at the
+    one-body settings of ``source`` (a torques_basilisk.json); Basilisk's one-body time is quoted from
+    ``source``, which says the machine it ran on."""
     recorded = json.loads(Path(source).read_text())
     results = {"final_time": recorded["final_time"], "target_error": TARGET_ERROR, "bodies_in_batch": bodies,
                "source": str(source), "source_machine": recorded["machine"], "problems": {}}
@@ -569,16 +577,7 @@ def batch_part(repeats, bodies, source):
         entry = recorded["problems"][name]
         term = satellite_term(damped)
         rk, splitting = frbjax_programs(term, recorded["final_time"])
-        rows = {}
-        for kind, fastest in entry["fastest_at_target"].items():
-            if kind.startswith("frbjax") and fastest and not (damped and kind == "frbjax splitting"):
-                rows[fastest[1]] = batch(term, rk, splitting, entry, fastest[1], bodies, repeats)
-        basilisk = entry["fastest_at_target"].get("Basilisk")
-        per_body = min(row["seconds_per_body"] for row in rows.values())
-        results["problems"][name] = {
-            "batch": rows, "fastest_seconds_per_body_in_batch": per_body,
-            "basilisk_one_body_seconds_from_source": basilisk[0] if basilisk else None,
-            "basilisk_over_frbjax_per_body_batch": basilisk[0] / per_body if basilisk else None}
+        results["problems"][name] = batch_rows(term, rk, splitting, entry, damped, False, bodies, repeats)
         print(f"{name}: {results['problems'][name]}", flush=True)
     return results
 

@@ -287,14 +287,14 @@ def _motion_once(inertia, angular_momentum, attitude, t, with_attitude=True, axe
     return momentum, _uniform_attitude(uniform, inertia, axes, angular_momentum, attitude, t, moving)
 
 
-def _once_inputs(inertia, angular_momentum, attitude, t, with_attitude, axes):
+def _once_inputs(inertia, angular_momentum, attitude, t, axes):
     """(inertia, axes, L0, unit q0, t) of ``motion_once``'s bodies, validated and broadcast."""
     inertia, angular_momentum, attitude = _prepare(inertia, angular_momentum, attitude, axes)[:3]
     axes = None if axes is None else jnp.broadcast_to(axes, inertia.shape + (3,))
     return inertia, axes, angular_momentum, attitude, jnp.asarray(t, inertia.dtype)
 
 
-def _once_precessing(inertia, angular_momentum, attitude, t, with_attitude, axes):
+def _once_precessing(inertia, angular_momentum, attitude, t, axes):
     prepared = _prepare(inertia, angular_momentum, attitude, axes)
     axes = None if axes is None else jnp.broadcast_to(axes, prepared[0].shape + (3,))
     return precessing(prepared[0], axes, prepared[1], prepared[-1] == UNIFORM)
@@ -302,9 +302,19 @@ def _once_precessing(inertia, angular_momentum, attitude, t, with_attitude, axes
 
 # A symmetric body next to the plane of its equal moments keeps the values of the elliptic formulas and
 # takes the derivatives of its regular precession's expansion (frbjax._precession).
-motion_once = with_precession_derivatives(
-    _motion_once, lambda with_attitude: "state" if with_attitude else "momentum alone", _once_precessing,
-    _once_inputs, nondiff_argnums=(4,))
+_state_at_one_time = with_precession_derivatives(
+    lambda inertia, momentum, attitude, t, axes: _motion_once(inertia, momentum, attitude, t, True, axes),
+    "state", _once_precessing, _once_inputs)
+_momentum_at_one_time = with_precession_derivatives(
+    lambda inertia, momentum, attitude, t, axes: _motion_once(inertia, momentum, attitude, t, False, axes),
+    "momentum alone", _once_precessing, _once_inputs)
+
+
+def motion_once(inertia, angular_momentum, attitude, t, with_attitude=True, axes=None):
+    """``_motion_once`` with the derivatives of ``_precession`` for the bodies next to the plane of
+    their equal moments."""
+    motion = _state_at_one_time if with_attitude else _momentum_at_one_time
+    return motion(inertia, angular_momentum, attitude, t, axes)
 
 
 def _series_inputs(body, t):
@@ -393,9 +403,10 @@ class FreeRigidBody(eqx.Module):
       of its equal moments but not in it: the values are the elliptic formulas', the derivatives those
       of its regular precession with its first-order neighbours off the symmetric bodies
       (docs/theory.md §6; the elliptic formulas' derivative in an unequal change of the equal moments
-      would lose digits as $10^{-16} / (e \cdot n)^2$, in a change of $e \cdot n$ as $10^{-16} / (e \cdot n)$).  Every first derivative there is that of the
-      motion; second derivatives too, except the one taken twice in the unequal direction of the equal
-      moments (the expansion is linear in it).
+      would lose digits as $10^{-16} / (e \cdot n)^2$, in a change of $e \cdot n$ as
+      $10^{-16} / (e \cdot n)$).  Every first derivative there is that of the motion; second
+      derivatives too, except the one taken twice in the unequal direction of the equal moments (the
+      expansion is linear in it).
 
     tests/test_gradients_body.py checks all of them against 32-digit (60 next to that plane) references.
     """

@@ -102,7 +102,7 @@ def precession(band, inertia, momentum, t, axes=None, attitude=True):
     half_cosine, half_sine = jnp.cos(half), jnp.sin(half)
     cosine, sine = 1 - 2 * half_sine * half_sine, 2 * half_sine * half_cosine  # of nu t
     double = 4 * half  # 2 nu t
-    f1, f2, f3, _ = response_functions(double * double, oscillating=True)
+    f1, f2, f3 = response_functions(double * double)
     once_cosine, once_sine = t * f1, t * double * f2  # F1 = once_cosine f_c + once_sine f_s
     twice_cosine, twice_sine = t * t * f2, t * t * double * f3  # F2 likewise
     # x = F1 + A F2 = F1 + (e . F2) gap L0 x e, f_c = unequal L0 x J L0, f_s = unequal L0 x (e x J L0).
@@ -170,7 +170,8 @@ def _expansion(band, outputs):
     "attitude" q0 ⊗ s(t), "state" both, "momentum alone" (L(t), None)."""
 
     def evaluate(inertia, axes, momentum, attitude, t):
-        angular_momentum, spin = precession(band, inertia, momentum, t, axes, attitude=outputs != "momentum")
+        with_attitude = outputs in ("attitude", "state")
+        angular_momentum, spin = precession(band, inertia, momentum, t, axes, attitude=with_attitude)
         if outputs == "momentum":
             return angular_momentum
         if outputs == "momentum alone":
@@ -181,36 +182,26 @@ def _expansion(band, outputs):
     return evaluate
 
 
-def with_precession_derivatives(function, outputs, band_of, inputs_of, nondiff_argnums=()):
+def with_precession_derivatives(function, outputs, band_of, inputs_of):
     """``function`` with its own values and, for the bodies in ``band_of(*args)`` (a per-body mask), the
     derivatives of the expansion at ``inputs_of(*args)`` = (inertia, axes, momentum, attitude, t)
     instead of its own: a custom JVP, so that evaluating costs nothing more.  ``outputs`` says what
-    ``function`` returns (see ``_expansion``), or gives it from the nondiff arguments."""
-    wrapped = jax.custom_jvp(function, nondiff_argnums=nondiff_argnums)
+    ``function`` returns (see ``_expansion``)."""
+    wrapped = jax.custom_jvp(function)
 
-    def rule(*arguments):
-        static, (primals, tangents) = arguments[:-2], arguments[-2:]
-        everything = _merge(static, primals, nondiff_argnums)
-        value, tangent = _jvp(lambda *moving: function(*_merge(static, moving, nondiff_argnums)), primals, tangents)
-        band = band_of(*everything)
-        kind = outputs(*static) if callable(outputs) else outputs
+    def rule(primals, tangents):
+        value, tangent = _jvp(function, primals, tangents)
+        band = band_of(*primals)
 
         def along_precession(tangent):
-            inputs, d_inputs = _jvp(lambda *moving: inputs_of(*_merge(static, moving, nondiff_argnums)),
-                                    primals, tangents)
-            _, precessing = jax.jvp(_expansion(band, kind), inputs, d_inputs)
+            inputs, d_inputs = _jvp(inputs_of, primals, tangents)
+            _, precessing = jax.jvp(_expansion(band, outputs), inputs, d_inputs)
             return jax.tree.map(lambda new, old: jnp.where(band[..., None], new, old), precessing, tangent)
 
         # Most batches have no such body: then the expansion is not evaluated at all.
         return value, when_any(band, along_precession, lambda tangent: tangent, tangent)
 
     wrapped.defjvp(rule, symbolic_zeros=True)
+    # A plain function, not the custom_jvp object: as a class attribute it must bind as a method.
     return functools.wraps(function)(lambda *arguments: wrapped(*arguments))
 
-
-def _merge(static, moving, positions):
-    """The full argument list from the nondiff arguments (at ``positions``) and the others."""
-    arguments, static, moving = [], list(static), list(moving)
-    for k in range(len(static) + len(moving)):
-        arguments.append(static.pop(0) if k in positions else moving.pop(0))
-    return arguments

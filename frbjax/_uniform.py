@@ -43,21 +43,17 @@ from ._frame import angular_velocity, matrix_product, matrix_times, to_body, to_
 from ._fusion import sum_last
 
 # |kappa t^2| below which each function is its Taylor series: where the closed forms lose more than
-# a few ulp to cancellation (x - sin x for x < 2, x^2/2 - 2 sin^2(x/2) for x < 4) and the series do
-# not (terms to (-y)^13 / 31!).
-_SERIES_LIMITS = (1.0, 1.0, 4.0, 16.0)
+# a few ulp to cancellation (x - sin x for x < 2) and the series do not (terms to (-y)^13 / 29!).
+_SERIES_LIMITS = (1.0, 1.0, 4.0)
 _SERIES_TERMS = 14
 # cosh and sinh of more overflow; derivatives of an unstable spin that large (e^700) saturate there.
 _LARGEST_GROWTH = 700.0
 
 
-def response_functions(y, oscillating=False):
-    """(f1, f2, f3, f4)(y) = sum_k (-y)^k / (2k + j)!, j = 1, 2, 3, 4: at x = sqrt(y), sin x / x,
-    (1 - cos x) / x^2, (x - sin x) / x^3 and (x^2/2 - 1 + cos x) / x^4 (sinh and cosh of sqrt(-y)
-    for y < 0; DLMF 4.19.1-2, 4.33.1-2).  With x = w t they give the repeated integrals of cos(w s)
-    and sin(w s) over [0, t] that the variational solutions (here and in ``_precession``) need, without
-    dividing by a small w.  ``oscillating``: y >= 0 is known (the sinh branch is not evaluated)."""
-    growing = jnp.zeros_like(y, bool) if oscillating else y < 0
+def response_functions(y):
+    """(f1, f2, f3)(y) = sum_k (-y)^k / (2k + j)!, j = 1, 2, 3: at x = sqrt(y), sin x / x,
+    (1 - cos x) / x^2 and (x - sin x) / x^3 (sinh and cosh of sqrt(-y) for y < 0; DLMF 4.19.1-2, 4.33.1-2)."""
+    growing = y < 0
 
     def taylor(j):
         terms = [(-1) ** k / math.factorial(2 * k + j) for k in range(_SERIES_TERMS)]
@@ -68,14 +64,9 @@ def response_functions(y, oscillating=False):
 
     # Safe-where: the closed forms see only |y| >= 1 (the series cover the rest).
     x = jnp.sqrt(jnp.where(jnp.abs(y) < 1, 1, jnp.where(growing, jnp.minimum(-y, _LARGEST_GROWTH**2), y)))
-    if oscillating:
-        sin_x, half = jnp.sin(x), jnp.sin(x / 2)
-    else:
-        sin_x = jnp.where(growing, jnp.sinh(x), jnp.sin(x))
-        half = jnp.where(growing, jnp.sinh(x / 2), jnp.sin(x / 2))
-    half_squared = x * x / 2
-    closed = (sin_x / x, 2 * half * half / (x * x), jnp.where(growing, sin_x - x, x - sin_x) / (x * x * x),
-              jnp.where(growing, 2 * half * half - half_squared, half_squared - 2 * half * half) / (x * x * x * x))
+    sin_x = jnp.where(growing, jnp.sinh(x), jnp.sin(x))
+    half = jnp.where(growing, jnp.sinh(x / 2), jnp.sin(x / 2))
+    closed = (sin_x / x, 2 * half * half / (x * x), jnp.where(growing, sin_x - x, x - sin_x) / (x * x * x))
     return tuple(jnp.where(jnp.abs(y) < limit, taylor(j + 1), value)
                  for j, (limit, value) in enumerate(zip(_SERIES_LIMITS, closed)))
 
@@ -97,7 +88,7 @@ def _response(moments, momentum, t, d_moments, d_momentum):
     n1, n2, n3 = unit[..., 0] ** 2, unit[..., 1] ** 2, unit[..., 2] ** 2
     d1, d2, d3 = gaps[..., 0], gaps[..., 1], gaps[..., 2]
     kappa = size_squared[..., 0] * (n1 * d2 * d3 + n2 * d1 * d3 + n3 * d1 * d2)
-    f1, f2, f3, _ = response_functions(kappa[..., None] * t * t)
+    f1, f2, f3 = response_functions(kappa[..., None] * t * t)
     sine, versine, excess = t * f1, t * t * f2, t * t * t * f3  # S, G, H
 
     # b / |L0| and the forced part W: delta L(t) gets |L0| W, phi gets -n x W.
@@ -109,7 +100,7 @@ def _response(moments, momentum, t, d_moments, d_momentum):
                           + size * forced)
 
     spin_angle = t * omega * size
-    g1, g2, *_ = response_functions(spin_angle * spin_angle)
+    g1, g2, _ = response_functions(spin_angle * spin_angle)
     normal = jnp.cross(unit, d_momentum)
     perpendicular = (-t * omega * (g1 * jnp.cross(unit, normal) + spin_angle * g2 * normal)
                      - sine * jnp.cross(unit, turned) - versine * size * jnp.cross(unit, turned_twice)
