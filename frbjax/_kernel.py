@@ -8,8 +8,8 @@ set by their count, not by its arithmetic.  XLA emits a small ``call`` as one ke
 carries the frontend attribute ``xla_cpu_small_call`` (the path XLA takes itself for small while
 loops).  :func:`one_kernel` puts a function into such a call: a nested ``jax.jit(...,
 inline=False)`` traced under ``jax.experimental.xla_metadata.set_xla_metadata``.  The attribute
-rides on the call, so it works inside the caller's own ``jit``; the library uses it for values of
-unbatched calls only, and lets ``jax.vmap`` and derivatives trace the ordinary program
+rides on the call, so it works inside the caller's own ``jit``; the library uses it for unbatched
+calls (their values and derivatives), and lets ``jax.vmap`` trace the ordinary program
 (``_primal_region``).
 
 It is an XLA-internal attribute, not an API, and it does not compile everything: XLA:CPU has no
@@ -27,25 +27,32 @@ dot products.  So a region is used only where
 Otherwise the function is called as it is.  Both programs compute the same values to rounding
 (tests/test_one_kernel.py runs both).
 
-Inside a region XLA keeps every distinct constant as a buffer of its own (it fuses no constant into
-the code there), and its CPU runtime wraps each such buffer anew at every call: about 65 ns a
-constant, 6 us of a one-body free flow's 19 us (87 constants).  So the region receives the
-constants of its jaxpr as arguments (:func:`_lift_constants`): one array per dtype, made once at the
-call site, from which the region reads its constants as values.
+Three more things keep a region at its floor and XLA:CPU from failing on it:
+
+- its constants are read from one array per dtype (``frbjax._kernel_constants``): XLA keeps each
+  distinct constant of a region as a buffer that its runtime handles at every call (about 65 ns
+  each; a one-body free flow had 94, 6 of its 19 us);
+- arguments known when the call is traced (Python numbers, arrays closed over by the caller) enter
+  the region as its constants: XLA:CPU aborts on a region whose argument is a constant once it emits
+  an enclosing loop as one kernel;
+- derivatives: a ``custom_jvp`` whose rule evaluates the values and their forward-mode Jacobian in
+  one more region (the tangent is that Jacobian applied outside it), so that a one-body gradient is
+  two small programs rather than the few thousand kernels of the ordinary reverse pass.  Batches
+  (``custom_vmap``) of the values and of the Jacobian trace the ordinary program.
 """
 
 from __future__ import annotations
 
 import functools
-import math
 import os
 
 import jax
-import jax.extend.core
 import jax.numpy as jnp
 import numpy as np
 from jax.custom_batching import custom_vmap
 from jax.experimental.xla_metadata import set_xla_metadata
+
+from ._kernel_constants import lift_constants, sub_jaxprs
 
 _ATTRIBUTES = dict(xla_cpu_small_call="true", inlineable="false")
 
@@ -102,15 +109,6 @@ def _call_region(region, *args):
         return region(*args)
 
 
-def _sub_jaxprs(params):
-    for value in params.values():
-        for item in value if isinstance(value, (tuple, list)) else (value,):
-            if isinstance(item, jax.extend.core.ClosedJaxpr):
-                yield item.jaxpr
-            elif isinstance(item, jax.extend.core.Jaxpr):
-                yield item
-
-
 def _fits_one_kernel(jaxpr) -> bool:
     """Whether every operation of ``jaxpr`` (and of its sub-jaxprs) has a single-kernel emitter."""
     for equation in jaxpr.eqns:
@@ -119,269 +117,9 @@ def _fits_one_kernel(jaxpr) -> bool:
             return False
         if name == "dot_general" and any(np.prod(v.aval.shape) > _MAX_DOT_ELEMENTS for v in equation.invars):
             return False
-        if not all(_fits_one_kernel(sub) for sub in _sub_jaxprs(equation.params)):
+        if not all(_fits_one_kernel(sub) for sub in sub_jaxprs(equation.params)):
             return False
     return True
-
-
-# Higher-order primitives whose values are those of one sub-jaxpr, evaluated in line (the region
-# serves values only: custom derivative and batching rules have no part in it).
-_CALLS = {"jit": "jaxpr", "pjit": "jaxpr", "closed_call": "call_jaxpr", "core_call": "call_jaxpr",
-          "remat2": "jaxpr", "checkpoint": "jaxpr", "custom_jvp_call": "call_jaxpr",
-          "custom_vjp_call": "call_jaxpr", "custom_vmap_call": "call"}
-_CONTROL_FLOW = frozenset({"cond", "while", "scan"})
-# Reductions over a few elements, written as a chain of their binary operation: the reduction's
-# initial value would be one more constant.
-_REDUCTIONS = {"reduce_sum": jax.lax.add, "reduce_prod": jax.lax.mul, "reduce_max": jax.lax.max,
-               "reduce_min": jax.lax.min, "reduce_and": jax.lax.bitwise_and, "reduce_or": jax.lax.bitwise_or}
-
-
-class _Constants:
-    """The literals and constant arrays of a jaxpr, packed into one flat array per dtype.
-
-    ``place`` gives a value its segment (equal values share one); :meth:`read` slices it back out
-    of the packed arrays inside the region, once per jaxpr being evaluated.
-    """
-
-    def __init__(self):
-        self.values = {}  # dtype name -> list of flat arrays
-        self.segments = {}  # (dtype name, shape, bytes) -> (start, stop)
-
-    def place(self, value, dtype=None):
-        value = np.asarray(value, dtype=dtype)
-        key = (value.dtype.name, value.shape, value.tobytes())
-        if key not in self.segments:
-            flat = self.values.setdefault(value.dtype.name, [])
-            start = sum(v.size for v in flat)
-            flat.append(value.reshape(-1))
-            self.segments[key] = (start, start + value.size)
-        return key
-
-    def collect(self, jaxpr):
-        """Place every literal of ``jaxpr`` and of its sub-jaxprs; False where a higher-order
-        primitive is not one that :func:`_evaluate` knows."""
-        for equation in jaxpr.eqns:
-            name = equation.primitive.name
-            subs = list(_sub_jaxprs(equation.params))
-            if subs and name not in _CALLS and name not in _CONTROL_FLOW:
-                return False
-            for var in equation.invars:
-                if isinstance(var, jax.extend.core.Literal):
-                    self.place(var.val, var.aval.dtype)
-            if name == "scan" and _small_scan(equation.params):  # its counter and zeros (_scan_as_while)
-                for value in (0, 1, equation.params["length"]):
-                    self.place(value, np.int32)
-                for aval in equation.params["jaxpr"].out_avals[equation.params["num_carry"]:]:
-                    self.place(0, aval.dtype)
-            if name == "exp2":
-                self.place(math.log(2), equation.invars[0].aval.dtype)
-            for sub in _sub_closed_jaxprs(equation.params):
-                for const in sub.consts:
-                    self.place(const)
-            if not all(self.collect(sub) for sub in subs):
-                return False
-        for var in jaxpr.outvars:
-            if isinstance(var, jax.extend.core.Literal):
-                self.place(var.val, var.aval.dtype)
-        return True
-
-    def packed(self):
-        return {dtype: np.concatenate(values) for dtype, values in self.values.items()}
-
-    def reader(self, packed):
-        """A function of a value (as placed) giving it from the traced ``packed`` arrays."""
-        cache = {}
-
-        def read(value, dtype=None):
-            value = np.asarray(value, dtype=dtype)
-            key = (value.dtype.name, value.shape, value.tobytes())
-            if key not in cache:
-                start, stop = self.segments[key]
-                cache[key] = jax.lax.slice_in_dim(packed[key[0]], start, stop).reshape(key[1])
-            return cache[key]
-
-        return read
-
-
-def _sub_closed_jaxprs(params):
-    for value in params.values():
-        for item in value if isinstance(value, (tuple, list)) else (value,):
-            if isinstance(item, jax.extend.core.ClosedJaxpr):
-                yield item
-
-
-def _evaluate(jaxpr, consts, args, constants, packed):
-    """The outputs of ``jaxpr`` with every literal and constant read from ``packed``."""
-    read_constant = constants.reader(packed)
-    environment = {}
-
-    def read(var):
-        if isinstance(var, jax.extend.core.Literal):
-            return read_constant(var.val, var.aval.dtype)
-        return environment[var]
-
-    def write(var, value):
-        if not isinstance(var, jax.extend.core.DropVar):
-            environment[var] = value
-
-    for var, value in zip(jaxpr.constvars, consts):
-        write(var, read_constant(value))
-    for var, value in zip(jaxpr.invars, args):
-        write(var, value)
-    for equation in jaxpr.eqns:
-        name, params = equation.primitive.name, equation.params
-        inputs = [read(var) for var in equation.invars]
-        if name in _CALLS:
-            outputs = _evaluate_closed(params[_CALLS[name]], inputs, constants, packed)
-        elif name == "cond":
-            outputs = _cond(params, inputs, constants, packed)
-        elif name == "while":
-            outputs = _while(params, inputs, constants, packed)
-        elif name == "scan" and _small_scan(params):
-            outputs = _scan_as_while(params, inputs, constants, packed, read_constant)
-        elif name == "scan":
-            outputs = _scan(params, inputs, constants, packed)
-        elif name in _REDUCTIONS and inputs[0].size and params["axes"]:
-            outputs = [_unrolled_reduction(_REDUCTIONS[name], inputs[0], params["axes"])]
-        elif name == "optimization_barrier":
-            # A nested region's barrier (one_kernel): inside this region it has nothing to keep apart.
-            outputs = inputs
-        elif name == "exp2":
-            outputs = [jax.lax.exp(inputs[0] * read_constant(math.log(2), inputs[0].dtype))]
-        else:
-            outputs = equation.primitive.bind(*inputs, **params)
-            outputs = outputs if equation.primitive.multiple_results else [outputs]
-        for var, value in zip(equation.outvars, outputs):
-            write(var, value)
-    return [read(var) for var in jaxpr.outvars]
-
-
-def _evaluate_closed(jaxpr, args, constants, packed):
-    if isinstance(jaxpr, jax.extend.core.ClosedJaxpr):
-        return _evaluate(jaxpr.jaxpr, jaxpr.consts, args, constants, packed)
-    return _evaluate(jaxpr, (), args, constants, packed)
-
-
-def _unrolled_reduction(operation, operand, axes):
-    for axis in sorted(axes, reverse=True):
-        parts = [jax.lax.index_in_dim(operand, k, axis, keepdims=False) for k in range(operand.shape[axis])]
-        operand = functools.reduce(operation, parts)
-    return operand
-
-
-def _cond(params, inputs, constants, packed):
-    # cond itself, not lax.switch (which clamps the index with two more constants); the packed
-    # arrays enter each branch as operands.
-    index, *operands = inputs
-    names = sorted(packed)
-
-    def branch_function(branch):
-        def evaluate(*flat):
-            return _evaluate_closed(branch, flat[len(names):], constants, dict(zip(names, flat[:len(names)])))
-        return evaluate
-
-    flat = [packed[name] for name in names] + list(operands)
-    avals = [jax.ShapeDtypeStruct(jnp.shape(x), jnp.result_type(x)) for x in flat]
-    branches = tuple(jax.make_jaxpr(branch_function(branch))(*avals) for branch in params["branches"])
-    return jax.lax.cond_p.bind(index, *flat, **{**params, "branches": branches})
-
-
-def _while(params, inputs, constants, packed):
-    cond_consts = inputs[:params["cond_nconsts"]]
-    body_consts = inputs[params["cond_nconsts"]:params["cond_nconsts"] + params["body_nconsts"]]
-    initial = inputs[params["cond_nconsts"] + params["body_nconsts"]:]
-
-    def condition(carry):
-        return _evaluate_closed(params["cond_jaxpr"], [*cond_consts, *carry], constants, packed)[0]
-
-    def body(carry):
-        return _evaluate_closed(params["body_jaxpr"], [*body_consts, *carry], constants, packed)
-
-    return jax.lax.while_loop(condition, body, initial)
-
-
-def _scan(params, inputs, constants, packed):
-    consts = inputs[:params["num_consts"]]
-    carry = inputs[params["num_consts"]:params["num_consts"] + params["num_carry"]]
-    xs = inputs[params["num_consts"] + params["num_carry"]:]
-
-    def step(carry, x):
-        outputs = _evaluate_closed(params["jaxpr"], [*consts, *carry, *x], constants, packed)
-        return outputs[:params["num_carry"]], outputs[params["num_carry"]:]
-
-    carry, ys = jax.lax.scan(step, carry, xs, length=params["length"], reverse=params["reverse"],
-                             unroll=params["unroll"])
-    return [*carry, *ys]
-
-
-def _holds_loops(jaxpr):
-    return any(equation.primitive.name in ("while", "scan")
-               or any(_holds_loops(sub) for sub in _sub_jaxprs(equation.params)) for equation in jaxpr.eqns)
-
-
-def _small_scan(params):
-    """Whether a scan runs as :func:`_scan_as_while`: the arrays it runs over and stacks hold at
-    most ``MAX_ELEMENTS`` values together, and where it has such arrays its body holds no loop (XLA:CPU
-    aborts on emitting such a while loop with loops inside in one kernel: measured with jax 0.10.2 on
-    a splitting step, whose stages scan over the method's coefficients around the free flow's loops)."""
-    scanned = params["jaxpr"].in_avals[params["num_consts"] + params["num_carry"]:]
-    stacked = params["jaxpr"].out_avals[params["num_carry"]:]
-    if (scanned or stacked) and _holds_loops(params["jaxpr"].jaxpr):
-        return False
-    return params["length"] * sum(math.prod(aval.shape) for aval in (*scanned, *stacked)) <= MAX_ELEMENTS
-
-
-def _scan_as_while(params, inputs, constants, packed, read_constant):
-    # A small scan as a while loop whose counter, bound and step are read like the other
-    # constants (lax.scan's own loop brings three of its own).  The arrays scanned over ride in the
-    # loop's state and turn by one row each step, and so do the stacked outputs (no dynamic slice).
-    consts = inputs[:params["num_consts"]]
-    carry = inputs[params["num_consts"]:params["num_consts"] + params["num_carry"]]
-    xs = inputs[params["num_consts"] + params["num_carry"]:]
-    reverse = params["reverse"]
-    zero, one, stop = (read_constant(k, np.int32) for k in (0, 1, params["length"]))
-    ys = [jax.lax.broadcast(read_constant(0, aval.dtype), (params["length"], *aval.shape))
-          for aval in params["jaxpr"].out_avals[params["num_carry"]:]]
-
-    def turn(rows, row=None):
-        """The next row to read, and the rows turned by one (``row`` put in where it went out)."""
-        if reverse:
-            first = rows[-1] if row is None else row
-            return rows[-1], jnp.concatenate([first[None], rows[:-1]])
-        last = rows[0] if row is None else row
-        return rows[0], jnp.concatenate([rows[1:], last[None]])
-
-    def body(state):
-        count, carry, xs, ys = state
-        x, xs = zip(*(turn(rows) for rows in xs)) if xs else ((), ())
-        outputs = _evaluate_closed(params["jaxpr"], [*consts, *carry, *x], constants, packed)
-        ys = [turn(rows, row)[1] for rows, row in zip(ys, outputs[params["num_carry"]:])]
-        return count + one, outputs[:params["num_carry"]], list(xs), ys
-
-    _, carry, _, ys = jax.lax.while_loop(lambda state: state[0] < stop, body, (zero, list(carry), list(xs), ys))
-    return [*carry, *ys]
-
-
-def _lift_constants(traced):
-    """``traced``'s function as ``(lifted, packed)``: ``lifted(packed, *args)`` computes the same
-    outputs with every literal and constant of the jaxpr read from ``packed`` (module docstring);
-    None where the jaxpr holds a higher-order primitive that :func:`_evaluate` does not know."""
-    closed = traced.jaxpr
-    constants = _Constants()
-    if not constants.collect(closed.jaxpr):
-        return None
-    for const in closed.consts:
-        constants.place(const)
-
-    packed = constants.packed()
-
-    def lifted(*args):
-        # The barrier keeps XLA from folding the reads back into constants of their own.
-        outputs = _evaluate(closed.jaxpr, closed.consts, jax.tree_util.tree_leaves(args), constants,
-                            jax.lax.optimization_barrier(packed))
-        return jax.tree_util.tree_unflatten(traced.out_tree, outputs)
-
-    return lifted
 
 
 def _batched_everywhere(axis_size, in_batched, args):
@@ -392,12 +130,14 @@ def _batched_everywhere(axis_size, in_batched, args):
 
 
 def _primal_region(function, region):
-    """``function`` as the region for its value; its derivatives and its batches as ``function`` itself.
+    """``function`` as the region for its value, with derivatives through a region of its Jacobian.
 
     Under ``jax.vmap`` the per-body region would become one kernel over the whole batch, which is
     slower than XLA's fused loops and which XLA:CPU cannot always compile (a large loop inside it
     asks for its parallel runtime): ``custom_vmap`` maps ``function`` instead.  ``custom_vmap`` has no
-    reverse mode, so the derivatives (``custom_jvp``) are those of ``function``, traced as usual.
+    reverse mode, so the tangent rule (``custom_jvp``) takes the values and the Jacobian from a
+    region that depends on the primal inputs alone (JAX's linearisation evaluates it as a known
+    value) and applies the Jacobian outside it, a linear map that reverse mode transposes.
     """
 
     @custom_vmap
@@ -436,14 +176,16 @@ def _values_and_jacobian(function, *args):
                                                                 for leaf in leaves]))
         return outputs, outputs  # the values as jacfwd's auxiliary output: one evaluation for both
 
-    jacobian, outputs = jax.jacfwd(of_variables, argnums=tuple(range(len(variables))), has_aux=True)(*variables)
+    every_variable = tuple(range(len(variables)))
+    jacobian, outputs = jax.jacfwd(of_variables, argnums=every_variable, has_aux=True)(*variables)
     return outputs, jacobian
 
 
 def _apply_jacobian(jacobian, outputs, primals, tangents):
     """The tangent of the outputs: the Jacobian (one entry per inexact input leaf) applied to the tangents."""
     leaves = jax.tree_util.tree_leaves(primals)
-    directions = [tangent for leaf, tangent in zip(leaves, jax.tree_util.tree_leaves(tangents)) if _inexact(leaf)]
+    directions = [tangent for leaf, tangent in zip(leaves, jax.tree_util.tree_leaves(tangents))
+                  if _inexact(leaf)]
 
     def tangent_of(output, rows):
         total = jnp.zeros_like(output)
@@ -452,8 +194,8 @@ def _apply_jacobian(jacobian, outputs, primals, tangents):
         return total
 
     tree = jax.tree_util.tree_structure(outputs)
-    return tree.unflatten([tangent_of(output, rows)
-                           for output, rows in zip(tree.flatten_up_to(outputs), tree.flatten_up_to(jacobian))])
+    rows_of_outputs = zip(tree.flatten_up_to(outputs), tree.flatten_up_to(jacobian))
+    return tree.unflatten([tangent_of(output, rows) for output, rows in rows_of_outputs])
 
 
 def one_kernel(function):
@@ -461,10 +203,10 @@ def one_kernel(function):
 
     ``function`` takes and returns pytrees of arrays, and must close over no tracer (pass everything
     it reads as an argument: ``custom_jvp`` and ``custom_vmap`` refuse closed-over tracers).  The
-    region serves the value of an unbatched call; under ``jax.vmap`` and in derivatives ``function``
-    is traced as usual (``_primal_region``).  The decision is made from the arguments' shapes and
-    the jaxpr when the call is traced, so that it costs nothing at run time; the jaxpr is traced once
-    (the region's own ``jit`` reuses it).
+    region serves the value of an unbatched call and, through a second region, its derivatives;
+    under ``jax.vmap`` ``function`` is traced as usual (``_primal_region``).  The decision is made
+    from the arguments' shapes and the jaxpr when the call is traced, so that it costs nothing at
+    run time.
     """
     @functools.wraps(function)
     def call(*args):
@@ -490,9 +232,10 @@ def one_kernel(function):
             return function(*args)
         if not _fits_one_kernel(traced.jaxpr.jaxpr):
             return function(*args)
-        lifting = _lift_constants(traced)
+        lifting = lift_constants(traced)
         try:
-            return _primal_region(of_traced, jax.jit(lifting, inline=False) if lifting else region)(*traced_leaves)
+            lifted_region = jax.jit(lifting, inline=False) if lifting else region
+            return _primal_region(of_traced, lifted_region)(*traced_leaves)
         except Exception:  # noqa: BLE001 - a primitive the evaluator binds wrongly: the plain region
             return _primal_region(of_traced, region)(*traced_leaves)
 
