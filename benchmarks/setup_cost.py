@@ -19,7 +19,10 @@ process pins itself to CPU 0 and runs XLA single-threaded before JAX starts), fl
 * ``one_body``: jitted ``free_flow(I, L, q, t)`` (the one-shot entry point, a one-kernel region) for
   one body and one time against a trivial jitted function of the same four arguments (JAX's
   dispatch); target ratio <= 2; with its compile time and that of its gradient (targets 1 s, 3 s),
-  and the same figures for ``FreeRigidBody(I, L, q).quaternion(t)`` (series prepared).
+  and the same figures for ``FreeRigidBody(I, L, q).quaternion(t)`` (series prepared).  Also, in
+  subprocesses (``--latency-only``), the same latency pair on all the machine's cores and on one
+  core with ``jax_cpu_enable_async_dispatch`` off: XLA:CPU runs a program of 1000 or more estimated
+  flops on its worker thread, which on one core costs two context switches per call.
 * ``eager``: ``FreeRigidBody(I, L, q).quaternion(t)`` at 1000 times without jit, second call, against
   the same under jit; target ratio <= 10; the first eager call (compilation included) is reported.
 * ``compile``: compile time of a quaternion loss over 1000 bodies x 100 common times, forward and
@@ -34,6 +37,7 @@ The one-body and compile rows also record the XLA kernels of each program (``ker
 conditionals, while loops), which set its compile time and one-body latency (docs/performance.md).
 
 Usage: python benchmarks/setup_cost.py [--quick] [--output-dir DIR]
+       python benchmarks/setup_cost.py --latency-only [--no-async-dispatch]   (one JSON line)
 Writes setup_cost.json and setup_cost.png into benchmarks/results/ (or --output-dir).
 """
 
@@ -47,8 +51,12 @@ import sys
 import time
 from pathlib import Path
 
+# SETUP_COST_ALL_CORES=1: the subprocess that measures the one-body latency on every core.
 if hasattr(os, "sched_setaffinity"):
-    os.sched_setaffinity(0, {sorted(os.sched_getaffinity(0))[0]})
+    if os.environ.get("SETUP_COST_ALL_CORES") == "1":
+        os.sched_setaffinity(0, range(os.cpu_count()))
+    else:
+        os.sched_setaffinity(0, {sorted(os.sched_getaffinity(0))[0]})
 os.environ.setdefault("XLA_FLAGS", "--xla_cpu_multi_thread_eigen=false")
 
 import jax  # noqa: E402
@@ -207,6 +215,36 @@ def one_body(options, rng):
     return row
 
 
+def latency(repeats=2000):
+    """Best single-call latency (dispatch, execution, wait) of a trivial jitted function and of a
+    jitted one-body ``free_flow``, in us."""
+    inertia, momentum, attitude = (jnp.asarray(a[0]) for a in bodies(np.random.default_rng(0), 1))
+    t = jnp.asarray(3.0)
+    trivial = jax.jit(lambda i, m, a, t: a * t + jnp.sum(i * m))
+    motion = jax.jit(lambda i, m, a, t: free_flow(i, m, a, t)[1])
+    times = {}
+    for name, function in (("trivial_jit_us", trivial), ("free_flow_us", motion)):
+        jax.block_until_ready(function(inertia, momentum, attitude, t))
+        best = np.inf
+        for _ in range(repeats):
+            start = time.perf_counter()
+            jax.block_until_ready(function(inertia, momentum, attitude, t))
+            best = min(best, time.perf_counter() - start)
+        times[name] = best * 1e6
+    return {**times, "ratio": times["free_flow_us"] / times["trivial_jit_us"],
+            "cores": len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count()}
+
+
+def latency_elsewhere(arguments, all_cores):
+    """``latency()`` in a fresh process (every core, or this one with other JAX options)."""
+    import subprocess
+
+    environment = dict(os.environ, SETUP_COST_ALL_CORES="1" if all_cores else "0")
+    output = subprocess.run([sys.executable, __file__, "--latency-only", *arguments], env=environment,
+                            capture_output=True, text=True, check=True).stdout
+    return json.loads(output.strip().splitlines()[-1])
+
+
 def calgo903_example1(options, rng):
     """Example 1 with XLA's default flags (one-kernel regions) against the Fortran driver's 0.21 s."""
     from calgo903_example1 import DATA, FORTRAN_SECONDS
@@ -290,14 +328,27 @@ def main(argv=None):
     parser.add_argument("--repeats", type=int, default=5)
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument("--output-dir", default=str(HERE / "results"))
+    parser.add_argument("--latency-only", action="store_true", help="print latency() as one JSON line")
+    parser.add_argument("--no-async-dispatch", action="store_true",
+                        help="with --latency-only: jax_cpu_enable_async_dispatch off (programs run inline)")
     options = parser.parse_args(argv)
+    if options.latency_only:
+        if options.no_async_dispatch:
+            jax.config.update("jax_cpu_enable_async_dispatch", False)
+        print(json.dumps(latency()))
+        return
     rng = np.random.default_rng(options.seed)
+    # First, while this process has started no XLA thread that could share the other cores.
+    elsewhere = {"all_cores": latency_elsewhere([], all_cores=True),
+                 "one_core_async_dispatch_off": latency_elsewhere(["--no-async-dispatch"], all_cores=False)}
     rows = {}
     for name, measure in (("prebuilt", prebuilt), ("construction", construction),
                           ("state_at_T", state_at_final_time), ("one_body", one_body),
                           ("calgo903_example1", calgo903_example1), ("eager", eager),
                           ("compile", compile_times)):
         rows[name] = measure(options, rng)
+        if name == "one_body":
+            rows[name]["elsewhere"] = elsewhere
         print(name, json.dumps(rows[name]), flush=True)
     rows["fit_first_call"] = fit_first_call(options, rng, rows["compile"]["diffrax_dopri8_value_and_grad_s"])
     print("fit_first_call", json.dumps(rows["fit_first_call"]), flush=True)
