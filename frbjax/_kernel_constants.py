@@ -11,9 +11,10 @@ are written here without them: ``lax.scan``'s counter (small scans run as while 
 reads the packed arrays), reductions' initial values (unrolled over their few elements), the index
 clamp of ``lax.switch`` (``cond`` is bound directly) and ``exp2``'s log 2.
 
-Calls, checkpoints and custom-derivative or custom-batching wrappers are evaluated in line: a region
-serves values only (its derivatives and batches trace the ordinary program).  A jaxpr holding any
-other higher-order primitive is not lifted (:func:`lift_constants` returns None).
+Calls, checkpoints and custom-derivative or custom-batching wrappers are evaluated in line: this
+evaluation gives values only (a region's derivatives and batches are the business of the custom
+rules around it in ``frbjax._kernel``).  A jaxpr holding any other higher-order primitive is not
+lifted (:func:`lift_constants` returns None).
 """
 
 from __future__ import annotations
@@ -55,8 +56,9 @@ _REDUCTIONS = {"reduce_sum": jax.lax.add, "reduce_prod": jax.lax.mul, "reduce_ma
 class _Constants:
     """The literals and constant arrays of a jaxpr, packed into one flat array per dtype.
 
-    ``place`` gives a value its segment (equal values share one); :meth:`read` slices it back out
-    of the packed arrays inside the region, once per jaxpr being evaluated.
+    :meth:`place` gives a value its segment (equal values share one); the function made by
+    :meth:`reader` slices it back out of the packed arrays inside the region, once per jaxpr
+    being evaluated.
     """
 
     def __init__(self):
