@@ -37,7 +37,7 @@ Three more things keep a region at its floor and XLA:CPU from failing on it:
   an enclosing loop as one kernel;
 - derivatives: a ``custom_jvp`` whose rule evaluates the values and their forward-mode Jacobian in
   one more region (the tangent is that Jacobian applied outside it), so that a one-body gradient is
-  two small programs rather than the few thousand kernels of the ordinary reverse pass.  Batches
+  one region and a small contraction rather than the ordinary reverse pass's hundreds of kernels.  Batches
   (``custom_vmap``) of the values and of the Jacobian trace the ordinary program.
 """
 
