@@ -198,6 +198,32 @@ def _apply_jacobian(jacobian, outputs, primals, tangents):
     return tree.unflatten([tangent_of(output, rows) for output, rows in rows_of_outputs])
 
 
+def _region_call(function, tree, leaves, known):
+    """A callable of the unknown leaves: ``function`` as a one-kernel region (its constants lifted) or,
+    where the region does not apply, ``function`` itself."""
+
+    def of_traced(*traced):
+        given = iter(traced)
+        return function(*tree.unflatten([leaf if is_known else next(given)
+                                         for leaf, is_known in zip(leaves, known)]))
+
+    traced_leaves = [leaf for leaf, is_known in zip(leaves, known) if not is_known]
+    region = jax.jit(of_traced, inline=False)
+    try:
+        traced = region.trace(*traced_leaves)
+    except TypeError:  # an argument jit cannot take (a callable inside a pytree, say)
+        return of_traced
+    if not _fits_one_kernel(traced.jaxpr.jaxpr):
+        return of_traced
+    lifting = lift_constants(traced)
+    try:
+        lifted = _primal_region(of_traced, jax.jit(lifting, inline=False) if lifting else region)
+        jax.eval_shape(lifted, *traced_leaves)
+        return lifted
+    except Exception:  # noqa: BLE001 - a primitive the evaluator binds wrongly: the plain region
+        return _primal_region(of_traced, region)
+
+
 def one_kernel(function):
     """``function`` evaluated as a one-kernel region where possible (module docstring), else as is.
 
@@ -208,35 +234,31 @@ def one_kernel(function):
     from the arguments' shapes and the jaxpr when the call is traced, so that it costs nothing at
     run time.
     """
+    # The regions of eager calls, by the arguments' structure and types (a call under a trace is
+    # traced once with the caller's program, which the caller's jit caches).
+    eager_regions = {}
+
     @functools.wraps(function)
     def call(*args):
         leaves, tree = jax.tree_util.tree_flatten(args)
         small = all(np.size(leaf) <= MAX_ELEMENTS for leaf in leaves)
         if not (small and enabled() and available()):
             return function(*args)
-        # Values known when the call is traced enter the region as its own constants, not as its
-        # arguments: XLA:CPU aborts on a region whose argument is a constant once it puts the
-        # region into a loop it emits as one kernel itself (a small while loop around it).
-        known = [not isinstance(leaf, jax.core.Tracer) for leaf in leaves]
-
-        def of_traced(*traced):
-            given = iter(traced)
-            return function(*tree.unflatten([leaf if is_known else next(given)
-                                             for leaf, is_known in zip(leaves, known)]))
-
+        # Under a trace, values known when the call is traced enter the region as its own constants,
+        # not as its arguments: XLA:CPU aborts on a region whose argument is a constant once it puts
+        # the region into a loop it emits as one kernel itself (a small while loop around it).
+        tracing = any(isinstance(leaf, jax.core.Tracer) for leaf in leaves)
+        known = [tracing and not isinstance(leaf, jax.core.Tracer) for leaf in leaves]
         traced_leaves = [leaf for leaf, is_known in zip(leaves, known) if not is_known]
-        region = jax.jit(of_traced, inline=False)
+        if tracing:
+            return _region_call(function, tree, leaves, known)(*traced_leaves)
         try:
-            traced = region.trace(*traced_leaves)
-        except TypeError:  # an argument jit cannot take (a callable inside a pytree, say)
-            return function(*args)
-        if not _fits_one_kernel(traced.jaxpr.jaxpr):
-            return function(*args)
-        lifting = lift_constants(traced)
-        try:
-            lifted_region = jax.jit(lifting, inline=False) if lifting else region
-            return _primal_region(of_traced, lifted_region)(*traced_leaves)
-        except Exception:  # noqa: BLE001 - a primitive the evaluator binds wrongly: the plain region
-            return _primal_region(of_traced, region)(*traced_leaves)
+            key = (tree, tuple(jax.typeof(leaf) for leaf in leaves))
+            hash(key)
+        except TypeError:  # a leaf that is not an array (jit refuses it too): no cache
+            return _region_call(function, tree, leaves, known)(*traced_leaves)
+        if key not in eager_regions:
+            eager_regions[key] = _region_call(function, tree, leaves, known)
+        return eager_regions[key](*traced_leaves)
 
     return call

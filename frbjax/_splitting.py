@@ -33,6 +33,7 @@ Runge-Kutta and Runge-Kutta-Nyström methods", J. Comput. Appl. Math. 142 (2002)
 
 from __future__ import annotations
 
+import functools
 import math
 from typing import ClassVar
 
@@ -562,6 +563,21 @@ def _check_initial_torque(term, t0, y0, args):
                          f"{' and '.join(names)} at t0 = {float(t0)!r}")
 
 
+@functools.lru_cache(maxsize=64)
+def _trajectory_region(solver, steps, dtype):
+    """The loop over ``steps`` steps of ``solver`` as a one-kernel region, made once per (solver,
+    steps, dtype), so that eager calls of ``splitting_trajectory`` reuse its compiled program."""
+
+    def trajectory(term, y0, dt, t0, args):
+        def one_step(state, n):
+            state = solver.advance(term, t0 + n * dt, dt, state, args)
+            return state, state
+
+        return jax.lax.scan(one_step, y0, jnp.arange(steps, dtype=dtype))[1]
+
+    return one_kernel(trajectory)
+
+
 def splitting_trajectory(term, y0, *, dt, steps, t0=0.0, args=None, method="blanes_moan6"):
     r"""The states after each of ``steps`` fixed steps of a splitting method: a lean ``lax.scan``.
 
@@ -590,16 +606,13 @@ def splitting_trajectory(term, y0, *, dt, steps, t0=0.0, args=None, method="blan
     t0 = jnp.asarray(t0, dtype)
     _check_initial_torque(term, t0, y0, args)
 
-    def trajectory(term, y0, dt, t0, args):
-        def one_step(state, n):
-            state = solver.advance(term, t0 + n * dt, dt, state, args)
-            return state, state
-
-        return jax.lax.scan(one_step, y0, jnp.arange(steps, dtype=dtype))[1]
-
     # One body (or a few): the whole loop over steps as one kernel (frbjax._kernel), the speed that
     # XLA reaches for small loops, without a process-wide flag.  Everything the loop reads is an
     # argument: a region closes over no tracer of the caller's.
-    momenta, attitudes = one_kernel(trajectory)(term, y0, dt, t0, args)
+    try:
+        region = _trajectory_region(solver, steps, jnp.dtype(dtype).name)
+    except TypeError:  # a solver that cannot be hashed (a kick solver of the user's, say): no cache
+        region = _trajectory_region.__wrapped__(solver, steps, jnp.dtype(dtype).name)
+    momenta, attitudes = region(term, y0, dt, t0, args)
     ts = t0 + dt * jnp.arange(steps + 1, dtype=dtype)
     return ts, (jnp.concatenate([y0[0][None], momenta]), jnp.concatenate([y0[1][None], attitudes]))

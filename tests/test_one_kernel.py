@@ -237,3 +237,31 @@ def test_derivative_programs_are_regions_too(monkeypatch):
     for got, want in zip(results, ordinary):
         assert np.isfinite(got).all()
         np.testing.assert_allclose(got, want, rtol=0, atol=2e-15 * np.abs(want).max())
+
+
+def test_eager_calls_reuse_their_region():
+    """Called eagerly, a one-kernel function is traced once per structure and types of its arguments
+    (every eager call traced and compiled it anew, 1.1 s each, before), and so is the trajectory of
+    ``splitting_trajectory`` once per (method, steps, dtype)."""
+    from frbjax import RigidBodyTerm, splitting_trajectory
+    from frbjax._splitting import _trajectory_region
+
+    traces = []
+
+    def function(x, y):
+        traces.append(1)
+        return jnp.sin(x) * y + 0.5
+
+    region = _kernel.one_kernel(function)
+    region(jnp.asarray([0.3, 0.4]), jnp.asarray(2.0))
+    traced = len(traces)
+    second = region(jnp.asarray([0.5, 0.6]), jnp.asarray(3.0))
+    assert len(traces) == traced
+    np.testing.assert_allclose(second, np.sin([0.5, 0.6]) * 3.0 + 0.5, rtol=1e-15)
+
+    term = RigidBodyTerm(INERTIA, potential=lambda t, q, args: q[0] * q[2])
+    y0 = (jnp.asarray(MOMENTUM), jnp.asarray(ATTITUDE))
+    splitting_trajectory(term, y0, dt=0.05, steps=7)
+    hits = _trajectory_region.cache_info().hits
+    splitting_trajectory(term, (2 * y0[0], y0[1]), dt=0.05, steps=7)
+    assert _trajectory_region.cache_info().hits == hits + 1
