@@ -187,11 +187,18 @@ def state_at_final_time(options, rng):
             "ratio": diffrax_s / frbjax_s, "max_difference": difference, "diffrax_ok": bool(jnp.all(ok))}
 
 
-def one_body(options, rng):
+def one_body_case(rng):
+    """One random body at t = 3 and JAX's dispatch floor: a trivial jitted function of the same four
+    arguments."""
     inertia, momentum, attitude = (jnp.asarray(a[0]) for a in bodies(rng, 1))
-    t = jnp.asarray(3.0)
     trivial = jax.jit(lambda i, m, a, t: a * t + jnp.sum(i * m))
-    trivial_s = best_time(lambda: trivial(inertia, momentum, attitude, t), max(options.repeats, 200), min_total=0.5)
+    return (inertia, momentum, attitude, jnp.asarray(3.0)), trivial
+
+
+def one_body(options, rng):
+    arguments, trivial = one_body_case(rng)
+    inertia, momentum, attitude, t = arguments
+    trivial_s = best_time(lambda: trivial(*arguments), max(options.repeats, 200), min_total=0.5)
     # The one-kernel probe (frbjax._kernel.available: one small compile, 0.07 s) runs once per
     # process, at the first region; it is not part of any one program's compile time.
     from frbjax import _kernel
@@ -216,21 +223,11 @@ def one_body(options, rng):
 
 
 def latency(repeats=2000):
-    """Best single-call latency (dispatch, execution, wait) of a trivial jitted function and of a
-    jitted one-body ``free_flow``, in us."""
-    inertia, momentum, attitude = (jnp.asarray(a[0]) for a in bodies(np.random.default_rng(0), 1))
-    t = jnp.asarray(3.0)
-    trivial = jax.jit(lambda i, m, a, t: a * t + jnp.sum(i * m))
+    """``one_body``'s latency pair alone (best single call: dispatch, execution, wait), in us."""
+    arguments, trivial = one_body_case(np.random.default_rng(0))
     motion = jax.jit(lambda i, m, a, t: free_flow(i, m, a, t)[1])
-    times = {}
-    for name, function in (("trivial_jit_us", trivial), ("free_flow_us", motion)):
-        jax.block_until_ready(function(inertia, momentum, attitude, t))
-        best = np.inf
-        for _ in range(repeats):
-            start = time.perf_counter()
-            jax.block_until_ready(function(inertia, momentum, attitude, t))
-            best = min(best, time.perf_counter() - start)
-        times[name] = best * 1e6
+    times = {name: best_time(lambda function=function: function(*arguments), repeats) * 1e6
+             for name, function in (("trivial_jit_us", trivial), ("free_flow_us", motion))}
     return {**times, "ratio": times["free_flow_us"] / times["trivial_jit_us"],
             "cores": len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count()}
 

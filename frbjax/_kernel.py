@@ -198,16 +198,15 @@ def _apply_jacobian(jacobian, outputs, primals, tangents):
     return tree.unflatten([tangent_of(output, rows) for output, rows in rows_of_outputs])
 
 
-def _region_call(function, tree, leaves, known):
-    """A callable of the unknown leaves: ``function`` as a one-kernel region (its constants lifted) or,
-    where the region does not apply, ``function`` itself."""
+def _region_call(function, tree, leaves, known, traced_leaves):
+    """A callable of ``traced_leaves`` (the leaves not ``known``): ``function`` as a one-kernel region
+    (its constants lifted) or, where the region does not apply, ``function`` itself."""
 
     def of_traced(*traced):
         given = iter(traced)
         return function(*tree.unflatten([leaf if is_known else next(given)
                                          for leaf, is_known in zip(leaves, known)]))
 
-    traced_leaves = [leaf for leaf, is_known in zip(leaves, known) if not is_known]
     region = jax.jit(of_traced, inline=False)
     try:
         traced = region.trace(*traced_leaves)
@@ -218,9 +217,11 @@ def _region_call(function, tree, leaves, known):
     lifting = lift_constants(traced)
     try:
         lifted = _primal_region(of_traced, jax.jit(lifting, inline=False) if lifting else region)
+        # Traced here (abstractly, once: JAX keeps the trace for the call that follows) so that a
+        # primitive the evaluator binds wrongly falls back to the plain region, not to an error.
         jax.eval_shape(lifted, *traced_leaves)
         return lifted
-    except Exception:  # noqa: BLE001 - a primitive the evaluator binds wrongly: the plain region
+    except Exception:  # noqa: BLE001 - see above
         return _primal_region(of_traced, region)
 
 
@@ -251,14 +252,14 @@ def one_kernel(function):
         known = [tracing and not isinstance(leaf, jax.core.Tracer) for leaf in leaves]
         traced_leaves = [leaf for leaf, is_known in zip(leaves, known) if not is_known]
         if tracing:
-            return _region_call(function, tree, leaves, known)(*traced_leaves)
+            return _region_call(function, tree, leaves, known, traced_leaves)(*traced_leaves)
         try:
             key = (tree, tuple(jax.typeof(leaf) for leaf in leaves))
             hash(key)
         except TypeError:  # a leaf that is not an array (jit refuses it too): no cache
-            return _region_call(function, tree, leaves, known)(*traced_leaves)
+            return _region_call(function, tree, leaves, known, traced_leaves)(*traced_leaves)
         if key not in eager_regions:
-            eager_regions[key] = _region_call(function, tree, leaves, known)
+            eager_regions[key] = _region_call(function, tree, leaves, known, traced_leaves)
         return eager_regions[key](*traced_leaves)
 
     return call

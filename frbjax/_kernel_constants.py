@@ -31,14 +31,17 @@ import numpy as np
 SMALL_SCAN_ELEMENTS = 64
 
 
-def sub_jaxprs(params):
-    """The jaxprs among the parameters of an equation (a call's body, a loop's, a cond's branches)."""
+def _parameter_jaxprs(params):
     for value in params.values():
         for item in value if isinstance(value, (tuple, list)) else (value,):
-            if isinstance(item, jax.extend.core.ClosedJaxpr):
-                yield item.jaxpr
-            elif isinstance(item, jax.extend.core.Jaxpr):
+            if isinstance(item, (jax.extend.core.ClosedJaxpr, jax.extend.core.Jaxpr)):
                 yield item
+
+
+def sub_jaxprs(params):
+    """The jaxprs among the parameters of an equation (a call's body, a loop's, a cond's branches)."""
+    for item in _parameter_jaxprs(params):
+        yield item.jaxpr if isinstance(item, jax.extend.core.ClosedJaxpr) else item
 
 
 # Higher-order primitives whose values are those of one sub-jaxpr, evaluated in line (the region
@@ -65,9 +68,14 @@ class _Constants:
         self.values = {}  # dtype name -> list of flat arrays
         self.segments = {}  # (dtype name, shape, bytes) -> (start, stop)
 
-    def place(self, value, dtype=None):
+    @staticmethod
+    def key(value, dtype=None):
+        """(dtype name, shape, bytes): equal values, and only they, share a segment."""
         value = np.asarray(value, dtype=dtype)
-        key = (value.dtype.name, value.shape, value.tobytes())
+        return (value.dtype.name, value.shape, value.tobytes()), value
+
+    def place(self, value, dtype=None):
+        key, value = self.key(value, dtype)
         if key not in self.segments:
             flat = self.values.setdefault(value.dtype.name, [])
             start = sum(v.size for v in flat)
@@ -93,8 +101,8 @@ class _Constants:
                     self.place(0, aval.dtype)
             if name == "exp2":
                 self.place(math.log(2), equation.invars[0].aval.dtype)
-            for sub in _sub_closed_jaxprs(equation.params):
-                for const in sub.consts:
+            for sub in _parameter_jaxprs(equation.params):
+                for const in getattr(sub, "consts", ()):
                     self.place(const)
             if not all(self.collect(sub) for sub in subs):
                 return False
@@ -111,21 +119,13 @@ class _Constants:
         cache = {}
 
         def read(value, dtype=None):
-            value = np.asarray(value, dtype=dtype)
-            key = (value.dtype.name, value.shape, value.tobytes())
+            key, _ = self.key(value, dtype)
             if key not in cache:
                 start, stop = self.segments[key]
                 cache[key] = jax.lax.slice_in_dim(packed[key[0]], start, stop).reshape(key[1])
             return cache[key]
 
         return read
-
-
-def _sub_closed_jaxprs(params):
-    for value in params.values():
-        for item in value if isinstance(value, (tuple, list)) else (value,):
-            if isinstance(item, jax.extend.core.ClosedJaxpr):
-                yield item
 
 
 def _evaluate(jaxpr, consts, args, constants, packed):
