@@ -192,6 +192,12 @@ def _prepare(inertia, angular_momentum, attitude, axes=None):
     norm = jnp.where(moving, norm, 0)
 
     regime = classify(sorted_inertia, unit_working, norm)
+    # Materialised (see _fusion): the working frame and the regime are cheap elementwise values, so
+    # XLA would fuse them into every later loop and recompute the sort of the moments and the
+    # classification's comparisons there, once per output element; over a batch that was a quarter of
+    # the one-time path's cost.
+    permutation, sorted_inertia, unit_working, norm, regime = materialise(
+        (permutation, sorted_inertia, unit_working, norm, regime))
     return inertia, angular_momentum, attitude, valid, permutation, sorted_inertia, unit_working, norm, regime
 
 
