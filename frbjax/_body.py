@@ -192,12 +192,6 @@ def _prepare(inertia, angular_momentum, attitude, axes=None):
     norm = jnp.where(moving, norm, 0)
 
     regime = classify(sorted_inertia, unit_working, norm)
-    # Materialised (see _fusion): the working frame and the regime are cheap elementwise values, so
-    # XLA would fuse them into every later loop and recompute the sort of the moments and the
-    # classification's comparisons there, once per output element; over a batch that was a quarter of
-    # the one-time path's cost.
-    permutation, sorted_inertia, unit_working, norm, regime = materialise(
-        (permutation, sorted_inertia, unit_working, norm, regime))
     return inertia, angular_momentum, attitude, valid, permutation, sorted_inertia, unit_working, norm, regime
 
 
@@ -273,6 +267,12 @@ def _motion_once(inertia, angular_momentum, attitude, t, with_attitude=True, axe
     """
     (inertia, angular_momentum, attitude, _, permutation, sorted_inertia, unit_working, norm,
      regime) = _prepare(inertia, angular_momentum, attitude, axes)
+    # Materialised (see _fusion): the working frame and the regime are cheap elementwise values, so
+    # XLA would fuse them into every later loop and recompute there the sort of the moments and the
+    # classification's comparisons, once per output element; over a batch that was a quarter of this
+    # path's cost.  (The constructor stores them: it needs no such boundary.)
+    permutation, sorted_inertia, unit_working, norm, regime = materialise(
+        (permutation, sorted_inertia, unit_working, norm, regime))
     t = jnp.asarray(t, inertia.dtype)
     tau = norm * t
     orbit = orbit_constants(sorted_inertia, unit_working, regime)
