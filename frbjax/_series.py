@@ -83,6 +83,7 @@ from jaxtyping import Array, Bool, Float
 
 from ._fusion import materialise, when_any
 from .special import elliprf
+from .special._circular import arctan2, cos_sin
 from .special._common import is_double
 from .special._legendre import _LARGE_NEGATIVE_CHARACTERISTIC, pi_without_first_kind
 
@@ -270,8 +271,8 @@ def coefficients(m, mc, characteristic, integrals=None, complete=None) -> Series
     q_c, q_c_over_mc = nome(jnp.where(candidate, mc, 0.5), jnp.where(candidate, m, 0.5))
     # beta' = pi a'/(2K') and pi/2 - beta' = pi b/(2K'): each sine from the smaller angle, so that
     # sin beta' keeps its digits as chi -> 0 and cos beta' as chi -> -infinity.
-    sin_shift = jnp.sin(np.pi / 2 * shift / complement_quarter)
-    cos_shift = jnp.sin(np.pi / 2 * distance / complement_quarter)
+    sin_shift = cos_sin(np.pi / 2 * shift / complement_quarter)[1]
+    cos_shift = cos_sin(np.pi / 2 * distance / complement_quarter)[1]
     # cos 3x = cos x (4 cos^2 x - 3), sin 3x = sin x (3 - 4 sin^2 x): relative precision kept.
     cos_triple = cos_shift * (4 * cos_shift * cos_shift - 3)
     sin_triple = sin_shift * (3 - 4 * sin_shift * sin_shift)
@@ -413,13 +414,14 @@ def _reduced_third_kind(data: SeriesData, reduced, sines, complementary_parts):
     _, _, real_c, imaginary_c = complementary_parts
     real = jnp.where(data.complementary, real_c, real)
     imaginary = jnp.where(data.complementary, imaginary_c, imaginary)
-    return reduced * data.slope + data.amplitude * jnp.arctan2(imaginary, real)
+    return reduced * data.slope + data.amplitude * arctan2(imaginary, real)
 
 
 def _angle(data: SeriesData, reduced):
     half_angle = reduced * (np.pi / 2) / data.quarter
     # Materialised: each is used by several outputs, whose fused loops would otherwise recompute it.
-    return materialise((reduced, jnp.sin(half_angle), jnp.cos(half_angle)))
+    half_cos, half_sin = cos_sin(half_angle)
+    return materialise((reduced, half_sin, half_cos))
 
 
 def third_kind_at(data: SeriesData, u):

@@ -27,15 +27,14 @@ Derivatives (custom JVP):
 
 from __future__ import annotations
 
-import math
-
 import jax
 import jax.numpy as jnp
 from jax import lax
 from jax import Array
 from jax.typing import ArrayLike
 
-from ._carlson import _horner, _rd
+from ._carlson import _rd
+from ._circular import cos_sin_near_zero
 from ._common import complement, is_double, over_sqrt, promote, scan_unroll
 from ._legendre import _complete_first
 
@@ -72,30 +71,6 @@ def _agm_levels(mc):
     return jnp.moveaxis(a_levels, 0, -1), jnp.moveaxis(b_levels, 0, -1), mean
 
 
-# Taylor coefficients (DLMF 4.19.1, 4.19.2), highest first: sin x = x + x^3 S(x^2) and
-# cos x = 1 - x^2/2 + x^4 C(x^2), through x^19 and x^20 (on 0 <= x <= pi/4 the first omitted terms are
-# below 1e-21 of the values).
-_SIN_TAIL = tuple((-1) ** k / math.factorial(2 * k + 1) for k in range(9, 0, -1))
-_COS_TAIL = tuple((-1) ** k / math.factorial(2 * k) for k in range(10, 1, -1))
-
-
-def _cos_sin_to_quarter_pi(theta):
-    """(cos, sin)(theta) for 0 <= theta <= pi/4 (a little beyond too) by their Taylor polynomials.
-
-    XLA:CPU evaluates a float64 sine or cosine by a scalar call per element (about 9 ns each, against
-    well under 1 ns for a vectorised product or square root); on this short interval the polynomials
-    need no argument reduction.  Each is its leading terms plus a small tail, and the rounding of
-    1 - x^2/2 is added back (w = 1 - h, then (1 - w) - h exactly), so that both stay within an ulp
-    of the correctly rounded values.
-    """
-    square = theta * theta
-    sine = theta + theta * square * _horner(_SIN_TAIL, square)
-    half = square / 2
-    lead = 1 - half
-    cosine = lead + (((1 - lead) - half) + square * square * _horner(_COS_TAIL, square))
-    return cosine, sine
-
-
 def _jacobi_to_half_quarter(w, levels):
     """(sn, cn, dn)(w|m) for 0 <= w <= K(m)/2 and mc = 1 - m > 0, each to a few ulp *relative*.
 
@@ -108,7 +83,8 @@ def _jacobi_to_half_quarter(w, levels):
     a_levels, b_levels, mean = levels
     tiny = w < _tiny_argument(w)
     theta = mean * jnp.where(tiny, 1, w)
-    cos_theta, sin_theta = _cos_sin_to_quarter_pi(theta)
+    # theta <= pi/4: the polynomials of _circular need no reduction (XLA's float64 sin and cos are scalar).
+    cos_theta, sin_theta = cos_sin_near_zero(theta)
     ratio = cos_theta / sin_theta
 
     def ascend(state, level):
