@@ -35,7 +35,7 @@ import jax.numpy as jnp
 from . import _series
 from ._fusion import materialise, when_any
 from .special._carlson import _rf_unrolled
-from .special._circular import arctan2, cos_sin
+from .special._circular import cos_sin
 from .special._jacobi import _ellipj, _half_periods, _quarter_period
 from .special._legendre import (
     _LARGE_NEGATIVE_CHARACTERISTIC,
@@ -297,7 +297,7 @@ def evaluate(consts, tau, attitude=True):
     third_kind = 2 * turns * consts["third_kind_complete"] + reduced_third_kind
     orientation = jnp.where(minor, -1, 1)
     partner = jnp.where(minor, l1, l3)
-    psi = consts["precession"] * tau + orientation * (arctan2(l2, partner) - consts["alpha"] * third_kind)
+    psi = consts["precession"] * tau + orientation * (jnp.arctan2(l2, partner) - consts["alpha"] * third_kind)
     return _chart(psi, l1, l2, l3, minor), momentum
 
 
@@ -318,7 +318,7 @@ def reference(consts, unit_momentum):
     partner = jnp.where(minor, l1, l3)
     third_kind = _series.third_kind_at(consts["series"], consts["u0"])
     orientation = jnp.where(minor, -1, 1)
-    psi = orientation * (arctan2(l2, partner) - consts["alpha"] * third_kind)
+    psi = orientation * (jnp.arctan2(l2, partner) - consts["alpha"] * third_kind)
     return _chart(psi, l1, l2, l3, minor)
 
 
@@ -432,7 +432,7 @@ def evaluate_once(orbit, unit_momentum, tau, attitude=True):
     minus_nu = -nu
     addition_scale = jnp.sqrt(minus_nu * (m + minus_nu) * (1 + minus_nu))
     addition_amplitude = jnp.sqrt(minus_nu) / jnp.sqrt((1 + minus_nu) * (m + minus_nu))
-    addition = addition_amplitude * arctan2(
+    addition = addition_amplitude * jnp.arctan2(
         addition_scale * sn0 * sn_v * sn_w, 1 + minus_nu * (sn_w * sn_w) - minus_nu * sn0 * sn_v * cn_w * dn_w)
     third_kind_change = periods + reduced - addition
 
@@ -447,7 +447,7 @@ def evaluate_once(orbit, unit_momentum, tau, attitude=True):
     # atan2(L2, L_o)(tau) - atan2(L2, L_o)(0) as one arctangent: L_o = L3 (L1 in the minor regime) is
     # A_o dn > 0 at both times, so both angles lie in (-pi/2, pi/2) and their difference in (-pi, pi).
     partner, partner_start = jnp.where(minor, k1, k3), jnp.where(minor, l1, l3)
-    angle_change = arctan2(k2 * partner_start - partner * l2, partner * partner_start + k2 * l2)
+    angle_change = jnp.arctan2(k2 * partner_start - partner * l2, partner * partner_start + k2 * l2)
     psi_elliptic = orientation * (angle_change - orbit["alpha"] * third_kind_change)
 
     def on_separatrix_angle(u, psi):

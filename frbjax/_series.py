@@ -83,7 +83,7 @@ from jaxtyping import Array, Bool, Float
 
 from ._fusion import materialise, when_any
 from .special import elliprf
-from .special._circular import arctan2, cos_sin
+from .special._circular import cos_sin
 from .special._common import is_double
 from .special._legendre import _LARGE_NEGATIVE_CHARACTERISTIC, pi_without_first_kind
 
@@ -414,7 +414,7 @@ def _reduced_third_kind(data: SeriesData, reduced, sines, complementary_parts):
     _, _, real_c, imaginary_c = complementary_parts
     real = jnp.where(data.complementary, real_c, real)
     imaginary = jnp.where(data.complementary, imaginary_c, imaginary)
-    return reduced * data.slope + data.amplitude * arctan2(imaginary, real)
+    return reduced * data.slope + data.amplitude * jnp.arctan2(imaginary, real)
 
 
 def _angle(data: SeriesData, reduced):

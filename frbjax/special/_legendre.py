@@ -32,7 +32,6 @@ from jax import Array
 from jax.typing import ArrayLike
 
 from ._carlson import _horner, _rd, _rf, _rf_rj, _rj, _rj_parameter_largest
-from ._circular import arctan2
 from ._common import complement, is_double, iterate, over_sqrt, promote
 
 
@@ -315,7 +314,7 @@ def pi_without_first_kind_from(n, s, c, m, mc, third):
     caller that computes it together with other Carlson integrals (one duplication loop)."""
     transformed, characteristic, kappa = _moved_characteristic(n, m)
     y = _delta_squared(s, c, mc)
-    head = jnp.where(transformed, over_sqrt(arctan2(jnp.sqrt(kappa) * s, c * jnp.sqrt(y)), kappa), 0)
+    head = jnp.where(transformed, over_sqrt(jnp.arctan2(jnp.sqrt(kappa) * s, c * jnp.sqrt(y)), kappa), 0)
     tail = characteristic * s**3 * third / 3
     return head + jnp.where(transformed, -tail, tail)
 
