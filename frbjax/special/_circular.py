@@ -94,9 +94,7 @@ def _reduced(x):
     third_part = quadrant * third
     r = head - third_part
     tail = ((head - r) - third_part) + error
-    # k = 0: x itself (exact, and -0 keeps its sign, which x - 0 P1 would not).
-    unreduced = quadrant == 0
-    return jnp.mod(quadrant, 4), jnp.where(unreduced, x, r), jnp.where(unreduced, 0, tail)
+    return jnp.mod(quadrant, 4), r, tail
 
 
 def _cos_sin_reduced(x):
@@ -107,7 +105,8 @@ def _cos_sin_reduced(x):
     cos_value = jnp.where(swap, sine, cosine)
     sin_value = jnp.where(swap, cosine, sine)
     cos_value = jnp.where((quadrant == 1) | (quadrant == 2), -cos_value, cos_value)
-    sin_value = jnp.where(quadrant >= 2, -sin_value, sin_value)
+    # sin(+-0) = +-0 (the polynomial's sum would give +0 for both).
+    sin_value = jnp.where(x == 0, x, jnp.where(quadrant >= 2, -sin_value, sin_value))
     return cos_value, sin_value
 
 
