@@ -359,7 +359,7 @@ def evaluate_once(orbit, unit_momentum, tau, attitude=True):
     # Materialised here and below: each value feeds several outputs, whose fused loops would otherwise
     # each recompute it (see _fusion).
     # The amplitude am(v) is left out before the conditional: a conditional's results are all computed,
-    # and its arctangent was a tenth of the one-time path's cost.
+    # and its arctangent cost 3% of the one-time path.
     sn_v, cn_v, dn_v = materialise(_ellipj(v, m, mc)[:3])
     # DLMF 22.8.1-22.8.3 at u0 + v as increments over (sn0, cn0, dn0), which vanish at v = 0 and are
     # O(v) without cancellation: then L(tau) = l + A (increments) returns the given l exactly at

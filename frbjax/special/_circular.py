@@ -4,7 +4,7 @@ XLA:CPU evaluates a float64 ``cos`` or ``sin`` by a scalar library call per elem
 against well under 1 ns for a vectorised product or square root; its ``exp`` and ``log`` are
 vectorised), and the exact motion takes a cosine and a sine or two per evaluation.  Here they are
 products and sums, which the compiler vectorises, within 0.65 ulp of the correctly rounded values
-(tests/special/test_circular.py, against mpmath):
+(tests/special/test_circular.py, against mpmath).
 
 :func:`cos_sin` reduces the argument by the nearest multiple of pi/2 (Cody and Waite's three-part
 pi/2, the first two parts short enough that their products with the multiple are exact, the
@@ -57,13 +57,12 @@ def _two_difference(a, b):
     return _two_sum(a, -b)
 
 
-_SPLITTER = 2.0**27 + 1  # Veltkamp's constant for float64
-
-
 def _two_product(a, b):
-    """(a b rounded, its exact rounding error) (Dekker's product with Veltkamp's split; |a|, |b| < 2^900)."""
+    """(a b rounded, its exact rounding error) (Dekker's product with Veltkamp's split, 2^27 + 1 in
+    float64 and 2^12 + 1 in float32; |a|, |b| far below the overflow threshold)."""
+    splitter = 2.0**27 + 1 if is_double(a) else 2.0**12 + 1
     product = a * b
-    a_big, b_big = _SPLITTER * a, _SPLITTER * b
+    a_big, b_big = splitter * a, splitter * b
     a_high, b_high = a_big - (a_big - a), b_big - (b_big - b)
     a_low, b_low = a - a_high, b - b_high
     return product, ((a_high * b_high - product) + a_high * b_low + a_low * b_high) + a_low * b_low
