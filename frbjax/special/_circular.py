@@ -52,11 +52,6 @@ def _two_sum(a, b):
     return total, (a - a_virtual) + (b - b_virtual)
 
 
-def _two_difference(a, b):
-    """(a - b rounded, its exact rounding error)."""
-    return _two_sum(a, -b)
-
-
 def _two_product(a, b):
     """(a b rounded, its exact rounding error) (Dekker's product with Veltkamp's split, 2^27 + 1 in
     float64 and 2^12 + 1 in float32; |a|, |b| far below the overflow threshold)."""
@@ -89,7 +84,7 @@ def _reduced(x):
     quadrant = jnp.round(x * _TWO_OVER_PI)
     first, second, third = _HALF_PI_PARTS
     # x - k P1 and k P2 are exact; the difference of those two is carried with its error.
-    head, error = _two_difference(x - quadrant * first, quadrant * second)
+    head, error = _two_sum(x - quadrant * first, -(quadrant * second))
     third_part = quadrant * third
     r = head - third_part
     tail = ((head - r) - third_part) + error
