@@ -161,7 +161,7 @@ def work_precision(quick, repeats):
                 return solution.ys[0][-1], solution.ys[1][-1]
             points = []
             for step in steps:
-                state = run(jnp.asarray(step))
+                state = jax.block_until_ready(run(jnp.asarray(step)))
                 seconds = best_time(lambda: run(jnp.asarray(step)), repeats)
                 points.append({"step": step, "error": state_error(state, reference), "seconds": seconds})
                 print(f"  {method:13s} h={step:<8g} error {points[-1]['error']:.2e}  {seconds:.4f} s",
@@ -172,7 +172,7 @@ def work_precision(quick, repeats):
             run = dopri8 if solver_name == "Dopri8" else rk_program(solver)
             points = []
             for tolerance in tolerances:
-                *state, count = run(jnp.asarray(tolerance))
+                *state, count = jax.block_until_ready(run(jnp.asarray(tolerance)))
                 seconds = best_time(lambda: run(jnp.asarray(tolerance)), repeats)
                 points.append({"tolerance": tolerance, "steps": int(count),
                                "error": state_error(state, reference), "seconds": seconds})
@@ -238,7 +238,7 @@ def energy(quick, repeats):
         return run
 
     splitting = program(frbjax.RigidBodySplitting("blanes_moan4"), step)
-    states = splitting()
+    states = jax.block_until_ready(splitting())
     splitting_seconds = best_time(splitting, 1 if not quick else repeats)
     splitting_error = np.abs(np.asarray(term.energy(0.0, states, args)) - energy0)
     results = {"steps": steps, "step": step, "final_time": final_time, "times": np.asarray(samples).tolist(),
@@ -256,7 +256,7 @@ def energy(quick, repeats):
         count = max(int(splitting_seconds / per_step), 100)
         count = min(count, steps * 20)
         run = program(solver, final_time / count)
-        states = run()
+        states = jax.block_until_ready(run())
         seconds = best_time(run, 1)
         error = np.abs(np.asarray(term.energy(0.0, states, args)) - energy0)
         results["runs"][name] = {"step": final_time / count, "steps": count, "seconds": seconds,

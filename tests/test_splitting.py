@@ -36,7 +36,8 @@ INERTIA = np.array([1.0, 1.6, 2.3])
 ARGS = {"weight": 1.0, "chi": np.array([0.05, 0.1, 0.4])}
 _Q0 = np.array([0.9, 0.3, -0.2, 0.1])
 Y0 = (np.array([0.3, 0.8, 2.0]), _Q0 / np.linalg.norm(_Q0))
-ORDERS = {"leapfrog": 2, "strang": 2, "yoshida4": 4, "blanes_moan4": 4, "blanes_moan6": 6}
+ORDERS = {"leapfrog": 2, "strang": 2, "yoshida4": 4, "blanes_moan4": 4, "blanes_moan6": 6, "aba864": 4,
+          "aba1064": 4}
 
 
 def heavy_top_potential(t, q, args):
@@ -97,12 +98,15 @@ def errors(method, steps, final_time, reference):
 # Steps where the error lies well above the reference's uncertainty and in the asymptotic regime.
 ORDER_STEPS = {"leapfrog": (0.04, 0.02, 0.01), "strang": (0.04, 0.02, 0.01),
                "yoshida4": (0.08, 0.04, 0.02), "blanes_moan4": (0.2, 0.1, 0.05),
-               "blanes_moan6": (0.5, 0.35, 0.25)}
+               "blanes_moan6": (0.5, 0.35, 0.25), "aba864": (0.2, 0.1, 0.05), "aba1064": (0.2, 0.1, 0.05)}
 
 
 @pytest.mark.parametrize("method", ORDERS)
 def test_order_against_dopri8(method):
-    """T = 20: the error against Dopri8 at 1e-14 falls at the slope of the order (within 0.3)."""
+    """T = 20: the error against Dopri8 at 1e-14 falls at the slope of the order (within 0.3).
+
+    Measured for the ABA methods (their classical order 4 at a weight that is no perturbation):
+    slopes 4.02 (aba864) and 4.01 (aba1064); at T = 100 halving 0.2 divides by 2^3.99 and 2^4.00."""
     reference = dopri8(20.0, 1e-14)
     # The reference is good to ~2e-13 (against Dopri8 at 1e-13), far below the errors measured.
     assert state_error(dopri8(20.0, 1e-13), reference) < 1e-12
@@ -115,7 +119,8 @@ def test_order_against_dopri8(method):
 
 # (h, h/2) at T = 100.  Dopri8 at 1e-13 is itself good to ~3.5e-11 there (against 1e-14), which is the
 # size of blanes_moan6's error at h = 0.25 (measured 2.4e-9 at 0.5, 7.8e-11 at 0.25).
-LONG_STEPS = {"leapfrog": 0.02, "strang": 0.02, "yoshida4": 0.08, "blanes_moan4": 0.2, "blanes_moan6": 0.5}
+LONG_STEPS = {"leapfrog": 0.02, "strang": 0.02, "yoshida4": 0.08, "blanes_moan4": 0.2, "blanes_moan6": 0.5,
+              "aba864": 0.2, "aba1064": 0.2}
 
 
 @pytest.mark.parametrize("method", ORDERS)
@@ -130,6 +135,31 @@ def test_agreement_with_dopri8_at_t100(method):
     assert coarse > 1e-9
     assert coarse * 2.0 ** -(order + 0.3) <= fine <= coarse * 2.0 ** -(order - 0.3) + 2 * uncertainty, (
         method, coarse, fine, uncertainty)
+
+
+@pytest.mark.parametrize("method", ["aba864", "aba1064"])
+def test_near_integrable_error_is_second_order_in_the_torque(method):
+    """A light top (weight eps): the ABA methods' error is O(eps h^8 + eps^2 h^6 + eps^3 h^4)
+    (Blanes et al. 2013), so at eps = 0.01 it falls at slope 6 with the step and dividing eps by 10
+    divides it by about 100.  A method of order 4 for any torque has an eps h^4 term: its error falls
+    at slope 4 and in proportion to eps (measured for blanes_moan4: slopes 4.20, 4.25, ratio 10.0).
+
+    Measured at T = 20, steps (1, 0.8, 0.63): slopes 5.87, 6.11 (aba864) and 5.91, 6.08 (aba1064);
+    error ratios between eps = 0.01 and 0.001 at h = 1: 128 and 104, with the reference good to
+    1.3e-13 and the errors at eps = 0.001 2.6e-12 and more.
+    """
+    measured = {}
+    for weight, steps in ((0.01, (1.0, 0.8, 0.63)), (0.001, (1.0,))):
+        args = dict(ARGS, weight=weight)
+        reference_solution = diffrax.diffeqsolve(
+            TERM, diffrax.Dopri8(), 0.0, 20.0, 0.01, Y0, args=args, max_steps=1_000_000,
+            stepsize_controller=diffrax.PIDController(rtol=1e-14, atol=1e-14))
+        reference = (reference_solution.ys[0][-1], reference_solution.ys[1][-1])
+        measured[weight] = np.array([state_error(final(method, 20.0, h, args=args), reference) for h in steps])
+    assert measured[0.001][0] > 2e-12, measured
+    slope = np.polyfit(np.log([1.0, 0.8, 0.63]), np.log(measured[0.01]), 1)[0]
+    assert abs(slope - 6) <= 0.3, (method, measured, slope)
+    assert measured[0.01][0] / measured[0.001][0] > 60, measured
 
 
 # ------------------------------------------------------------------------------ CALGO example 1
