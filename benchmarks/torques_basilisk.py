@@ -130,11 +130,13 @@ def mrp_to_quaternion(sigma):
 
 
 def satellite_term(damped):
-    """The gravity gradient through its potential (plain kicks), the damping as a momentum torque."""
+    """The ready-made torques as the momentum torque: the gravity gradient alone does not depend on L
+    (plain kicks L += s tau, its closed form), with the damping the kick is the exact affine one."""
     inertia = jnp.asarray(SATELLITE_INERTIA)
-    gradient = torques.GravityGradient(inertia, torques.CircularOrbit(ORBIT_RADIUS, MU_EARTH))
-    damping = torques.LinearDamping(inertia, DAMPING) if damped else None
-    return frbjax.RigidBodyTerm(inertia, potential=gradient.potential, momentum_torque=damping)
+    torque = torques.GravityGradient(inertia, torques.CircularOrbit(ORBIT_RADIUS, MU_EARTH))
+    if damped:
+        torque = torque + torques.LinearDamping(inertia, DAMPING)
+    return frbjax.RigidBodyTerm(inertia, momentum_torque=torque)
 
 
 def satellite_states(bodies):
@@ -168,7 +170,21 @@ def frbjax_programs(term, final_time):
             return solution.ys[0][-1], solution.ys[1][-1]
         return run
 
-    return rk, splitting
+    def final_state(method, step):
+        """The state at T alone by ``splitting_trajectory(save_every=steps)``: the same method, with
+        the free flows joined across steps where it starts and ends with one (aba864, aba1064)."""
+        steps = round(final_time / step)
+        if not math.isclose(steps * step, final_time):
+            raise ValueError(f"the step {step} does not divide T = {final_time}")
+
+        @jax.jit
+        def run(y0):
+            _, (momenta, attitudes) = frbjax.splitting_trajectory(term, y0, dt=step, steps=steps, method=method,
+                                                                  save_every=steps)
+            return momenta[-1], attitudes[-1]
+        return run
+
+    return rk, splitting, final_state
 
 
 def basilisk_run(final_time, step, integrator, damped, tolerance=None):
@@ -262,7 +278,7 @@ def basilisk_part(quick, repeats, with_basilisk):
         print(f"basilisk: {results['basilisk']}", flush=True)
     for name, damped in (("damped", True), ("undamped", False)):
         term = satellite_term(damped)
-        rk, splitting = frbjax_programs(term, final_time)
+        rk, splitting, final_state = frbjax_programs(term, final_time)
         y0 = tuple(x[0] for x in satellite_states(1))
         dopri8 = rk(diffrax.Dopri8())
         reference = dopri8(y0, jnp.asarray(1e-14))
@@ -322,7 +338,7 @@ def basilisk_part(quick, repeats, with_basilisk):
         frbjax_best = min((f for k, f in fastest.items() if k.startswith("frbjax") and f), default=None)
         entry["basilisk_over_frbjax_one_body"] = (fastest["Basilisk"][0] / frbjax_best[0]
                                                   if frbjax_best and fastest["Basilisk"] else None)
-        entry.update(batch_rows(term, rk, splitting, entry, damped, quick, bodies, repeats))
+        entry.update(batch_rows(term, rk, splitting, final_state, entry, damped, quick, bodies, repeats))
         print(f"  {name}: fastest at {TARGET_ERROR:g}: {fastest}; Basilisk / frbjax one body "
               f"{entry['basilisk_over_frbjax_one_body']}, per body in a batch "
               f"{entry.get('basilisk_over_frbjax_per_body_batch')}", flush=True)
@@ -330,7 +346,7 @@ def basilisk_part(quick, repeats, with_basilisk):
     return results
 
 
-def batch_rows(term, rk, splitting, entry, damped, quick, bodies, repeats):
+def batch_rows(term, rk, splitting, final_state, entry, damped, quick, bodies, repeats):
     """The batch rows of one problem: its fastest frbjax methods at ``entry``'s one-body settings, and
     the per-body time against Basilisk's one body."""
     fastest = entry["fastest_at_target"]
@@ -342,7 +358,8 @@ def batch_rows(term, rk, splitting, entry, damped, quick, bodies, repeats):
             rows["batch_splitting"] = "left out: the exact damping kicks cost as much per body in a batch"
             continue
         if fastest[kind]:
-            rows["batch"][fastest[kind][1]] = batch(term, rk, splitting, entry, fastest[kind][1], bodies, repeats)
+            rows["batch"][fastest[kind][1]] = batch(term, rk, splitting, final_state, entry, fastest[kind][1], bodies,
+                                                    repeats)
     if rows["batch"]:
         per_body = min(run["seconds_per_body"] for run in rows["batch"].values())
         rows["fastest_seconds_per_body_in_batch"] = per_body
@@ -351,22 +368,33 @@ def batch_rows(term, rk, splitting, entry, damped, quick, bodies, repeats):
     return rows
 
 
-def batch(term, rk, splitting, entry, method, bodies, repeats):
+def batch(term, rk, splitting, final_state, entry, method, bodies, repeats):
     """``bodies`` satellites at once with ``method`` at the setting that gives TARGET_ERROR for one body.
 
-    A splitting method steps all bodies together (one state (bodies, 3), (bodies, 4)); a Runge-Kutta
-    method is ``jax.vmap``-ed over the bodies, so that each body keeps its own adaptive steps.
+    A splitting method steps all bodies together (one state (bodies, 3), (bodies, 4)), both through
+    ``diffeqsolve`` and through ``splitting_trajectory(save_every=steps)`` (the final state alone, the
+    free flows joined across steps: the row's time and errors); a Runge-Kutta method is
+    ``jax.vmap``-ed over the bodies, so that each body keeps its own adaptive steps.
     """
     points = entry["methods"][method]["points"]
     kind = "step" if "step" in points[0] else "tolerance"
     # The largest step (loosest tolerance) whose one-body error is at or below the target.
     good = [p for p in points if p["error"] <= TARGET_ERROR] or points[-1:]
     setting = max(p[kind] for p in good)
+    y0 = satellite_states(bodies)
+    extra = {}
     if kind == "step":
-        run = splitting(method)
+        through_diffeqsolve = splitting(method)
+        jax.block_until_ready(through_diffeqsolve(y0, jnp.asarray(setting)))
+        extra["seconds_diffeqsolve"] = best_time(lambda: through_diffeqsolve(y0, jnp.asarray(setting)), repeats)
+        final = final_state(method, setting)
+
+        def run(y0, setting):
+            return final(y0)
+
+        extra["program"] = "splitting_trajectory(save_every=steps): the final state, free flows joined"
     else:
         run = jax.jit(jax.vmap(rk({"Tsit5": diffrax.Tsit5(), "Dopri8": diffrax.Dopri8()}[method]), in_axes=(0, None)))
-    y0 = satellite_states(bodies)
     state = jax.block_until_ready(run(y0, jnp.asarray(setting)))
     seconds = best_time(lambda: run(y0, jnp.asarray(setting)), repeats)
     references = jax.jit(jax.vmap(rk(diffrax.Dopri8()), in_axes=(0, None)))
@@ -375,11 +403,12 @@ def batch(term, rk, splitting, entry, method, bodies, repeats):
     # The reference's own uncertainty per body (its distance to Dopri8 at 1e-13): a tumble whose
     # state at T amplifies rounding errors this much is ill-conditioned for every method.
     uncertainty = relative_error(references(y0, jnp.asarray(1e-13)), reference)
+    through = f" (diffeqsolve {1e6 * extra['seconds_diffeqsolve'] / bodies:.1f} us)" if extra else ""
     print(f"  batch of {bodies}: {method} {kind}={setting:g}: {seconds:.3f} s, {1e6 * seconds / bodies:.1f} us "
-          f"per body; error median {np.median(errors):.1e}, 90% {np.quantile(errors, 0.9):.1e}, max "
+          f"per body{through}; error median {np.median(errors):.1e}, 90% {np.quantile(errors, 0.9):.1e}, max "
           f"{errors.max():.1e}; reference's own uncertainty max {uncertainty.max():.1e}", flush=True)
     return {"method": method, kind: setting, "bodies": bodies, "seconds": seconds,
-            "seconds_per_body": seconds / bodies, "max_error": float(errors.max()),
+            "seconds_per_body": seconds / bodies, **extra, "max_error": float(errors.max()),
             "median_error": float(np.median(errors)), "p90_error": float(np.quantile(errors, 0.9)),
             "fraction_within_target": float(np.mean(errors <= TARGET_ERROR)),
             "max_reference_uncertainty": float(uncertainty.max())}
@@ -592,8 +621,8 @@ def batch_part(repeats, bodies, source):
     for name, damped in (("damped", True), ("undamped", False)):
         entry = recorded["problems"][name]
         term = satellite_term(damped)
-        rk, splitting = frbjax_programs(term, recorded["final_time"])
-        results["problems"][name] = batch_rows(term, rk, splitting, entry, damped, False, bodies, repeats)
+        rk, splitting, final_state = frbjax_programs(term, recorded["final_time"])
+        results["problems"][name] = batch_rows(term, rk, splitting, final_state, entry, damped, False, bodies, repeats)
         print(f"{name}: {results['problems'][name]}", flush=True)
     return results
 

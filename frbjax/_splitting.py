@@ -188,6 +188,25 @@ class _Function(eqx.Module):
         return self.function(*arguments)
 
 
+class _WithoutMomentum(eqx.Module):
+    """A momentum torque that does not depend on L (``depends_on_momentum`` False) as a torque (t, q, args)."""
+
+    momentum_torque: object
+
+    def __call__(self, t, q, args):
+        return self.momentum_torque(t, q, jnp.zeros((3,), q.dtype), args)
+
+
+class _SumOfTorques(eqx.Module):
+    """Two torques (t, q, args) -> (3,) added."""
+
+    first: object
+    second: object
+
+    def __call__(self, t, q, args):
+        return self.first(t, q, args) + self.second(t, q, args)
+
+
 class RigidBodyTerm(diffrax.AbstractTerm):
     r"""A rigid body under torques, as a diffrax term: the state is ``y = (L, q)``.
 
@@ -201,7 +220,9 @@ class RigidBodyTerm(diffrax.AbstractTerm):
       attitude only (thrusters fixed in the body, magnetic torquers with a given dipole, ...);
     - ``momentum_torque(t, q, L, args) -> (3,)``: a body-frame torque of one body that may also depend
       on its body angular momentum L (3,), hence on its angular velocity Omega = L / I (damping,
-      eddy currents, attitude controllers, B-dot: :mod:`frbjax.torques`).
+      eddy currents, attitude controllers, B-dot: :mod:`frbjax.torques`).  One whose attribute
+      ``depends_on_momentum`` is False (gravity, the gravity gradient, a constant torque of
+      :mod:`frbjax.torques`, and their sums) is taken as a ``torque``: the term holds it there.
 
     The body moves by
 
@@ -260,6 +281,12 @@ class RigidBodyTerm(diffrax.AbstractTerm):
             value = _concrete(inertia)
             if value is not None and not (np.all(np.isfinite(value)) and np.all(np.asarray(value) > 0)):
                 raise ValueError("inertia: the principal moments of inertia must be finite and > 0")
+        if momentum_torque is not None and getattr(momentum_torque, "depends_on_momentum", True) is False:
+            # A torque of frbjax.torques that does not depend on L (gravity, the gravity gradient): a
+            # torque of (t, q), kicked by L += s tau, not by the matrix exponential of an affine kick.
+            position_torque = _WithoutMomentum(momentum_torque)
+            torque = position_torque if torque is None else _SumOfTorques(torque, position_torque)
+            momentum_torque = None
         if linear_in_momentum is None:
             linear_in_momentum = bool(getattr(momentum_torque, "linear_in_momentum", False))
         self.inertia = inertia
@@ -512,16 +539,96 @@ class RigidBodySplitting(diffrax.AbstractSolver):
         dtype = jnp.result_type(momentum, attitude)
         # diffrax's times are float64 under x64 even for a float32 state: keep the state's precision.
         t, h = jnp.asarray(t, dtype), jnp.asarray(h, dtype)
+        kick, free_motion = self._pieces(term, h, args)
         kicks = jnp.asarray(self.kicks, dtype)
         flows = jnp.asarray(self.flows, dtype)
         # Kick i + 1 comes after the free flows 0..i: at time t + h (f_0 + ... + f_i).
         kick_times = jnp.asarray(np.cumsum(self.flows), dtype)
+        if self.kicks[0] != 0:
+            momentum = kick(momentum, attitude, kicks[0], t)
+
+        # One loop over the stages, the last kick included even when its coefficient is 0: XLA:CPU
+        # (jaxlib 0.10.2) aborted compiling diffrax's step region without a loop around the free
+        # flows (leapfrog, strang) or with other loop structures (``advance_steps``).
+        def stage(state, coefficients):
+            momentum, attitude = state
+            flow, next_kick, time = coefficients
+            momentum, attitude = free_motion(momentum, attitude, flow * h)
+            return (kick(momentum, attitude, next_kick, t + time * h), attitude), None
+
+        (momentum, attitude), _ = jax.lax.scan(stage, (momentum, attitude), (flows, kicks[1:], kick_times))
+        return momentum.astype(dtype), attitude.astype(dtype)
+
+    def advance_steps(self, term, t, h, y, args, count):
+        """``count`` steps of size h (any sign) from the state y = (L, q) at time t: the state after
+        the last one.
+
+        A method that starts and ends with a free flow (k_0 = k_n = 0) joins each step's last free
+        flow with the next step's first, F(f_{n-1} h) F(f_0 h) = F((f_{n-1} + f_0) h) (the free motion
+        is a flow: exact): n - 1 free flows a step instead of n, for a caller that needs the state
+        every ``count`` steps only.  Other methods take ``count`` steps of ``advance``.
+        """
+        if count == 1:
+            return self.advance(term, t, h, y, args)
+        momentum, attitude = y
+        dtype = jnp.result_type(momentum, attitude)
+        # diffrax's times are float64 under x64 even for a float32 state: keep the state's precision.
+        t, h = jnp.asarray(t, dtype), jnp.asarray(h, dtype)
+        kick, free_motion = self._pieces(term, h, args)
+        flows, kicks = self.flows, self.kicks
+        # Kick i comes after the free flows 0..i-1 of its step: at time t + h (j + f_0 + ... + f_{i-1}).
+        offsets = np.concatenate([[0.0], np.cumsum(flows)])
+
+        def constant(values):
+            return jnp.asarray(np.asarray(values, float), dtype)
+
+        def stages(state, time, coefficients):
+            # (kick i, then free flow i) for the stages given: kick coefficient, time offset, flow.
+            def stage(state, stage_coefficients):
+                momentum, attitude = state
+                kick_coefficient, offset, flow = stage_coefficients
+                momentum = kick(momentum, attitude, kick_coefficient, time + offset * h)
+                return free_motion(momentum, attitude, flow * h), None
+
+            length = coefficients[0].shape[0]
+            if length <= 1:
+                # No loop of zero or one iteration: XLA:CPU (jaxlib 0.10.2) aborted compiling one-kernel
+                # regions that held one around other loops.
+                return stage(state, tuple(c[0] for c in coefficients))[0] if length else state
+            return jax.lax.scan(stage, state, coefficients)[0]
+
+        def repeat(one_step, state):
+            return jax.lax.scan(one_step, state, jnp.arange(count, dtype=dtype))[0]
+
+        state = (momentum, attitude)
+        if kicks[0] == 0 and kicks[-1] == 0 and len(flows) > 1:
+            # [F(f_0 + f_{n-1}) K(k_1) F(f_1) ... F(f_{n-2}) K(k_{n-1})] per step, the first step's
+            # first free flow F(f_0), then the last step's last free flow F(f_{n-1}).
+            first, joined_first = constant(flows[0]), constant(flows[0] + flows[-1])
+            rest = (constant(kicks[1:-1]), constant(offsets[1:-1]))
+
+            def one_step(state, j):
+                momentum, attitude = free_motion(*state, jnp.where(j == 0, first, joined_first) * h)
+                # Kick i, then free flow i, for i = 1..n-2; kick n-1 last.
+                momentum, attitude = stages((momentum, attitude), t + j * h,
+                                            (rest[0][:-1], rest[1][:-1], constant(flows[1:-1])))
+                return (kick(momentum, attitude, rest[0][-1], t + (j + rest[1][-1]) * h), attitude), None
+
+            state = repeat(one_step, state)
+            momentum, attitude = free_motion(*state, constant(flows[-1]) * h)
+            return momentum.astype(dtype), attitude.astype(dtype)
+        # Kicks at both ends: nothing to join, the steps one after the other.
+        def one_step(state, j):
+            return self.advance(term, t + j * h, h, state, args), None
+
+        momentum, attitude = repeat(one_step, state)
+        return momentum.astype(dtype), attitude.astype(dtype)
+
+    def _pieces(self, term, h, args):
+        """(kick(L, q, coefficient, time) -> L, free_motion(L, q, time) -> (L, q)) of a step of size h."""
 
         def kick(momentum, attitude, coefficient, time):
             return self.kick(term, time, coefficient * h, momentum, attitude, args)
-
-        if self.kicks[0] != 0:
-            momentum = kick(momentum, attitude, kicks[0], t)
 
         # The matrix exponential of the exact affine kick calls XLA's runtime (an LU solve), so the step
         # cannot be one kernel (solver.step): then each free flow is one instead, its region given the
@@ -539,14 +646,7 @@ class RigidBodySplitting(diffrax.AbstractSolver):
             def free_motion(momentum, attitude, time):
                 return region(moments_only, momentum, attitude, time)
 
-        def stage(state, coefficients):
-            momentum, attitude = state
-            flow, next_kick, time = coefficients
-            momentum, attitude = free_motion(momentum, attitude, flow * h)
-            return (kick(momentum, attitude, next_kick, t + time * h), attitude), None
-
-        (momentum, attitude), _ = jax.lax.scan(stage, (momentum, attitude), (flows, kicks[1:], kick_times))
-        return momentum.astype(dtype), attitude.astype(dtype)
+        return kick, free_motion
 
 
 def _affine_kick(term, t, s, momentum, attitude, args):
@@ -616,32 +716,44 @@ def _check_initial_torque(term, t0, y0, args):
 
 
 @functools.lru_cache(maxsize=64)
-def _trajectory_region(solver, steps, dtype):
-    """The loop over ``steps`` steps of ``solver`` as a one-kernel region, made once per (solver,
-    steps, dtype), so that eager calls of ``splitting_trajectory`` reuse its compiled program."""
+def _trajectory_region(solver, steps, dtype, save_every=1):
+    """The loop over ``steps`` steps of ``solver``, the state saved every ``save_every`` steps, as a
+    one-kernel region, made once per (solver, steps, dtype, save_every), so that eager calls of
+    ``splitting_trajectory`` reuse its compiled program."""
 
     def trajectory(term, y0, dt, t0, args):
-        def one_step(state, n):
-            state = solver.advance(term, t0 + n * dt, dt, state, args)
+        def saved_steps(state, n):
+            state = solver.advance_steps(term, t0 + n * dt, dt, state, args, save_every)
             return state, state
 
-        return jax.lax.scan(one_step, y0, jnp.arange(steps, dtype=dtype))[1]
+        if steps == save_every:
+            # One block: its state directly (XLA:CPU failed to compile a one-kernel region holding a
+            # loop of one iteration around the loop over the steps).
+            return jax.tree.map(lambda x: x[None], saved_steps(y0, jnp.zeros((), dtype))[1])
+        return jax.lax.scan(saved_steps, y0, jnp.arange(0, steps, save_every, dtype=dtype))[1]
 
     return one_kernel(trajectory)
 
 
-def splitting_trajectory(term, y0, *, dt, steps, t0=0.0, args=None, method="blanes_moan6"):
+def splitting_trajectory(term, y0, *, dt, steps, t0=0.0, args=None, method="blanes_moan6", save_every=1):
     r"""The states after each of ``steps`` fixed steps of a splitting method: a lean ``lax.scan``.
 
-    Returns ``(ts, (L, q))`` with ``ts`` (steps + 1,) = t0 + n dt and L (steps + 1, ..., 3), q
-    (steps + 1, ..., 4), the initial state first.  ``method`` is a name of ``METHODS`` or a
-    :class:`RigidBodySplitting`; the step is the same code as ``diffrax.diffeqsolve(term,
-    RigidBodySplitting(...), ...)``.  ``steps`` is a Python int (the program is compiled for it).
+    Returns ``(ts, (L, q))`` with ``ts`` (steps / save_every + 1,) = t0 + n save_every dt and L
+    (steps / save_every + 1, ..., 3), q (..., 4), the initial state first.  ``method`` is a name of
+    ``METHODS`` or a :class:`RigidBodySplitting`; the step is the same code as
+    ``diffrax.diffeqsolve(term, RigidBodySplitting(...), ...)``.  ``steps`` is a Python int (the
+    program is compiled for it), and so is ``save_every``, which must divide it.
 
-    Use it for many saved steps of a small system (no per-step bookkeeping of diffeqsolve) and for
-    forward-mode derivatives; reverse mode through it stores every step (memory grows with ``steps``):
-    for long reverse-mode runs use diffeqsolve with its ``RecursiveCheckpointAdjoint``.
+    ``save_every`` > 1 saves every ``save_every``-th state only, and for a method that starts and
+    ends with a free flow (strang, aba864, aba1064) joins the last free flow of each step with the
+    first of the next between saved states (``RigidBodySplitting.advance_steps``): one free flow a
+    step fewer (aba1064: 8 instead of 9), the same method.  ``save_every=steps`` returns the initial
+    and the final state.
 
+    Use it for many saved steps of a small system (no per-step bookkeeping of diffeqsolve), for the
+    state at a final time, and for forward-mode derivatives; reverse mode through it stores every
+    step (memory grows with ``steps``): for long reverse-mode runs use diffeqsolve with its
+    ``RecursiveCheckpointAdjoint``.
     Bad input: ``dt`` <= 0 or not finite, a non-finite or zero initial state, or a torque that is not
     finite at the initial state (a NaN-returning function) raise ValueError naming the argument when
     they are concrete; under jit the states are NaN instead.  The attitude
@@ -652,6 +764,8 @@ def splitting_trajectory(term, y0, *, dt, steps, t0=0.0, args=None, method="blan
         raise ValueError(f"term must be a RigidBodyTerm, got {type(term).__name__}")
     if not isinstance(steps, (int, np.integer)) or steps < 0:
         raise ValueError(f"steps must be a Python int >= 0, got {steps!r}")
+    if not isinstance(save_every, (int, np.integer)) or save_every < 1 or steps % save_every:
+        raise ValueError(f"save_every must be a Python int >= 1 that divides steps ({steps}), got {save_every!r}")
     y0 = _checked_state(y0, term)
     dtype = y0[0].dtype
     dt = _checked_step(dt).astype(dtype)
@@ -661,10 +775,11 @@ def splitting_trajectory(term, y0, *, dt, steps, t0=0.0, args=None, method="blan
     # One body (or a few): the whole loop over steps as one kernel (frbjax._kernel), the speed that
     # XLA reaches for small loops, without a process-wide flag.  Everything the loop reads is an
     # argument: a region closes over no tracer of the caller's.
+    key = (solver, int(steps), jnp.dtype(dtype).name, int(save_every))
     try:
-        region = _trajectory_region(solver, steps, jnp.dtype(dtype).name)
+        region = _trajectory_region(*key)
     except TypeError:  # a solver that cannot be hashed (a kick solver of the user's, say): no cache
-        region = _trajectory_region.__wrapped__(solver, steps, jnp.dtype(dtype).name)
+        region = _trajectory_region.__wrapped__(*key)
     momenta, attitudes = region(term, y0, dt, t0, args)
-    ts = t0 + dt * jnp.arange(steps + 1, dtype=dtype)
+    ts = t0 + dt * (save_every * jnp.arange(steps // save_every + 1, dtype=dtype))
     return ts, (jnp.concatenate([y0[0][None], momenta]), jnp.concatenate([y0[1][None], attitudes]))

@@ -12,7 +12,9 @@ that they are traced and differentiated like any array).  Pass one, or a sum of 
     term = frbjax.RigidBodyTerm(inertia, momentum_torque=torque)
 
 Every torque here is affine in L (``linear_in_momentum = True``), so that the splitting's kick is
-exact (a matrix exponential; :class:`~frbjax.RigidBodySplitting`).  The torques that derive from a
+exact (a matrix exponential; :class:`~frbjax.RigidBodySplitting`); those that do not depend on L at
+all (``depends_on_momentum = False``: gravity, the gravity gradient, a constant torque, and their
+sums) kick as a ``torque=`` does, L += s tau(t, q).  The torques that derive from a
 potential (uniform gravity, gravity gradient) also give it, ``.potential(t, q, args)``, for
 ``RigidBodyTerm(potential=...)``: the kick is then a plain L += s tau and the splitting symplectic.
 
@@ -144,6 +146,9 @@ class AbstractTorque(eqx.Module):
 
     ``linear_in_momentum``: whether the torque is affine in L (all of this module's are), which
     :class:`~frbjax.RigidBodyTerm` reads to make the splitting's kick exact.
+    ``depends_on_momentum``: whether it depends on L at all (gravity, the gravity gradient and a
+    constant torque do not): a term kicks with such a torque as with ``torque=``, L += s tau(t, q),
+    with no matrix exponential.
     """
 
     def __call__(self, t, q, L, args) -> Float[Array, "3"]:
@@ -151,6 +156,10 @@ class AbstractTorque(eqx.Module):
 
     @property
     def linear_in_momentum(self) -> bool:
+        return True
+
+    @property
+    def depends_on_momentum(self) -> bool:
         return True
 
     def __add__(self, other):
@@ -179,6 +188,10 @@ class SumOfTorques(AbstractTorque):
     def linear_in_momentum(self) -> bool:
         return all(getattr(torque, "linear_in_momentum", False) for torque in self.torques)
 
+    @property
+    def depends_on_momentum(self) -> bool:
+        return any(getattr(torque, "depends_on_momentum", True) for torque in self.torques)
+
 
 # ------------------------------------------------------------------------------ the torques
 
@@ -193,6 +206,10 @@ class ConstantTorque(AbstractTorque):
 
     def __call__(self, t, q, L, args):
         return self.torque.astype(jnp.result_type(q, self.torque))
+
+    @property
+    def depends_on_momentum(self) -> bool:
+        return False
 
 
 class UniformGravity(AbstractTorque):
@@ -219,6 +236,10 @@ class UniformGravity(AbstractTorque):
 
     def __call__(self, t, q, L, args):
         return jnp.cross(self.centre_of_mass, _body(q, self.weight))
+
+    @property
+    def depends_on_momentum(self) -> bool:
+        return False
 
     def potential(self, t, q, args):
         """V(q) = -F . R(q) c (zero with the centre of mass at the fixed point's height)."""
@@ -297,6 +318,10 @@ class GravityGradient(AbstractTorque):
     def __call__(self, t, q, L, args):
         direction, strength = self._direction_and_strength(t, q)
         return strength * jnp.cross(direction, self.inertia @ direction)
+
+    @property
+    def depends_on_momentum(self) -> bool:
+        return False
 
     def potential(self, t, q, args):
         """V(t, q) = (3 mu / (2 |r|^3)) n . J n."""

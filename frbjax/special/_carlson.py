@@ -52,30 +52,80 @@ from jax.custom_derivatives import SymbolicZero
 from jax import Array
 from jax.typing import ArrayLike
 
-from .._fusion import materialise
+from .._fusion import materialise, when_any
 from ._common import is_double, iterate, over_sqrt, promote
+from ._common import rolled as is_rolled
 
 
 def _plan(x):
-    """(steps, spread threshold) of the duplication, per dtype (see the module note).
+    """(steps, spread threshold, the first blocks of steps over an array) of the duplication, per
+    dtype (see the module note).
 
     float64: 12 steps bring the spread below 2^-8 for argument ratios down to 1e-300, where the
     seventh-order series errs by about 0.1 spread^8 < 1e-17.  float32: 7 steps (spread 2^-5, 1e-13).
+    Over an array the steps come in blocks, the first always taken and each later one (the last
+    holding the remaining steps) only when some point needs it (``_duplicate``): 2 steps serve
+    spreads up to 1/16 (the third-kind integral of a short step), 4 spreads up to 1.
     """
-    return (12, 2.0**-8) if is_double(x) else (7, 2.0**-5)
+    return (12, 2.0**-8, (2, 2)) if is_double(x) else (7, 2.0**-5, (2, 1))
 
 
-def _duplicate(step, state, x, rolled=False):
-    """Apply duplication ``step(state, q)`` (q = 4^-k at step k) ``_plan`` times; returns (state, 4^-N).
+def _duplicate(step, state, x, rolled=False, deviation=None):
+    """Apply duplication ``step(state, q)`` (q = 4^-k at step k) until the spread is small; returns
+    (state, 4^-N) with N the steps taken, per point.
 
-    Unrolled for an array of points, a rolled loop for one point or a few (``_common.rolled``) and in
-    the derivative rules (``rolled=True``: one compiled step instead of twelve, for compile time).
+    ``deviation(state)`` gives, per point, pairs (Q, A_k) of the relative spread's numerator and
+    denominator, one pair per series the loop serves: Q = max |A_0 - x_0| over the arguments, A_k the
+    mean after k steps, and the spread 4^-k Q / A_k (Carlson 1995, eq. (2.4)).  A point takes no
+    further step once its spread is at most ``_plan``'s threshold (Carlson's stopping rule, with
+    ``_plan``'s count as the most), so that its value follows from its own arguments alone, whatever
+    the batch around it.  Over an array the steps are unrolled (one fused pass) in ``_plan``'s
+    blocks, each block after the first skipped when no point of the batch needs it (a conditional,
+    ``_fusion.when_any``); for one point or a few, a rolled loop of every step, masked.  The derivative rules' loops (``rolled=True``) take every step: a loop JAX can
+    transpose, and partial derivatives whose series converge more slowly than the value's.
     """
+    steps, threshold, first = _plan(x)
+
+    def converged(carry):
+        quarter, state = carry
+        done = True
+        for spread, mean in deviation(state):
+            done = done & (quarter * spread <= threshold * mean)
+        return done
+
     def body(_, carry):
         quarter, state = carry
-        return quarter / 4, step(state, quarter)
+        done = converged(carry)
+        stepped = step(state, quarter)
+        state = jax.tree.map(lambda kept, new: jnp.where(done, kept, new), state, stepped)
+        return jnp.where(done, quarter, quarter / 4), state
 
-    quarter, state = iterate(body, (jnp.asarray(1.0, x.dtype), state), _plan(x)[0], x, rolled)
+    if rolled:
+        # The rules' loops: every step, so that the partial derivatives (whose series converge a
+        # power of the spread more slowly than the value's) keep the fixed count's accuracy.
+        def full_step(_, carry):
+            quarter, state = carry
+            return quarter / 4, step(state, quarter)
+
+        quarter, state = lax.fori_loop(0, steps, full_step, (jnp.asarray(1.0, x.dtype), state))
+        return state, quarter
+    carry = (jnp.ones_like(x), state)
+    if is_rolled(x):
+        # One point or a few: a rolled loop of every step, masked (a loop that ends early needs a
+        # reduction in its condition, which a one-kernel region cannot hold: frbjax._kernel).
+        quarter, state = lax.fori_loop(0, steps, body, carry)
+    else:
+        # Unrolled in blocks: the first always, each later one only when some point needs it.
+        taken = 0
+        for size in first + (steps - sum(first),):
+            def block(carry, start=taken, size=size):
+                for k in range(start, start + size):
+                    carry = body(k, carry)
+                return carry
+
+            carry = block(carry) if taken == 0 else when_any(~converged(carry), block, lambda c: c, carry)
+            taken += size
+        quarter, state = carry
     return state, quarter
 
 
@@ -137,6 +187,14 @@ def _rj_polynomial(e2, e3, e4, e5):
     )
 
 
+def _largest_magnitude(*deviations):
+    """max |d| over the deviations A_0 - x_0 of the arguments (Carlson's Q)."""
+    largest = jnp.abs(deviations[0])
+    for deviation in deviations[1:]:
+        largest = jnp.maximum(largest, jnp.abs(deviation))
+    return largest
+
+
 def _lambda(x, y, z, sqrt):
     sx, sy, sz = sqrt(x), sqrt(y), sqrt(z)
     return sx * (sy + sz) + sy * sz, (sx, sy, sz)
@@ -148,13 +206,15 @@ def _lambda(x, y, z, sqrt):
 def _rf_series(x, y, z, rolled=False):
     mean0 = (x + y + z) / 3
     dx0, dy0 = mean0 - x, mean0 - y
+    spread0 = _largest_magnitude(dx0, dy0, mean0 - z)
 
     def step(state, _):
         x, y, z, mean = state
         lam, _ = _lambda(x, y, z, _sqrt_for(rolled))
         return (x + lam) / 4, (y + lam) / 4, (z + lam) / 4, (mean + lam) / 4
 
-    (x, y, z, mean), quarter = _duplicate(step, (x, y, z, mean0), x, rolled)
+    (x, y, z, mean), quarter = _duplicate(step, (x, y, z, mean0), x, rolled,
+                                          lambda state: ((spread0, state[3]),))
     # DLMF 19.36.1 with X = 1 - x_N/A_N computed without cancellation as (A_0 - x_0) / (4^N A_N).
     scale = quarter / mean
     return over_sqrt(_rf_polynomial(dx0 * scale, dy0 * scale), mean)
@@ -310,15 +370,22 @@ def _log_above_one_jvp(primals, tangents):
     return _log_above_one(x), dx / x
 
 
-def _rf_rj_series(x, y, z, p, parameter_largest=False, rolled=False):
-    """(R_F(x, y, z), R_J(x, y, z, p)) from one duplication of x, y, z (the same for both)."""
+def _rf_rj_series(x, y, z, p, parameter_largest=False, rolled=False, with_rf=True):
+    """(R_F(x, y, z), R_J(x, y, z, p)) from one duplication of x, y, z (the same for both); without
+    ``with_rf`` the steps stop when R_J's series has converged (R_F's value is then not used)."""
     mean0 = (x + y + z + 2 * p) / 5
     dx0, dy0, dz0 = mean0 - x, mean0 - y, mean0 - z
     px0, py0, pz0 = p - x, p - y, p - z
+    spread0 = _largest_magnitude(dx0, dy0, dz0, mean0 - p)
     # e_k < 0 (an odd number of arguments above p) is decided by the inputs alone.
     negative = (px0 < 0) ^ (py0 < 0) ^ (pz0 < 0)
     mean_f0 = (x + y + z) / 3
     fx0, fy0 = mean_f0 - x, mean_f0 - y
+    spread_f0 = _largest_magnitude(fx0, fy0, mean_f0 - z)
+
+    def deviation(state):
+        pairs = ((spread0, state[4]),)
+        return pairs + ((spread_f0, state[5]),) if with_rf else pairs
 
     def step(state, quarter):
         x, y, z, p, mean, mean_f, correction = state
@@ -353,7 +420,7 @@ def _rf_rj_series(x, y, z, p, parameter_largest=False, rolled=False):
         return x, y, z, p, (mean + lam) / 4, (mean_f + lam) / 4, correction
 
     state = (x, y, z, p, mean0, mean_f0, jnp.zeros_like(mean0))
-    (x, y, z, p, mean, mean_f, correction), quarter = _duplicate(step, state, x, rolled)
+    (x, y, z, p, mean, mean_f, correction), quarter = _duplicate(step, state, x, rolled, deviation)
     scale = quarter / mean
     big_x, big_y, big_z = dx0 * scale, dy0 * scale, dz0 * scale
     big_p = -(big_x + big_y + big_z) / 2
@@ -369,12 +436,13 @@ def _rf_rj_series(x, y, z, p, parameter_largest=False, rolled=False):
 
 
 def _rj_series(x, y, z, p, parameter_largest=False, rolled=False):
-    return _rf_rj_series(x, y, z, p, parameter_largest, rolled)[1]
+    return _rf_rj_series(x, y, z, p, parameter_largest, rolled, with_rf=False)[1]
 
 
 def _rd_series(x, y, z, rolled=False):
     mean0 = (x + y + 3 * z) / 5
     dx0, dy0 = mean0 - x, mean0 - y
+    spread0 = _largest_magnitude(dx0, dy0, mean0 - z)
 
     def step(state, quarter):
         x, y, z, mean, correction = state
@@ -383,7 +451,8 @@ def _rd_series(x, y, z, rolled=False):
         return (x + lam) / 4, (y + lam) / 4, (z + lam) / 4, (mean + lam) / 4, correction
 
     state = (x, y, z, mean0, jnp.zeros_like(mean0))
-    (x, y, z, mean, correction), quarter = _duplicate(step, state, x, rolled)
+    (x, y, z, mean, correction), quarter = _duplicate(step, state, x, rolled,
+                                                      lambda state: ((spread0, state[3]),))
     scale = quarter / mean
     big_x, big_y = dx0 * scale, dy0 * scale
     big_z = -(big_x + big_y) / 3

@@ -35,14 +35,34 @@ from jax.typing import ArrayLike
 
 from ._carlson import _rd
 from ._circular import cos_sin_near_zero
-from ._common import complement, is_double, over_sqrt, promote, scan_unroll
+from .._fusion import when_any
+from ._common import complement, is_double, over_sqrt, promote, rolled
 from ._legendre import _complete_first
 
 
 def _agm_steps(x) -> int:
     # b_n/a_n -> 1 quadratically once a_n ~ b_n; from b_0 = sqrt(mc) = 1e-150 that takes 10 steps
-    # (checked against mpmath down to mc = 1e-300).  Extra steps are exact identities.
+    # (checked against mpmath down to mc = 1e-300).
     return 13 if is_double(x) else 8
+
+
+def _agm_plan(x):
+    """(the sizes of the blocks of levels over an array, relative gap at which a level is the last
+    one used).
+
+    Once (a_n - b_n)/a_n <= 2^-26 (2^-12 in float32), the next gap, about (a_n - b_n)^2/(8 a_n), is
+    below half an ulp: the levels above n are a_{n+1} repeated, and each of them would be an identity
+    of the ascent (``_jacobi_to_half_quarter``).  Over an array the levels come in blocks, the first
+    always computed and the rest only when some point uses them: 6 levels serve every mc >= 1e-4
+    (4 in float32).
+    """
+    return ((6,), 2.0**-26) if is_double(x) else ((4,), 2.0**-12)
+
+
+def _agm_blocks(x):
+    """The blocks of ``_agm_plan``, the last one holding the remaining levels."""
+    sizes, _ = _agm_plan(x)
+    return sizes + (_agm_steps(x) - sum(sizes),)
 
 
 def _tiny_argument(x) -> float:
@@ -52,23 +72,50 @@ def _tiny_argument(x) -> float:
 
 
 def _agm_levels(mc):
-    """The AGM levels of DLMF 22.20.1 for parameter m = 1 - mc (mc > 0): (a_n, b_n) for n < N and a_N.
+    """The AGM levels of DLMF 22.20.1 for parameter m = 1 - mc (mc > 0): (a_n, b_n, used_n) for
+    n < N and each point's top mean.
 
-    a_0 = 1, b_0 = sqrt(mc), a_{n+1} = (a_n + b_n)/2, b_{n+1} = sqrt(a_n b_n); N = ``_agm_steps``.  The
-    levels depend on the parameter alone, so a caller that evaluates many arguments at one parameter
-    (the rigid body) computes them once.  Returned with the level axis last (batch dimensions first,
-    as in a pytree of per-body data).
+    a_0 = 1, b_0 = sqrt(mc), a_{n+1} = (a_n + b_n)/2, b_{n+1} = sqrt(a_n b_n), at most N =
+    ``_agm_steps`` levels.  A point uses its levels up to the first whose relative gap is below
+    ``_agm_plan``'s, and its top mean is the next a (the AGM to rounding); its higher levels
+    (``used_n`` false) are never read, so that its values follow from its own parameter alone,
+    whatever the batch around it.  Over an array the levels above the first few are computed only
+    when some point uses them (a conditional: ``_fusion.when_any``; most parameters need 4 to 6).
+    The levels depend on the parameter alone, so a caller that evaluates many arguments at one
+    parameter (the rigid body) computes them once.  Returned with the level axis last (batch
+    dimensions first, as in a pytree of per-body data).
     """
+    _, tolerance = _agm_plan(mc)
 
     def descend(state, _):
-        a, b = state
-        return ((a + b) / 2, jnp.sqrt(a * b)), (a, b)
+        a, b, used, mean = state
+        next_a = (a + b) / 2
+        last = used & (a - b <= tolerance * a)
+        mean = jnp.where(used, next_a, mean)
+        return (next_a, jnp.sqrt(a * b), used & ~last, mean), (a, b, used)
 
-    # Unrolled for an array of points: one fused pass over them instead of a loop that stores every
-    # level's state.  Rolled for one point or a few (``_common.rolled``: one kernel, faster compile).
-    (mean, _), (a_levels, b_levels) = lax.scan(descend, (jnp.ones_like(mc), jnp.sqrt(mc)), None,
-                                               length=_agm_steps(mc), unroll=scan_unroll(mc))
-    return jnp.moveaxis(a_levels, 0, -1), jnp.moveaxis(b_levels, 0, -1), mean
+    start = (jnp.ones_like(mc), jnp.sqrt(mc), jnp.ones(mc.shape, bool), jnp.ones_like(mc))
+    if rolled(mc):
+        # One point or a few: one rolled loop (``_common.rolled``: one kernel, faster compile).
+        (_, _, _, mean), levels = lax.scan(descend, start, None, length=_agm_steps(mc))
+    else:
+        # Unrolled (one fused pass over the points), each block after the first only for a batch
+        # that uses it.
+        state, blocks = start, []
+        for index, size in enumerate(_agm_blocks(mc)):
+            def compute(state, size=size):
+                return lax.scan(descend, state, None, length=size, unroll=True)
+
+            def unused(state, size=size):
+                a, b, used, _ = state
+                return state, tuple(jnp.broadcast_to(x, (size,) + x.shape) for x in (a, b, used))
+
+            state, block = compute(state) if index == 0 else when_any(state[2], compute, unused, state)
+            blocks.append(block)
+        mean = state[3]
+        levels = tuple(jnp.concatenate(parts) for parts in zip(*blocks))
+    a_levels, b_levels, used = (jnp.moveaxis(level, 0, -1) for level in levels)
+    return a_levels, b_levels, used, mean
 
 
 def _jacobi_to_half_quarter(w, levels):
@@ -79,8 +126,9 @@ def _jacobi_to_half_quarter(w, levels):
     top angle theta = a_N w (<= pi/4 here, so sin and cos lose nothing) the ratio c = cn/sn and dn
     are carried down with products and sums of positive numbers only.  Nothing cancels, so cn and dn
     keep their relative precision even when they are as small as mc^(1/4) (m -> 1, w -> K/2).
+    Each point ascends through the levels it uses only (``_agm_levels``).
     """
-    a_levels, b_levels, mean = levels
+    a_levels, b_levels, used_levels, mean = levels
     tiny = w < _tiny_argument(w)
     theta = mean * jnp.where(tiny, 1, w)
     # theta <= pi/4: the polynomials of _circular need no reduction (XLA's float64 sin and cos are scalar).
@@ -89,18 +137,33 @@ def _jacobi_to_half_quarter(w, levels):
 
     def ascend(state, level):
         ratio, cot_ratio, dn = state
-        a_n, b_n = level
-        ratio = ratio * cot_ratio
-        cot_ratio = cot_ratio * dn
-        dn = (b_n + ratio) / (a_n + ratio)
-        return (cot_ratio / a_n, cot_ratio, dn), None
+        a_n, b_n, used = level
+        ratio_next = ratio * cot_ratio
+        cot_ratio_next = cot_ratio * dn
+        dn_next = (b_n + ratio_next) / (a_n + ratio_next)
+        stepped = (cot_ratio_next / a_n, cot_ratio_next, dn_next)
+        return tuple(jnp.where(used, new, kept) for new, kept in zip(stepped, state)), None
 
     start = (ratio, mean * ratio, jnp.ones_like(ratio))
-    # Unrolled for an array of points: XLA fuses the whole ascent into one loop over them (a rolled
-    # loop writes every level's state to memory and back, several times slower); rolled for one
-    # point or a few (``_common.rolled``).
-    levels = (jnp.moveaxis(a_levels, -1, 0), jnp.moveaxis(b_levels, -1, 0))
-    (_, cot_ratio, dn), _ = lax.scan(ascend, start, levels, reverse=True, unroll=scan_unroll(ratio))
+    levels = tuple(jnp.moveaxis(level, -1, 0) for level in (a_levels, b_levels, used_levels))
+    if rolled(ratio):
+        # One point or a few: a rolled loop (``_common.rolled``).
+        (_, cot_ratio, dn), _ = lax.scan(ascend, start, levels, reverse=True)
+    else:
+        # Unrolled: XLA fuses the ascent into one loop over the points (a rolled loop writes every
+        # level's state to memory and back, several times slower); the higher levels only for a batch
+        # where some point uses them.
+        state, end = start, _agm_steps(w)
+        for index, size in reversed(list(enumerate(_agm_blocks(w)))):
+            block = tuple(level[end - size:end] for level in levels)
+
+            def ascend_block(state, block):
+                return lax.scan(ascend, state, block, reverse=True, unroll=True)[0]
+
+            state = (ascend_block(state, block) if index == 0
+                     else when_any(block[2][0], ascend_block, lambda state, block: state, state, block))
+            end -= size
+        _, cot_ratio, dn = state
     sn = over_sqrt(1, cot_ratio * cot_ratio + 1)
     cn = cot_ratio * sn
     one = jnp.ones_like(cn)
