@@ -5,13 +5,18 @@ complex elliptic integrals", Numer. Algorithms 10 (1995) 13-26; DLMF 19.36.1-19.
 Taylor series of DLMF 19.36.1 and 19.36.2 up to seventh order.
 
 Each duplication step is an exact identity that shrinks the relative spread of the arguments by a
-factor 4, and the seventh-order series errs by about the eighth power of that spread.  A *fixed* number
-of steps per dtype (``_plan``: 12 in float64, enough for argument ratios down to 1e-300) keeps each
-function a straight-line XLA program.  Over an array the steps are unrolled, so that XLA fuses the
-whole evaluation into one vectorized pass over the points; one point or a few and the derivative
-rules use a rolled loop instead (one compiled step: compile time; ``_common.rolled``).  R_F and R_J of the same x, y, z share one loop (``_rf_rj``).  In R_J's
-step, R_C(1, 1 + e_k) (Carlson 1995, eq. (2.19)) costs a square root and a polynomial; a logarithm
-only serves the points with 1 + e_k < 1/2.
+factor 4, and the seventh-order series errs by about the eighth power of that spread.  Each point
+stops at Carlson's criterion, once its spread 4^-k |A_0 - x_0| / A_k is below 2^-8, after at most a
+fixed number of steps per dtype (``_plan``: 12 in float64, enough for argument ratios down to
+1e-300), so that a point's value depends on its own arguments only.  Over an array the steps are
+unrolled, so that XLA fuses them into vectorized passes over the points, in blocks (``_plan``): the
+first always, each later one only when some point of the batch still needs it (arguments within a
+few per cent of each other, such as the third-kind integral over a short step, need 2 steps;
+far-apart ones all 12).  One point or a few use a rolled loop of every step, masked, and the
+derivative rules a rolled loop of every step (one compiled step: compile time; ``_common.rolled``).
+R_F and R_J of the same x, y, z share one loop (``_rf_rj``).  In R_J's step, R_C(1, 1 + e_k)
+(Carlson 1995, eq. (2.19)) costs a square root and a polynomial; a logarithm only serves the points
+with 1 + e_k < 1/2.
 
 $R_C$ has closed forms (DLMF 19.2.18-19.2.19): an arctangent for $x < y$, a logarithm for $x > y$, and
 its Maclaurin series in $(y - x)/x$ near $x = y$.

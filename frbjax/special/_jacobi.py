@@ -6,7 +6,9 @@ Evaluation (fixed operation count, per dtype):
    change sign, dn does not, am gains $j\pi$).  $K = R_F(0, m_c, 1)$ is computed from the complement,
    so the reduction error grows only linearly with the number of periods.
 2. For $|u_r| \le K/2$, Bulirsch's form of the descending Landen transformation (AGM, DLMF 22.20.ii),
-   which carries cn/sn and dn down the AGM levels with positive products and sums only; for
+   which carries cn/sn and dn down the AGM levels with positive products and sums only (each point
+   through its own levels, up to the one where the AGM has converged: 4 to 6 for most parameters,
+   12 for mc = 1e-300; over an array the higher levels only when some point uses them); for
    $K/2 < |u_r| \le K$ the quarter-period reflection $u_r = K - w$ (DLMF 22.4.3).  sn, cn and dn then
    all have a few ulp *relative* error, also where cn and dn are as small as $\sqrt{m_c}$ ($u$ near
    $K$, $m \to 1$), which is what the rigid body near its separatrix needs.
