@@ -5,7 +5,9 @@ Three parts (``--parts``, default all), each writing JSON (and a PNG) into bench
 * ``basilisk`` (torques_basilisk.json/png): a satellite (principal moments 900, 800, 600 kg m^2) on
   a circular orbit of radius 7000 km (Earth, mu = 3.986004360e14 m^3/s^2, Basilisk's value), tumbling
   at about 0.02 rad/s, under the gravity-gradient torque and a linear viscous damping D = 0.005 N m s
-  (``frbjax.torques.GravityGradient`` + ``LinearDamping``), to T = one day.  Work-precision: frbjax's
+  (``frbjax.torques.GravityGradient`` + ``LinearDamping`` as the term's ``momentum_torque``: the
+  gravity gradient alone kicks by its closed form, with the damping the kick is the exact affine
+  one), to T = one day.  Work-precision: frbjax's
   splitting methods (``RigidBodySplitting`` in ``diffrax.diffeqsolve``, final state only) over step
   sizes, diffrax's Tsit5 and Dopri8 on the same ``RigidBodyTerm`` over tolerances, and Basilisk's
   spacecraft hub (``GravityGradientEffector``) with its RK4 over step sizes and RKF78 over
@@ -20,7 +22,9 @@ Three parts (``--parts``, default all), each writing JSON (and a PNG) into bench
   ``--repeats`` runs after compilation (Basilisk: after ``InitializeSimulation``), one body; then
   1024 bodies with different initial states at the step (tolerance) that gives 1e-8 for one body,
   per body (Basilisk has no batch: its per-body time is its one-body time): the fastest splitting
-  method (one batched state) and the fastest diffrax solver (``jax.vmap``: each body its own steps),
+  method (one batched state; the state at T by ``splitting_trajectory(save_every=steps)``, which
+  joins the free flows across steps, and through ``diffeqsolve`` for comparison) and the fastest
+  diffrax solver (``jax.vmap``: each body its own steps),
   except the splitting on the damped satellite (its matrix-exponential kicks cost as much per body
   in a batch as alone, minutes for 1024 bodies; its one-body time is behind Dopri8's anyway).
 * ``energy`` (torques_energy.json/png): the heavy top (``torques.UniformGravity`` as a potential) over
