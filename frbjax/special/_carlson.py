@@ -5,18 +5,17 @@ complex elliptic integrals", Numer. Algorithms 10 (1995) 13-26; DLMF 19.36.1-19.
 Taylor series of DLMF 19.36.1 and 19.36.2 up to seventh order.
 
 Each duplication step is an exact identity that shrinks the relative spread of the arguments by a
-factor 4, and the seventh-order series errs by about the eighth power of that spread.  Each point
-stops at Carlson's criterion, once its spread 4^-k |A_0 - x_0| / A_k is below 2^-8, after at most a
+factor 4, and the seventh-order series errs by about the eighth power of that spread.  At most a
 fixed number of steps per dtype (``_plan``: 12 in float64, enough for argument ratios down to
-1e-300), so that a point's value depends on its own arguments only.  Over an array the steps are
-unrolled, so that XLA fuses them into vectorized passes over the points, in blocks (``_plan``): the
-first always, each later one only when some point of the batch still needs it (arguments within a
-few per cent of each other, such as the third-kind integral over a short step, need 2 steps;
-far-apart ones all 12).  One point or a few use a rolled loop of every step, masked, and the
-derivative rules a rolled loop of every step (one compiled step: compile time; ``_common.rolled``).
-R_F and R_J of the same x, y, z share one loop (``_rf_rj``).  In R_J's step, R_C(1, 1 + e_k)
-(Carlson 1995, eq. (2.19)) costs a square root and a polynomial; a logarithm only serves the points
-with 1 + e_k < 1/2.
+1e-300) are taken.  Over an array the steps are unrolled, so that XLA fuses them into vectorized
+passes over the points, in blocks (``_plan``): the first always, each later one only when some
+point of the batch still needs it (Carlson's stopping rule, spread below 2^-8): arguments within a
+few per cent of each other, such as the third-kind integral over a short step, need 2 steps,
+far-apart ones all 12 (``_duplicate``).  One point or a few use a rolled loop of every step, masked
+at each point's own convergence, and the derivative rules a rolled loop of every step (one compiled
+step: compile time; ``_common.rolled``).  R_F and R_J of the same x, y, z share one loop
+(``_rf_rj``).  In R_J's step, R_C(1, 1 + e_k) (Carlson 1995, eq. (2.19)) costs a square root and a
+polynomial; a logarithm only serves the points with 1 + e_k < 1/2.
 
 $R_C$ has closed forms (DLMF 19.2.18-19.2.19): an arctangent for $x < y$, a logarithm for $x > y$, and
 its Maclaurin series in $(y - x)/x$ near $x = y$.
@@ -81,13 +80,17 @@ def _duplicate(step, state, x, rolled=False, deviation=None):
 
     ``deviation(state)`` gives, per point, pairs (Q, A_k) of the relative spread's numerator and
     denominator, one pair per series the loop serves: Q = max |A_0 - x_0| over the arguments, A_k the
-    mean after k steps, and the spread 4^-k Q / A_k (Carlson 1995, eq. (2.4)).  A point takes no
-    further step once its spread is at most ``_plan``'s threshold (Carlson's stopping rule, with
-    ``_plan``'s count as the most), so that its value follows from its own arguments alone, whatever
-    the batch around it.  Over an array the steps are unrolled (one fused pass) in ``_plan``'s
-    blocks, each block after the first skipped when no point of the batch needs it (a conditional,
-    ``_fusion.when_any``); for one point or a few, a rolled loop of every step, masked.  The derivative rules' loops (``rolled=True``) take every step: a loop JAX can
-    transpose, and partial derivatives whose series converge more slowly than the value's.
+    mean after k steps, and the spread 4^-k Q / A_k (Carlson 1995, eq. (2.4)).  Over an array the
+    steps are unrolled (fused passes over the points) in ``_plan``'s blocks, each block after the
+    first taken only when some point of the batch needs it (a conditional, ``_fusion.when_any``).
+    In the first blocks a point takes no further step once its spread is at most ``_plan``'s
+    threshold (Carlson's stopping rule), so that in a batch that needs no more, its value depends on
+    its own arguments only; the last block (the remaining steps, for batches with far-apart
+    arguments) steps every point, unmasked, as a fixed count did: masks in that long fused chain
+    made such batches 1.3 times slower.  Further steps are identities of the exact integral, so a
+    point's value in such a batch differs by rounding only.  One point or a few: a rolled loop of
+    every step, masked.  The derivative rules' loops (``rolled=True``) take every step: a loop JAX
+    can transpose, and partial derivatives whose series converge more slowly than the value's.
     """
     steps, threshold, first = _plan(x)
 
@@ -120,12 +123,21 @@ def _duplicate(step, state, x, rolled=False, deviation=None):
         # reduction in its condition, which a one-kernel region cannot hold: frbjax._kernel).
         quarter, state = lax.fori_loop(0, steps, body, carry)
     else:
-        # Unrolled in blocks: the first always, each later one only when some point needs it.
+        # Unrolled in blocks: the first always, each later one only when some point needs it.  The
+        # last block takes its steps at every point, unmasked: masks in a long fused chain cost XLA
+        # a kernel per step (a batch that needs every step ran 1.3 times slower masked).
+        def unmasked(_, carry):
+            quarter, state = carry
+            return quarter / 4, step(state, quarter)
+
         taken = 0
-        for size in first + (steps - sum(first),):
-            def block(carry, start=taken, size=size):
+        blocks = [size for size in first + (steps - sum(first),) if size]
+        for index, size in enumerate(blocks):
+            one_step = unmasked if index == len(blocks) - 1 and index > 0 else body
+
+            def block(carry, start=taken, size=size, one_step=one_step):
                 for k in range(start, start + size):
-                    carry = body(k, carry)
+                    carry = one_step(k, carry)
                 return carry
 
             carry = block(carry) if taken == 0 else when_any(~converged(carry), block, lambda c: c, carry)

@@ -64,7 +64,7 @@ def _agm_plan(x):
 def _agm_blocks(x):
     """The blocks of ``_agm_plan``, the last one holding the remaining levels."""
     sizes, _ = _agm_plan(x)
-    return sizes + (_agm_steps(x) - sum(sizes),)
+    return tuple(size for size in sizes + (_agm_steps(x) - sum(sizes),) if size)
 
 
 def _tiny_argument(x) -> float:
@@ -80,9 +80,9 @@ def _agm_levels(mc):
     a_0 = 1, b_0 = sqrt(mc), a_{n+1} = (a_n + b_n)/2, b_{n+1} = sqrt(a_n b_n), at most N =
     ``_agm_steps`` levels.  A point uses its levels up to the first whose relative gap is below
     ``_agm_plan``'s, and its top mean is the next a (the AGM to rounding); its higher levels
-    (``used_n`` false) are never read, so that its values follow from its own parameter alone,
-    whatever the batch around it.  Over an array the levels above the first few are computed only
-    when some point uses them (a conditional: ``_fusion.when_any``; most parameters need 4 to 6).
+    (``used_n`` false) are not needed.  Over an array the levels above the first few are computed
+    only when some point uses them (a conditional: ``_fusion.when_any``; most parameters need 4 to
+    6), and then the ascent goes through them at every point (``_jacobi_to_half_quarter``).
     The levels depend on the parameter alone, so a caller that evaluates many arguments at one
     parameter (the rigid body) computes them once.  Returned with the level axis last (batch
     dimensions first, as in a pytree of per-body data).
@@ -128,7 +128,11 @@ def _jacobi_to_half_quarter(w, levels):
     top angle theta = a_N w (<= pi/4 here, so sin and cos lose nothing) the ratio c = cn/sn and dn
     are carried down with products and sums of positive numbers only.  Nothing cancels, so cn and dn
     keep their relative precision even when they are as small as mc^(1/4) (m -> 1, w -> K/2).
-    Each point ascends through the levels it uses only (``_agm_levels``).
+    Each point ascends through the levels it uses only (``_agm_levels``), but for the top block of
+    levels, which a batch needs only where some parameter converges late: it ascends unmasked, and
+    a point converged below it goes through levels with a_n = b_n to half an ulp, each an identity
+    of the ascent to rounding.  So a point's values depend on its parameter alone in every batch
+    that does not need the top block, and by rounding otherwise.
     """
     a_levels, b_levels, used_levels, mean = levels
     tiny = w < _tiny_argument(w)
@@ -137,14 +141,17 @@ def _jacobi_to_half_quarter(w, levels):
     cos_theta, sin_theta = cos_sin_near_zero(theta)
     ratio = cos_theta / sin_theta
 
-    def ascend(state, level):
+    def unmasked_ascend(state, level):
         ratio, cot_ratio, dn = state
-        a_n, b_n, used = level
+        a_n, b_n, _ = level
         ratio_next = ratio * cot_ratio
         cot_ratio_next = cot_ratio * dn
         dn_next = (b_n + ratio_next) / (a_n + ratio_next)
-        stepped = (cot_ratio_next / a_n, cot_ratio_next, dn_next)
-        return tuple(jnp.where(used, new, kept) for new, kept in zip(stepped, state)), None
+        return (cot_ratio_next / a_n, cot_ratio_next, dn_next), None
+
+    def ascend(state, level):
+        stepped, _ = unmasked_ascend(state, level)
+        return tuple(jnp.where(level[2], new, kept) for new, kept in zip(stepped, state)), None
 
     start = (ratio, mean * ratio, jnp.ones_like(ratio))
     levels = tuple(jnp.moveaxis(level, -1, 0) for level in (a_levels, b_levels, used_levels))
@@ -159,8 +166,11 @@ def _jacobi_to_half_quarter(w, levels):
         for index, size in reversed(list(enumerate(_agm_blocks(w)))):
             block = tuple(level[end - size:end] for level in levels)
 
-            def ascend_block(state, block):
-                return lax.scan(ascend, state, block, reverse=True, unroll=True)[0]
+            # The top block ascends unmasked (docstring): masks in that long fused chain cost XLA a
+            # kernel per level.
+            def ascend_block(state, block, index=index):
+                top = index == len(_agm_blocks(w)) - 1 and index > 0
+                return lax.scan(unmasked_ascend if top else ascend, state, block, reverse=True, unroll=True)[0]
 
             state = (ascend_block(state, block) if index == 0
                      else when_any(block[2][0], ascend_block, lambda state, block: state, state, block))

@@ -2,8 +2,9 @@
 
 The duplication stops at each point once its spread is below the threshold, and the Landen ascent
 starts at each point's own last AGM level; over an array the later blocks of steps (levels) are
-skipped when no point needs them.  A point's value must then depend on its own arguments only: the
-same bits alone, in a batch that skips the later blocks, and in a batch that needs them all.
+skipped when no point needs them, and the last block, for batches with far-apart arguments, steps
+every point.  A point's value must then be the same bits alone and in a batch that skips the last
+block, and agree to rounding in a batch that needs it.
 Accuracy against mpmath is checked by test_carlson.py, test_jacobi.py and test_legendre.py.
 """
 
@@ -41,7 +42,7 @@ FUNCTIONS = {
 
 
 @pytest.mark.parametrize("name", sorted(FUNCTIONS))
-def test_value_of_a_point_does_not_depend_on_its_batch(name):
+def test_value_of_a_point_depends_on_its_batch_by_rounding_at_most(name):
     assert jax.config.jax_enable_x64
     easy, hard = _easy_and_hard(np.random.default_rng(11))
     function = jax.jit(FUNCTIONS[name])
@@ -49,7 +50,10 @@ def test_value_of_a_point_does_not_depend_on_its_batch(name):
     mixed = {key: np.concatenate([easy[key], hard[key]]) for key in easy}
     with_hard = np.asarray(function(mixed))
     assert np.all(np.isfinite(with_hard[:EASY]))
-    np.testing.assert_array_equal(with_hard[:EASY], alone_batch)
+    # Measured relative: R_F 5.8e-16, R_D 4.5e-16, R_J 3.9e-16, ellippiinc 1.6e-16; ellipj absolute
+    # 3.3e-16 (sn, cn, dn are at most 1).
+    eps = np.finfo(float).eps
+    np.testing.assert_allclose(with_hard[:EASY], alone_batch, rtol=4 * eps, atol=3 * eps if name == "ellipj" else 0)
     # One point at a time: the rolled loops of a small array.
     for i in range(0, EASY, 41):
         one = np.asarray(function({key: value[i:i + 1] for key, value in easy.items()}))
@@ -59,8 +63,9 @@ def test_value_of_a_point_does_not_depend_on_its_batch(name):
 def test_duplication_stops_at_each_points_own_spread():
     """R_F's duplication of arguments within 3% of each other stops after at most 2 steps (spread
     below 1/16, 4^-2/16 = 2^-8), of (1e-300, 1, 1) after 5 (the spread 4^-k (A_0 - x_0)/A_k with
-    A_k -> R_F^-2 = 4/pi^2), of (1e-300, 1e-300, 1) after all 12 (A_k -> 1/346^2); the later blocks
-    of the unrolled steps are a conditional."""
+    A_k -> R_F^-2 = 4/pi^2), of (1e-300, 1e-300, 1) after all 12 (A_k -> 1/346^2), each point at its
+    own count in a rolled loop (8 points); over an array that needs the last block every point takes
+    all 12; the later blocks of the unrolled steps are a conditional."""
     assert jax.config.jax_enable_x64
     near = jnp.asarray(np.random.default_rng(3).uniform(0.97, 1.03, (3, EASY)))
 
@@ -78,10 +83,10 @@ def test_duplication_stops_at_each_points_own_spread():
 
     counts = np.asarray(jax.jit(steps_taken)(*near))
     assert counts.max() <= 2
+    few = jnp.asarray([[1e-300] * 4 + [1e-300] * 4, [1.0] * 4 + [1e-300] * 4, [1.0] * 8])
+    np.testing.assert_array_equal(np.asarray(jax.jit(steps_taken)(*few)), [5] * 4 + [_plan(few)[0]] * 4)
     one_small = jnp.asarray([[1e-300] * EASY, [1.0] * EASY, [1.0] * EASY])
-    np.testing.assert_array_equal(np.asarray(jax.jit(steps_taken)(*one_small)), 5)
-    two_small = jnp.asarray([[1e-300] * EASY, [1e-300] * EASY, [1.0] * EASY])
-    np.testing.assert_array_equal(np.asarray(jax.jit(steps_taken)(*two_small)), _plan(two_small)[0])
+    np.testing.assert_array_equal(np.asarray(jax.jit(steps_taken)(*one_small)), _plan(one_small)[0])
     assert "cond" in str(jax.make_jaxpr(steps_taken)(*near))
 
 
