@@ -568,18 +568,16 @@ class RigidBodySplitting(diffrax.AbstractSolver):
         A method that starts and ends with a free flow (k_0 = k_n = 0) joins each step's last free
         flow with the next step's first, F(f_{n-1} h) F(f_0 h) = F((f_{n-1} + f_0) h) (the free motion
         is a flow: exact): n - 1 free flows a step instead of n, for a caller that needs the state
-        every ``count`` steps only (``joins_free_flows``).
+        every ``count`` steps only.  Other methods take ``count`` steps of ``advance``.
         """
-        flows, kicks = self.flows, self.kicks
         if count == 1:
             return self.advance(term, t, h, y, args)
-        if not self.joins_free_flows:
-            raise ValueError("advance_steps joins free flows: the method must start and end with one")
         momentum, attitude = y
         dtype = jnp.result_type(momentum, attitude)
         # diffrax's times are float64 under x64 even for a float32 state: keep the state's precision.
         t, h = jnp.asarray(t, dtype), jnp.asarray(h, dtype)
         kick, free_motion = self._pieces(term, h, args)
+        flows, kicks = self.flows, self.kicks
         # Kick i comes after the free flows 0..i-1 of its step: at time t + h (j + f_0 + ... + f_{i-1}).
         offsets = np.concatenate([[0.0], np.cumsum(flows)])
 
@@ -601,27 +599,32 @@ class RigidBodySplitting(diffrax.AbstractSolver):
                 return stage(state, tuple(c[0] for c in coefficients))[0] if length else state
             return jax.lax.scan(stage, state, coefficients)[0]
 
-        # [F(f_0 + f_{n-1}) K(k_1) F(f_1) ... F(f_{n-2}) K(k_{n-1})] per step, the first step's first
-        # free flow F(f_0), then the last step's last free flow F(f_{n-1}).
-        first, joined_first = constant(flows[0]), constant(flows[0] + flows[-1])
-        rest = (constant(kicks[1:-1]), constant(offsets[1:-1]))
+        def repeat(one_step, state):
+            return jax.lax.scan(one_step, state, jnp.arange(count, dtype=dtype))[0]
 
+        state = (momentum, attitude)
+        if kicks[0] == 0 and kicks[-1] == 0 and len(flows) > 1:
+            # [F(f_0 + f_{n-1}) K(k_1) F(f_1) ... F(f_{n-2}) K(k_{n-1})] per step, the first step's
+            # first free flow F(f_0), then the last step's last free flow F(f_{n-1}).
+            first, joined_first = constant(flows[0]), constant(flows[0] + flows[-1])
+            rest = (constant(kicks[1:-1]), constant(offsets[1:-1]))
+
+            def one_step(state, j):
+                momentum, attitude = free_motion(*state, jnp.where(j == 0, first, joined_first) * h)
+                # Kick i, then free flow i, for i = 1..n-2; kick n-1 last.
+                momentum, attitude = stages((momentum, attitude), t + j * h,
+                                            (rest[0][:-1], rest[1][:-1], constant(flows[1:-1])))
+                return (kick(momentum, attitude, rest[0][-1], t + (j + rest[1][-1]) * h), attitude), None
+
+            state = repeat(one_step, state)
+            momentum, attitude = free_motion(*state, constant(flows[-1]) * h)
+            return momentum.astype(dtype), attitude.astype(dtype)
+        # Kicks at both ends: nothing to join, the steps one after the other.
         def one_step(state, j):
-            momentum, attitude = free_motion(*state, jnp.where(j == 0, first, joined_first) * h)
-            # Kick i, then free flow i, for i = 1..n-2; kick n-1 last.
-            momentum, attitude = stages((momentum, attitude), t + j * h,
-                                        (rest[0][:-1], rest[1][:-1], constant(flows[1:-1])))
-            return (kick(momentum, attitude, rest[0][-1], t + (j + rest[1][-1]) * h), attitude), None
+            return self.advance(term, t + j * h, h, state, args), None
 
-        state = jax.lax.scan(one_step, (momentum, attitude), jnp.arange(count, dtype=dtype))[0]
-        momentum, attitude = free_motion(*state, constant(flows[-1]) * h)
+        momentum, attitude = repeat(one_step, state)
         return momentum.astype(dtype), attitude.astype(dtype)
-
-    @property
-    def joins_free_flows(self) -> bool:
-        """Whether the method starts and ends with a free flow (k_0 = k_n = 0), so that
-        ``advance_steps`` joins them across steps."""
-        return self.kicks[0] == 0 and self.kicks[-1] == 0 and len(self.flows) > 1
 
     def _pieces(self, term, h, args):
         """(kick(L, q, coefficient, time) -> L, free_motion(L, q, time) -> (L, q)) of a step of size h."""
@@ -721,15 +724,6 @@ def _trajectory_region(solver, steps, dtype, save_every=1):
     ``splitting_trajectory`` reuse its compiled program."""
 
     def trajectory(term, y0, dt, t0, args):
-        if save_every == 1 or not solver.joins_free_flows:
-            # Nothing to join: every step, every save_every-th state kept.
-            def one_step(state, n):
-                state = solver.advance(term, t0 + n * dt, dt, state, args)
-                return state, state
-
-            states = jax.lax.scan(one_step, y0, jnp.arange(steps, dtype=dtype))[1]
-            return jax.tree.map(lambda x: x[save_every - 1::save_every], states)
-
         def saved_steps(state, n):
             state = solver.advance_steps(term, t0 + n * dt, dt, state, args, save_every)
             return state, state
