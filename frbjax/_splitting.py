@@ -734,6 +734,11 @@ def _trajectory_region(solver, steps, dtype, save_every=1):
             return jax.tree.map(lambda x: x[None], saved_steps(y0, jnp.zeros((), dtype))[1])
         return jax.lax.scan(saved_steps, y0, jnp.arange(0, steps, save_every, dtype=dtype))[1]
 
+    if steps == 1 and len(solver.flows) == 1:
+        # One step of a method with one free flow (leapfrog): the region would be ``advance`` alone,
+        # its loop of one iteration around the free flow outermost, on which XLA:CPU (jaxlib 0.10.2)
+        # aborts for an eager call of one body; that loop cannot go, diffrax's step region needs it.
+        return eqx.filter_jit(trajectory)
     return one_kernel(trajectory)
 
 
