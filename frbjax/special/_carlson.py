@@ -108,14 +108,14 @@ def _duplicate(step, state, x, rolled=False, deviation=None):
         state = jax.tree.map(lambda kept, new: jnp.where(done, kept, new), state, stepped)
         return jnp.where(done, quarter, quarter / 4), state
 
+    def unmasked(_, carry):
+        quarter, state = carry
+        return quarter / 4, step(state, quarter)
+
     if rolled:
         # The rules' loops: every step, so that the partial derivatives (whose series converge a
         # power of the spread more slowly than the value's) keep the fixed count's accuracy.
-        def full_step(_, carry):
-            quarter, state = carry
-            return quarter / 4, step(state, quarter)
-
-        quarter, state = lax.fori_loop(0, steps, full_step, (jnp.asarray(1.0, x.dtype), state))
+        quarter, state = lax.fori_loop(0, steps, unmasked, (jnp.asarray(1.0, x.dtype), state))
         return state, quarter
     carry = (jnp.ones_like(x), state)
     if is_rolled(x):
@@ -126,10 +126,6 @@ def _duplicate(step, state, x, rolled=False, deviation=None):
         # Unrolled in blocks: the first always, each later one only when some point needs it.  The
         # last block takes its steps at every point, unmasked: masks in a long fused chain cost XLA
         # a kernel per step (a batch that needs every step ran 1.3 times slower masked).
-        def unmasked(_, carry):
-            quarter, state = carry
-            return quarter / 4, step(state, quarter)
-
         taken = 0
         blocks = [size for size in first + (steps - sum(first),) if size]
         for index, size in enumerate(blocks):

@@ -163,13 +163,14 @@ def _jacobi_to_half_quarter(w, levels):
         # level's state to memory and back, several times slower); the higher levels only for a batch
         # where some point uses them.
         state, end = start, _agm_steps(w)
-        for index, size in reversed(list(enumerate(_agm_blocks(w)))):
+        blocks = _agm_blocks(w)
+        for index, size in reversed(list(enumerate(blocks))):
             block = tuple(level[end - size:end] for level in levels)
-
             # The top block ascends unmasked (docstring): masks in that long fused chain cost XLA a
             # kernel per level.
-            def ascend_block(state, block, index=index):
-                top = index == len(_agm_blocks(w)) - 1 and index > 0
+            top = index == len(blocks) - 1 and index > 0
+
+            def ascend_block(state, block, top=top):
                 return lax.scan(unmasked_ascend if top else ascend, state, block, reverse=True, unroll=True)[0]
 
             state = (ascend_block(state, block) if index == 0
