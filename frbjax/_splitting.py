@@ -513,9 +513,16 @@ class RigidBodySplitting(diffrax.AbstractSolver):
     def step(self, terms, t0, t1, y0, args, solver_state, made_jump):
         del solver_state, made_jump
         term, direction = _unwrap(terms)
-        # A step of one body (or a few) as one kernel (frbjax._kernel): diffrax's loop then launches
-        # one kernel per step for it instead of some hundred.
-        y1 = one_kernel(self.advance)(term, direction * t0, direction * (t1 - t0), y0, args)
+        arguments = (term, direction * t0, direction * (t1 - t0), y0, args)
+        if len(self.flows) == 1 and not any(isinstance(leaf, jax.core.Tracer) for leaf in jax.tree.leaves(arguments)):
+            # One step of a method with one free flow (leapfrog) called eagerly, outside diffeqsolve:
+            # as a region it is advance's loop of one iteration around the free flow alone, on which
+            # XLA:CPU (jaxlib 0.10.2) aborts the process (as in _trajectory_region); an ordinary program.
+            y1 = _eager_advance(self, *arguments)
+        else:
+            # A step of one body (or a few) as one kernel (frbjax._kernel): diffrax's loop then
+            # launches one kernel per step for it instead of some hundred.
+            y1 = one_kernel(self.advance)(*arguments)
         return y1, None, dict(y0=y0, y1=y1), None, diffrax.RESULTS.successful
 
     def func(self, terms, t0, y0, args):
@@ -715,6 +722,11 @@ def _check_initial_torque(term, t0, y0, args):
         names = [name for name in ("potential", "torque", "momentum_torque") if getattr(term, name) is not None]
         raise ValueError(f"the torque at the initial state is not finite (NaN or inf): check "
                          f"{' and '.join(names)} at t0 = {float(t0)!r}")
+
+
+@eqx.filter_jit
+def _eager_advance(solver, term, t, h, y, args):
+    return solver.advance(term, t, h, y, args)
 
 
 @functools.lru_cache(maxsize=64)

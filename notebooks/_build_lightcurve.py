@@ -11,9 +11,10 @@ cells = [
 
 `frbjax.lightcurve` computes the brightness of a body in exact torque-free motion and inverts light
 curves for the spin state, the moments of inertia (ratios) and a convex shape.  Here: a synthetic
-short-axis-mode tumbler like Apophis (moments 0.61 : 0.965 : 1, $E/E_0 = 1.024$), its shape a bumpy
-convex hull (not the model's ellipsoid: no inverse crime), observed on 24 nights over 90 days at
-changing geometry with 1% noise and an unknown scale per night; four later nights are held out."""),
+short-axis-mode tumbler with Apophis's moments (0.61 : 0.965 : 1, $E/E_0 = 1.024$) but a faster
+spin (precession period 4.8 hours), its shape a bumpy convex hull (not the model's facets: no
+inverse crime), observed 16 times a night on 24 nights over 90 days at changing geometry with 1%
+noise and an unknown scale per night; four later nights are held out."""),
     code("""# Number of times at which the model light curves are drawn; the tests run with fewer.
 N_SAMPLES = 20000""", metadata={"tags": ["parameters"]}),
     code("""import pathlib
@@ -39,12 +40,12 @@ import test_lightcurve_fit as problem"""),
     code("""inertia = np.array([0.61, 0.965, 1.0])
 direction = problem.momentum_with_energy(inertia, 1.024, 1.0)
 p_psi, _, _ = tumbler_periods(inertia, direction)
-momentum = direction * float(p_psi) / 1.14          # P_psi = 1.14 days
+momentum = direction * float(p_psi) / problem.PRECESSION_PERIOD          # P_psi = 0.2 days
 truth = FreeRigidBody(inertia, momentum, problem.ATTITUDE)
 periods = np.array([float(p) for p in tumbler_periods(inertia, momentum)[:2]])
 print(f"true periods: P_psi = {periods[0] * 24:.2f} h, P_phi = {periods[1] * 24:.2f} h")
 
-(times, flux, sun, observer, night), held_out = problem.observe(truth, seed=3)
+(times, flux, sun, observer, night), held_out = problem.observe(truth, seed=3, per_night=problem.SAMPLES_PER_NIGHT)
 epoch = float(np.median(times))
 fig, axes = plt.subplots(1, 3, figsize=(12, 3), constrained_layout=True)
 for k, axis in enumerate(axes):
@@ -62,13 +63,14 @@ plt.show()"""),
     md("""## The inversion
 
 The search: a grid of the two periods over $\\pm 0.5\\%$ around the truth (as a periodogram would
-give), 32 random states each (inertia ratios, energy, phases, attitude), all evaluated on the nights
-nearest the epoch in one vmapped program; the 8 best are refined by Levenberg-Marquardt on growing
-windows of the data."""),
+give), 3 x 3 period pairs with 128 random states each (inertia ratios, energy, phases, attitude), all
+evaluated on the nights nearest the epoch in one vmapped program; the 16 best are refined by
+Levenberg-Marquardt on growing windows of the data, each start held near its period cell until the
+last window, then the convex shape (log-areas on 320 fixed normals) is fitted with the motion."""),
     code("""start = time.perf_counter()
 result = fit_lightcurve(times, flux, sun, observer, lightcurve=night,
                         periods=tuple((p * 0.995, p * 1.005) for p in periods), mode="SAM",
-                        shape="ellipsoid", period_grid=(3, 3), starts_per_period=32, n_refine=8)
+                        **problem.FIT_OPTIONS)
 print(f"fit in {time.perf_counter() - start:.1f} s (including compilation)")
 print("periods (h):", np.asarray(result.periods) * 24, "+-", np.asarray(result.period_sigma) * 24,
       " true:", periods * 24)

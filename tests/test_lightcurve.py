@@ -274,6 +274,34 @@ def test_minkowski_reconstruction_recovers_the_polytope():
     np.testing.assert_allclose(volume, v0, rtol=1e-9)
 
 
+def test_minkowski_reconstruction_of_an_image_that_is_not_closed():
+    """A fitted Gaussian image is closed only as far as its regularisation holds it: the polyhedron
+    of the nearest closed image.  This image (an ellipsoid's on the 320 normals of the fit's model,
+    log-areas perturbed by 0.4 N(0, 1), closure 0.8% of its area) made qhull fail before."""
+    model = ConvexShape.from_mesh(*icosphere(2))
+    normals = np.asarray(model.normals)
+    axes = np.array([1.35, 1.0, 0.8])
+    # The ellipsoid's area per solid angle is (abc)^2 / h(n)^4, h its support function.
+    solid_angles = np.asarray(model.areas) / np.asarray(model.areas).sum() * 4 * np.pi
+    areas = solid_angles * np.prod(axes) ** 2 / np.sum(axes**2 * normals**2, -1) ** 2
+    areas = areas * np.exp(0.4 * np.random.default_rng(1).normal(size=areas.shape))
+    image = ConvexShape(normals, areas)
+    assert np.max(np.abs(np.asarray(image.closure()))) > 5e-3
+    vertices, faces = image.polyhedron()
+    rebuilt = ConvexShape.from_mesh(vertices, faces)
+    # Each of the polyhedron's triangles lies on a face of one of the image's normals: the areas per
+    # normal against the image's (measured: rms 2.2%, largest 3.9% of the mean area), the total the
+    # image's, the polyhedron's image closed (3.5e-17).
+    owner = np.argmax(np.asarray(rebuilt.normals) @ normals.T, 1)
+    assert np.min(np.sum(np.asarray(rebuilt.normals) * normals[owner], 1)) > 1 - 1e-12
+    rebuilt_areas = np.bincount(owner, np.asarray(rebuilt.areas), minlength=len(normals))
+    difference = (rebuilt_areas - areas) / areas.mean()
+    assert np.sqrt(np.mean(difference**2)) < 0.025
+    assert np.max(np.abs(difference)) < 0.045
+    np.testing.assert_allclose(rebuilt_areas.sum(), areas.sum(), rtol=1e-12)
+    assert np.max(np.abs(np.asarray(rebuilt.closure()))) < 1e-15
+
+
 # ------------------------------------------------------------------------------------ periods
 
 

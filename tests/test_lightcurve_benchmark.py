@@ -2,7 +2,7 @@
 
 The quick sizes are those of tests/test_lightcurve_fit.py (its compiled solver is reused through
 JAX's persistent cache); what they can show must hold: RK4 reaches the flux tolerance on its ladder
-of steps, frbjax's flux agrees with it, and the synthetic tumbler's periods come back.
+of steps, frbjax's flux agrees with it, and the synthetic SAM tumbler is recovered.
 """
 
 from __future__ import annotations
@@ -20,8 +20,10 @@ def test_lightcurve_benchmark_quick(tmp_path, request):
     for key in ("frbjax_samples_per_second", "rk4_samples_per_second", "speedup"):
         assert finite_positive(forward[key]), key
     assert forward["rk4_max_relative_flux_error"] < 1e-5
-    inversion = result["inversion"]
-    assert finite_positive(inversion["compiled_seconds"])
-    # The SAM case of tests/test_lightcurve_fit.py: P_psi to 3.3e-5, P_phi to 2.0e-3 (measured).
-    assert inversion["period_relative_error"][0] < 5e-5
-    assert inversion["period_relative_error"][1] < 2.5e-3
+    (inversion,) = result["inversions"]
+    assert finite_positive(inversion["first_call_seconds"])
+    # The SAM case of tests/test_lightcurve_fit.py with its options and seed: P_psi to 6.3e-6, P_phi
+    # to 6.2e-5, held-out nights 1.10% rms (measured).
+    assert inversion["recovered"]
+    assert inversion["period_relative_error"][0] < 8e-6
+    assert inversion["period_relative_error"][1] < 7.5e-5

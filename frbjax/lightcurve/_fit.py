@@ -45,6 +45,14 @@ first windows hold fewer samples than a convex shape has areas); for ``shape="co
 shape, started from the Gaussian image of each fitted ellipsoid, is then solved with the motion on
 all the data.  The lowest cost wins.  Periods, moments and their standard errors come from the
 covariance (J^T J)^+ s^2 of the winner (s^2 the residual variance of the data rows).
+
+The windows hold the samples within a radius of the epoch, the first a tenth of the data, each next
+radius 1.8 times the last: a window's fit predicts the phase a factor 1.8 further out, where its
+period error has not yet grown to a cycle.  On every window but the last each start keeps its grid
+cell as a Gaussian prior, log P ~ N(log P_start, (cell / 2)^2) for both periods: the first windows
+(a few nights) hold the periods so weakly that Levenberg-Marquardt leaves the searched range (by
+10% and more in P_psi on the synthetic tumblers of the tests) and the continuation then ends in an
+alias of the record.  The last window, all the data, has no prior.
 """
 
 from __future__ import annotations
@@ -68,10 +76,10 @@ from ._shape import ConvexShape, icosphere
 
 __all__ = ["LightcurveFit", "fit_lightcurve"]
 
-_WINDOWS = (0.1, 0.25, 0.5, 1.0)
 _MIN_WINDOW = 24
 _PRINCIPAL_INERTIA = (0.5, 0.75, 1.0)
 _SEARCH_SUBDIVISIONS = 1
+_WINDOW_GROWTH = 1.8
 
 
 # ------------------------------------------------------------------------------------ the model
@@ -127,7 +135,7 @@ def _safe_log(flux):
 
 def _log_flux_and_jacobian(parameters, reference, data, config):
     """(log m (N,), d log m / d parameters (N, P)) for parameters = (theta (8), shape parameters)."""
-    kind, law, c, subdivisions = config
+    kind, law, c, subdivisions, _ = config
     theta, shape_parameters = parameters[:8], parameters[8:]
     if kind == "convex":
         areas = jnp.exp(shape_parameters)
@@ -161,9 +169,30 @@ def _curve_mean(values, weights, curves):
     return curves @ means
 
 
-def _residuals_and_jacobian(parameters, reference, data, weights, config):
-    """(r (R,), dr/dparameters (R, P)): data rows then the shape's regularisation rows."""
-    kind = config[0]
+def _periods(theta, reference, principal_axis):
+    """((P_psi, P_phi), LAM) of motion parameters theta.  A principal-axis rotation has one period,
+    2 pi I3 / |L| (I3 = 1), reported as P_psi with P_phi infinite: the limit of the tumbler's
+    (P_psi, P_phi) at vanishing nutation is not it (1/P = 1/P_psi - 1/P_phi there, for SAM)."""
+    moving = _body(theta, reference)
+    p_psi, p_phi, long_axis = tumbler_periods(moving.inertia, moving.initial_angular_momentum)
+    if principal_axis:
+        p_psi, p_phi = 2 * jnp.pi / jnp.exp(theta[2]), jnp.asarray(jnp.inf, theta.dtype)
+    return jnp.stack([p_psi, p_phi]), long_axis
+
+
+def _log_periods(theta, reference, principal_axis):
+    """log (P_psi, P_phi), the infinite P_phi of a principal-axis rotation as 0 (its prior is off)."""
+    periods = _periods(theta, reference, principal_axis)[0]
+    return jnp.log(jnp.where(jnp.isfinite(periods), periods, 1.0))
+
+
+def _residuals_and_jacobian(parameters, reference, data, window, config):
+    """(r (R,), dr/dparameters (R, P)): data rows, the shape's regularisation rows, the period prior's.
+
+    ``window`` = (weights (N,) of the samples, prior (log centre (2,), inverse widths (2,)), prior
+    weight): the continuation window, and the start's period cell as a Gaussian prior in log P."""
+    kind, principal_axis = config[0], config[4]
+    weights, (prior_centre, prior_inverse_width), prior_weight = window
     log_model, jac = _log_flux_and_jacobian(parameters, reference, data, config)
     difference = data["log_brightness"] - log_model
     offset = _curve_mean(difference, weights, data["curves"])
@@ -185,6 +214,11 @@ def _residuals_and_jacobian(parameters, reference, data, weights, config):
         d_reg = jnp.concatenate([jnp.zeros((d_reg.shape[0], 8), d_reg.dtype), d_reg], 1)
         residual = jnp.concatenate([residual, reg])
         jacobian = jnp.concatenate([jacobian, d_reg])
+    log_periods = lambda theta: _log_periods(theta, reference, principal_axis)  # noqa: E731
+    prior_scale = prior_weight * prior_inverse_width
+    d_prior = prior_scale[:, None] * jax.jacfwd(log_periods)(parameters[:8])
+    residual = jnp.concatenate([residual, prior_scale * (log_periods(parameters[:8]) - prior_centre)])
+    jacobian = jnp.concatenate([jacobian, jnp.pad(d_prior, ((0, 0), (0, parameters.size - 8)))])
     jacobian = jacobian * data["free"]
     finite = jnp.isfinite(residual)
     return jnp.where(finite, residual, 0.0), jnp.where(finite[:, None] & jnp.isfinite(jacobian), jacobian, 0.0)
@@ -193,47 +227,53 @@ def _residuals_and_jacobian(parameters, reference, data, weights, config):
 @functools.partial(jax.custom_jvp, nondiff_argnums=(2,))
 def _least_squares_fn(parameters, args, config):
     """(r, (r, J)) for optimistix; its JVP is J @ dp with J from one forward-mode pass."""
-    reference, data, weights = args
-    residual, jacobian = _residuals_and_jacobian(parameters, reference, data, weights, config)
+    reference, data, window = args
+    residual, jacobian = _residuals_and_jacobian(parameters, reference, data, window, config)
     return residual, (residual, jacobian)
 
 
 @_least_squares_fn.defjvp
 def _least_squares_fn_jvp(config, primals, tangents):
-    parameters, (reference, data, weights) = primals
-    residual, jacobian = _residuals_and_jacobian(parameters, reference, data, weights, config)
+    parameters, (reference, data, window) = primals
+    residual, jacobian = _residuals_and_jacobian(parameters, reference, data, window, config)
     aux = (residual, jacobian)
     return (residual, aux), (jacobian @ tangents[0], jax.tree.map(jnp.zeros_like, aux))
 
 
-def _solve_start(parameters, reference, data, masks, config, rtol, atol, max_steps):
-    """Levenberg-Marquardt on each window of ``masks`` in turn (continuation)."""
+def _solve_start(parameters, reference, prior, data, masks, prior_weights, config, rtol, atol, max_steps):
+    """Levenberg-Marquardt on each window of ``masks`` in turn (continuation), the period prior
+    weighted by ``prior_weights`` (one per window)."""
     solver = optx.LevenbergMarquardt(rtol=rtol, atol=atol)
     fn = lambda p, args: _least_squares_fn(p, args, config)  # noqa: E731
 
-    def stage(current, mask):
-        solution = optx.least_squares(fn, solver, current, args=(reference, data, mask), has_aux=True,
-                                      max_steps=max_steps, throw=False)
+    def stage(current, window):
+        mask, prior_weight = window
+        args = (reference, data, (mask, prior, prior_weight))
+        solution = optx.least_squares(fn, solver, current, args=args, has_aux=True, max_steps=max_steps,
+                                      throw=False)
         finite = jnp.all(jnp.isfinite(solution.value))
         value = jnp.where(finite, solution.value, current)
         return value, solution.result == optx.RESULTS.successful
 
-    parameters, ok = jax.lax.scan(stage, parameters, masks)
-    residual, jacobian = _residuals_and_jacobian(parameters, reference, data, masks[-1], config)
+    parameters, ok = jax.lax.scan(stage, parameters, (masks, prior_weights))
+    last = (masks[-1], prior, prior_weights[-1])
+    residual, jacobian = _residuals_and_jacobian(parameters, reference, data, last, config)
     cost = 0.5 * jnp.sum(residual**2)
     return parameters, jnp.where(jnp.isfinite(cost), cost, jnp.inf), ok[-1], residual, jacobian
 
 
 @functools.partial(jax.jit, static_argnames=("config", "rtol", "atol", "max_steps"))
-def _refine(parameters, references, data, masks, config, rtol, atol, max_steps):
-    solve = lambda p, ref: _solve_start(p, ref, data, masks, config, rtol, atol, max_steps)  # noqa: E731
-    return jax.vmap(solve)(parameters, references)
+def _refine(parameters, references, priors, data, masks, prior_weights, config, rtol, atol, max_steps):
+    def solve(p, reference, prior):
+        return _solve_start(p, reference, prior, data, masks, prior_weights, config, rtol, atol, max_steps)
+
+    return jax.vmap(solve)(parameters, references, priors)
 
 
 @functools.partial(jax.jit, static_argnames=("config", "chunk"))
 def _search_costs(parameters, references, start_areas, data, mask, config, chunk):
     """Cost of each start on the first window with its own shape (the ellipsoid of its inertia)."""
-    _, law, c, _ = config
+    _, law, c, _, _ = config
 
     def cost(item):
         theta, reference, areas = item
@@ -248,18 +288,12 @@ def _search_costs(parameters, references, start_areas, data, mask, config, chunk
 
 @functools.partial(jax.jit, static_argnames="principal_axis")
 def _periods_and_jacobian(theta, reference, principal_axis):
-    """((P_psi, P_phi), LAM, their Jacobian in theta).  A principal-axis rotation has one period,
-    2 pi I3 / |L| (I3 = 1), reported as P_psi with P_phi infinite: the limit of the tumbler's
-    (P_psi, P_phi) at vanishing nutation is not it (1/P = 1/P_psi - 1/P_phi there, for SAM)."""
-
+    """((P_psi, P_phi), LAM, their Jacobian in theta)."""
     def periods(theta):
-        moving = _body(theta, reference)
-        p_psi, p_phi, long_axis = tumbler_periods(moving.inertia, moving.initial_angular_momentum)
-        if principal_axis:
-            p_psi, p_phi = 2 * jnp.pi / jnp.exp(theta[2]), jnp.asarray(jnp.inf, theta.dtype)
-        return jnp.stack([p_psi, p_phi]), long_axis
+        values, long_axis = _periods(theta, reference, principal_axis)
+        return values, (values, long_axis)
 
-    jacobian, (values, long_axis) = jax.jacfwd(lambda t: (periods(t)[0], periods(t)), has_aux=True)(theta)
+    jacobian, (values, long_axis) = jax.jacfwd(periods, has_aux=True)(theta)
     return values, long_axis, jacobian
 
 
@@ -383,6 +417,18 @@ def _laplacian(faces):
 # ------------------------------------------------------------------------------------ the fit
 
 
+def _continuation_windows(distance):
+    """Masks (W, N) of the continuation windows: the samples within a radius of the epoch, the first
+    radius holding a tenth of them (at least ``_MIN_WINDOW``), each next ``_WINDOW_GROWTH`` times the
+    last, the last window all of them."""
+    count = distance.size
+    ranked = np.sort(distance)
+    radii = [ranked[min(count, max(math.ceil(0.1 * count), _MIN_WINDOW)) - 1]]
+    while radii[-1] * _WINDOW_GROWTH < ranked[-1]:
+        radii.append(radii[-1] * _WINDOW_GROWTH)
+    return np.stack([distance <= radius for radius in radii] + [np.ones(count, bool)]).astype(float)
+
+
 def _validate(times, flux, sun, observer, lightcurve, magnitudes):
     times = np.asarray(times, float)
     if times.ndim != 1:
@@ -453,7 +499,9 @@ def fit_lightcurve(
     a principal axis) with ``starts_per_period`` random states each (inertia ratios in
     ``inertia_range``, ``mode`` "SAM", "LAM" or "both", polhode phase, attitude); ``n_refine`` of the
     best are refined by Levenberg-Marquardt on growing windows around ``epoch`` (default: the median
-    time).  ``shape``: "convex" (log-areas on the facet normals of an icosphere of
+    time), each start held to its cell of the period grid by a prior until the last window (module
+    docstring): choose the grid fine enough that a cell's phase drift over the first nights is well
+    under a cycle.  ``shape``: "convex" (log-areas on the facet normals of an icosphere of
     ``convex_subdivisions``, with ``regularisation`` = (closure weight, smoothness weight)) or
     "ellipsoid".  ``initial``: a :class:`frbjax.FreeRigidBody` (time from the epoch), e.g. an earlier
     fit, refined beside the search's best (its shape starts as the ellipsoid of its inertia).
@@ -481,13 +529,7 @@ def fit_lightcurve(
     labels, curve_index = np.unique(lightcurve, return_inverse=True)
     curves = np.eye(len(labels))[curve_index]
 
-    # Continuation windows: the samples nearest the epoch.
-    distance = np.abs(times - epoch)
-    ranked = np.sort(distance)
-    masks = np.zeros((len(_WINDOWS), n))
-    for k, fraction in enumerate(_WINDOWS):
-        count = n if fraction >= 1 else min(n, max(math.ceil(fraction * n), _MIN_WINDOW))
-        masks[k] = distance <= ranked[count - 1]
+    masks = _continuation_windows(np.abs(times - epoch))
 
     # ---- starts: a grid of the periods times random states
     if principal_axis:
@@ -521,6 +563,17 @@ def fit_lightcurve(
         valid &= np.all(np.isfinite(momentum), -1)
         momentum = np.where(valid[:, None], momentum, np.array([0.0, 0.0, 1.0]))
     attitudes = _random_rotations(rng, count)
+    # The period prior of each start: its grid cell, log P ~ N(log P_start, (cell / 2)^2).
+    grid_sizes = np.atleast_1d(period_grid).astype(int)
+    period_ranges = np.atleast_2d(np.asarray(periods, float))
+    cell = np.log(period_ranges[:, 1] / period_ranges[:, 0]) / np.maximum(grid_sizes[: len(period_ranges)] - 1, 1)
+    prior_inverse_width = np.zeros(2)
+    prior_inverse_width[: len(cell)] = 2 / np.maximum(cell, 1e-6)
+    if initial is not None:
+        initial_periods = np.asarray(tumbler_periods(initial.inertia, initial.initial_angular_momentum)[:2], float)
+        if principal_axis:
+            scale0 = float(np.max(np.asarray(initial.inertia)))
+            initial_periods = np.array([2 * np.pi * scale0 / np.linalg.norm(np.asarray(initial.initial_angular_momentum)), np.inf])
     if initial is not None:
         # The given motion as one more start, placed first; its cost is not searched but refined.
         scale = float(np.max(np.asarray(initial.inertia)))
@@ -528,8 +581,8 @@ def fit_lightcurve(
         given = np.asarray(initial.initial_angular_momentum)[None] / scale
         momentum = np.concatenate([given, momentum])
         attitudes = np.concatenate([np.asarray(initial.initial_attitude)[None], attitudes])
-        period_psi = np.concatenate([[np.nan], period_psi])
-        period_phi = np.concatenate([[np.nan], period_phi])
+        period_psi = np.concatenate([initial_periods[:1], period_psi])
+        period_phi = np.concatenate([initial_periods[1:], period_phi])
         valid = np.concatenate([[True], valid])
         count += 1
     momentum_norm = np.linalg.norm(momentum, axis=-1)
@@ -565,7 +618,7 @@ def fit_lightcurve(
         sigma=np.asarray(sigma), normals=normals, search_normals=search_normals, laplacian=laplacian,
         regularisation=np.asarray(regularisation, float), free=free)
     data = {key: jnp.asarray(value, dtype) for key, value in data.items()}
-    config = (shape, law, float(c), _SEARCH_SUBDIVISIONS)
+    config = (shape, law, float(c), _SEARCH_SUBDIVISIONS, bool(principal_axis))
 
     # ---- the search: every start's cost on the first window
     as_jax = lambda tree: jax.tree.map(lambda x: jnp.asarray(x, dtype), tree)  # noqa: E731
@@ -577,22 +630,26 @@ def fit_lightcurve(
         best = np.concatenate([[0], best[:-1]])
 
     refs = tuple(r[best] for r in references)
+    centres = np.log(np.stack([period_psi[best], period_phi[best]], -1))
+    centres = np.where(np.isfinite(centres), centres, 0.0)
+    priors = (centres, np.broadcast_to(prior_inverse_width, centres.shape))
+    prior_weights = np.concatenate([np.ones(len(masks) - 1), [0.0]])
     # The continuation windows are solved with the ellipsoid (2 shape parameters): the first windows
     # hold fewer samples than a convex shape has areas.  A convex shape is then fitted on all the data
     # from the Gaussian image of the fitted ellipsoid, on its fixed normals.
     ellipsoid_data = dict(data, free=jnp.asarray(ellipsoid_free, dtype))
     ellipsoid_config = ("ellipsoid",) + config[1:]
     parameters0 = np.concatenate([theta[best], ellipsoid_start[best]], 1)
-    out = _refine(as_jax(parameters0), as_jax(refs), ellipsoid_data, jnp.asarray(masks, dtype), ellipsoid_config,
-                  rtol=float(rtol), atol=float(atol), max_steps=int(max_steps))
+    out = _refine(as_jax(parameters0), as_jax(refs), as_jax(priors), ellipsoid_data, jnp.asarray(masks, dtype),
+                  jnp.asarray(prior_weights, dtype), ellipsoid_config, rtol=float(rtol), atol=float(atol), max_steps=int(max_steps))
     if shape == "convex":
         fitted = np.asarray(out[0])
         fitted_axes = np.concatenate([np.ones((len(best), 1)), np.exp(fitted[:, 8:])], 1)
         log_areas = np.log(_gaussian_image_areas(fitted_axes, normals, solid_angles))
         log_areas -= log_areas.mean(-1, keepdims=True)
         parameters0 = np.concatenate([fitted[:, :8], log_areas], 1)
-        out = _refine(as_jax(parameters0), as_jax(refs), data, jnp.asarray(masks[-1:], dtype), config,
-                      rtol=float(rtol), atol=float(atol), max_steps=int(max_steps))
+        out = _refine(as_jax(parameters0), as_jax(refs), as_jax(priors), data, jnp.asarray(masks[-1:], dtype),
+                      jnp.zeros(1, dtype), config, rtol=float(rtol), atol=float(atol), max_steps=int(max_steps))
     fitted, refine_costs, oks, residual_rows, jacobians = (np.asarray(x) for x in out)
     winner = int(np.argmin(np.where(np.isfinite(refine_costs), refine_costs, np.inf)))
     p = fitted[winner].astype(float)

@@ -150,7 +150,11 @@ class ConvexShape(eqx.Module):
 
         Solves min_h sum_i A_i h_i - log V(h) (module docstring) with optimistix's BFGS in log h, V(h)
         and its gradient a(h) from qhull's half-space intersection, then scales the polytope so that
-        its total area is that of the image.  Facets whose area is negligible may be absent.  One
+        its total area is that of the image.  The problem has a solution only for a closed image
+        (sum_i A_i n_i = 0; otherwise translating the polytope lowers the objective without end):
+        an image that is not, such as a fitted one (closed only as far as its regularisation holds
+        it), is first closed by the smallest change of its areas (least squares, areas kept
+        positive).  Facets whose area is negligible may be absent.  One
         shape at a time (no batch dimension).
         """
         normals = np.asarray(self.normals, dtype=float)
@@ -159,8 +163,7 @@ class ConvexShape(eqx.Module):
             raise ValueError("polyhedron: one shape at a time (normals (F, 3))")
         # A facet of (nearly) zero area would leave its height free to run off: a floor keeps it
         # just touching the polytope.
-        weights = np.maximum(areas / areas.sum(), 1e-9)
-        weights = weights / weights.sum()
+        weights = _closed_image(normals, np.maximum(areas / areas.sum(), 1e-9))
         log_heights = _minkowski_heights(normals, weights, rtol, atol, max_steps)
         vertices, faces, _, _ = _halfspace_polytope(normals, np.exp(log_heights))
         current = _triangle_areas(vertices, faces).sum()
@@ -175,6 +178,17 @@ class ConvexShape(eqx.Module):
         vertices, faces = self.polyhedron()
         volume, _, inertia = mesh_inertia(vertices, faces)
         return np.asarray(volume), density * np.asarray(inertia)
+
+
+def _closed_image(normals, weights, floor=1e-9, iterations=50):
+    """Weights (F,) summing to 1 with sum_i w_i n_i = 0, nearest to ``weights`` in least squares:
+    the projection onto the closed images, alternated with the floor that keeps them positive."""
+    gram = normals.T @ normals
+    for _ in range(iterations):
+        weights = np.maximum(weights - normals @ np.linalg.solve(gram, normals.T @ weights), floor)
+        if np.linalg.norm(weights @ normals) <= 1e-14 * weights.sum():
+            break
+    return weights / weights.sum()
 
 
 def _triangle_areas(vertices, faces):
