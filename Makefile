@@ -18,7 +18,7 @@ demo: $(STAMP)
 
 # pytest exits 5 when it collects no test; that is reported, not hidden.
 test: $(STAMP)
-	$(BIN)/python -m pytest -n 2 -q --durations=15 tests; rc=$$?; \
+	$(BIN)/python -m pytest -n 2 --dist loadgroup -q --durations=15 tests; rc=$$?; \
 	if [ $$rc -eq 5 ]; then echo "pytest collected no tests"; fi; exit $$rc
 
 # The documentation site into site/, with every warning an error (mkdocs.yml sets strict too).

@@ -264,10 +264,11 @@ def _solve_start(parameters, reference, prior, data, masks, prior_weights, confi
 
 @functools.partial(jax.jit, static_argnames=("config", "rtol", "atol", "max_steps"))
 def _refine(parameters, references, priors, data, masks, prior_weights, config, rtol, atol, max_steps):
-    def solve(p, reference, prior):
-        return _solve_start(p, reference, prior, data, masks, prior_weights, config, rtol, atol, max_steps)
+    """Each start (parameters, reference, prior, masks (W, N): its windows) solved by _solve_start."""
+    def solve(p, reference, prior, start_masks):
+        return _solve_start(p, reference, prior, data, start_masks, prior_weights, config, rtol, atol, max_steps)
 
-    return jax.vmap(solve)(parameters, references, priors)
+    return jax.vmap(solve)(parameters, references, priors, masks)
 
 
 @functools.partial(jax.jit, static_argnames=("config", "chunk"))
@@ -504,7 +505,8 @@ def fit_lightcurve(
     under a cycle.  ``shape``: "convex" (log-areas on the facet normals of an icosphere of
     ``convex_subdivisions``, with ``regularisation`` = (closure weight, smoothness weight)) or
     "ellipsoid".  ``initial``: a :class:`frbjax.FreeRigidBody` (time from the epoch), e.g. an earlier
-    fit, refined beside the search's best (its shape starts as the ellipsoid of its inertia).
+    fit, refined beside the search's best on all the data from the first window (its shape starts as
+    the ellipsoid of its inertia).
     ``law``, ``c``: the scattering law (:func:`brightness`); ``sigma``: the relative
     noise (weights the data against the regularisation).
 
@@ -570,17 +572,16 @@ def fit_lightcurve(
     prior_inverse_width = np.zeros(2)
     prior_inverse_width[: len(cell)] = 2 / np.maximum(cell, 1e-6)
     if initial is not None:
-        initial_periods = np.asarray(tumbler_periods(initial.inertia, initial.initial_angular_momentum)[:2], float)
-        if principal_axis:
-            scale0 = float(np.max(np.asarray(initial.inertia)))
-            initial_periods = np.array([2 * np.pi * scale0 / np.linalg.norm(np.asarray(initial.initial_angular_momentum)), np.inf])
-    if initial is not None:
         # The given motion as one more start, placed first; its cost is not searched but refined.
         scale = float(np.max(np.asarray(initial.inertia)))
         inertia = np.concatenate([np.asarray(initial.inertia)[None] / scale, inertia])
         given = np.asarray(initial.initial_angular_momentum)[None] / scale
         momentum = np.concatenate([given, momentum])
         attitudes = np.concatenate([np.asarray(initial.initial_attitude)[None], attitudes])
+        if principal_axis:
+            initial_periods = np.array([2 * np.pi / np.linalg.norm(given), np.inf])
+        else:
+            initial_periods = np.asarray(tumbler_periods(initial.inertia, initial.initial_angular_momentum)[:2], float)
         period_psi = np.concatenate([initial_periods[:1], period_psi])
         period_phi = np.concatenate([initial_periods[1:], period_phi])
         valid = np.concatenate([[True], valid])
@@ -634,13 +635,18 @@ def fit_lightcurve(
     centres = np.where(np.isfinite(centres), centres, 0.0)
     priors = (centres, np.broadcast_to(prior_inverse_width, centres.shape))
     prior_weights = np.concatenate([np.ones(len(masks) - 1), [0.0]])
+    # The windows carry a random start's phase outwards from the epoch; a given motion (an earlier
+    # fit) has it already and is fitted to all the data from the first window.
+    start_masks = np.repeat(masks[None], len(best), 0)
+    if initial is not None:
+        start_masks[best == 0] = 1.0
     # The continuation windows are solved with the ellipsoid (2 shape parameters): the first windows
     # hold fewer samples than a convex shape has areas.  A convex shape is then fitted on all the data
     # from the Gaussian image of the fitted ellipsoid, on its fixed normals.
     ellipsoid_data = dict(data, free=jnp.asarray(ellipsoid_free, dtype))
     ellipsoid_config = ("ellipsoid",) + config[1:]
     parameters0 = np.concatenate([theta[best], ellipsoid_start[best]], 1)
-    out = _refine(as_jax(parameters0), as_jax(refs), as_jax(priors), ellipsoid_data, jnp.asarray(masks, dtype),
+    out = _refine(as_jax(parameters0), as_jax(refs), as_jax(priors), ellipsoid_data, jnp.asarray(start_masks, dtype),
                   jnp.asarray(prior_weights, dtype), ellipsoid_config, rtol=float(rtol), atol=float(atol), max_steps=int(max_steps))
     if shape == "convex":
         fitted = np.asarray(out[0])
@@ -648,7 +654,7 @@ def fit_lightcurve(
         log_areas = np.log(_gaussian_image_areas(fitted_axes, normals, solid_angles))
         log_areas -= log_areas.mean(-1, keepdims=True)
         parameters0 = np.concatenate([fitted[:, :8], log_areas], 1)
-        out = _refine(as_jax(parameters0), as_jax(refs), as_jax(priors), data, jnp.asarray(masks[-1:], dtype),
+        out = _refine(as_jax(parameters0), as_jax(refs), as_jax(priors), data, jnp.asarray(start_masks[:, -1:], dtype),
                       jnp.zeros(1, dtype), config, rtol=float(rtol), atol=float(atol), max_steps=int(max_steps))
     fitted, refine_costs, oks, residual_rows, jacobians = (np.asarray(x) for x in out)
     winner = int(np.argmin(np.where(np.isfinite(refine_costs), refine_costs, np.inf)))
