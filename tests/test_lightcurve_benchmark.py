@@ -1,8 +1,9 @@
 """Smoke run of benchmarks/lightcurve.py (--quick): both parts measured, finite, written out.
 
-The quick sizes are those of tests/test_lightcurve_fit.py (its compiled solver is reused through
-JAX's persistent cache); what they can show must hold: RK4 reaches the flux tolerance on its ladder
-of steps, frbjax's flux agrees with it, and the synthetic SAM tumbler is recovered.
+The quick sizes are small (4 bodies; 16 starts, 2 refined, the ellipsoid model); what they can show
+must hold: RK4 reaches the flux tolerance on its ladder of steps, frbjax's flux agrees with it, and a
+small inversion of the synthetic SAM tumbler runs (tests/test_lightcurve_fit.py measures the
+inversion's quality).
 """
 
 from __future__ import annotations
@@ -27,8 +28,5 @@ def test_lightcurve_benchmark_quick(tmp_path, request):
     assert forward["rk4_max_relative_flux_error"] < 1e-5
     (inversion,) = result["inversions"]
     assert finite_positive(inversion["first_call_seconds"])
-    # The SAM case of tests/test_lightcurve_fit.py with its options and seed: P_psi to 6.3e-6, P_phi
-    # to 6.2e-5, held-out nights 1.10% rms (measured).
-    assert inversion["recovered"]
-    assert inversion["period_relative_error"][0] < 8e-6
-    assert inversion["period_relative_error"][1] < 7.5e-5
+    # A small search (16 starts, 2 refined, the ellipsoid model): its periods within the ranges.
+    assert max(inversion["period_relative_error"]) < 0.01
