@@ -190,9 +190,10 @@ def _residuals_and_jacobian(parameters, reference, data, window, config):
     """(r (R,), dr/dparameters (R, P)): data rows, the shape's regularisation rows, the period prior's.
 
     ``window`` = (weights (N,) of the samples, prior (log centre (2,), inverse widths (2,)), prior
-    weight): the continuation window, and the start's period cell as a Gaussian prior in log P."""
+    weight): the continuation window, and the start's period cell as a Gaussian prior in log P; a
+    prior of None has no rows (a stage without it does not evaluate the periods at every step)."""
     kind, principal_axis = config[0], config[4]
-    weights, (prior_centre, prior_inverse_width), prior_weight = window
+    weights, prior, prior_weight = window
     log_model, jac = _log_flux_and_jacobian(parameters, reference, data, config)
     difference = data["log_brightness"] - log_model
     offset = _curve_mean(difference, weights, data["curves"])
@@ -214,11 +215,13 @@ def _residuals_and_jacobian(parameters, reference, data, window, config):
         d_reg = jnp.concatenate([jnp.zeros((d_reg.shape[0], 8), d_reg.dtype), d_reg], 1)
         residual = jnp.concatenate([residual, reg])
         jacobian = jnp.concatenate([jacobian, d_reg])
-    log_periods = lambda theta: _log_periods(theta, reference, principal_axis)  # noqa: E731
-    prior_scale = prior_weight * prior_inverse_width
-    d_prior = prior_scale[:, None] * jax.jacfwd(log_periods)(parameters[:8])
-    residual = jnp.concatenate([residual, prior_scale * (log_periods(parameters[:8]) - prior_centre)])
-    jacobian = jnp.concatenate([jacobian, jnp.pad(d_prior, ((0, 0), (0, parameters.size - 8)))])
+    if prior is not None:
+        prior_centre, prior_inverse_width = prior
+        log_periods = lambda theta: _log_periods(theta, reference, principal_axis)  # noqa: E731
+        prior_scale = prior_weight * prior_inverse_width
+        d_prior = prior_scale[:, None] * jax.jacfwd(log_periods)(parameters[:8])
+        residual = jnp.concatenate([residual, prior_scale * (log_periods(parameters[:8]) - prior_centre)])
+        jacobian = jnp.concatenate([jacobian, jnp.pad(d_prior, ((0, 0), (0, parameters.size - 8)))])
     jacobian = jacobian * data["free"]
     finite = jnp.isfinite(residual)
     return jnp.where(finite, residual, 0.0), jnp.where(finite[:, None] & jnp.isfinite(jacobian), jacobian, 0.0)
@@ -242,12 +245,12 @@ def _least_squares_fn_jvp(config, primals, tangents):
 
 def _solve_start(parameters, reference, prior, data, masks, prior_weights, config, rtol, atol, max_steps):
     """Levenberg-Marquardt on each window of ``masks`` in turn (continuation), the period prior
-    weighted by ``prior_weights`` (one per window)."""
+    weighted by ``prior_weights`` (one per window; ``prior`` None: no prior)."""
     solver = optx.LevenbergMarquardt(rtol=rtol, atol=atol)
     fn = lambda p, args: _least_squares_fn(p, args, config)  # noqa: E731
 
     def stage(current, window):
-        mask, prior_weight = window
+        mask, prior_weight = window if prior is not None else (window, None)
         args = (reference, data, (mask, prior, prior_weight))
         solution = optx.least_squares(fn, solver, current, args=args, has_aux=True, max_steps=max_steps,
                                       throw=False)
@@ -255,8 +258,8 @@ def _solve_start(parameters, reference, prior, data, masks, prior_weights, confi
         value = jnp.where(finite, solution.value, current)
         return value, solution.result == optx.RESULTS.successful
 
-    parameters, ok = jax.lax.scan(stage, parameters, (masks, prior_weights))
-    last = (masks[-1], prior, prior_weights[-1])
+    parameters, ok = jax.lax.scan(stage, parameters, masks if prior is None else (masks, prior_weights))
+    last = (masks[-1], prior, None if prior is None else prior_weights[-1])
     residual, jacobian = _residuals_and_jacobian(parameters, reference, data, last, config)
     cost = 0.5 * jnp.sum(residual**2)
     return parameters, jnp.where(jnp.isfinite(cost), cost, jnp.inf), ok[-1], residual, jacobian
@@ -654,8 +657,9 @@ def fit_lightcurve(
         log_areas = np.log(_gaussian_image_areas(fitted_axes, normals, solid_angles))
         log_areas -= log_areas.mean(-1, keepdims=True)
         parameters0 = np.concatenate([fitted[:, :8], log_areas], 1)
-        out = _refine(as_jax(parameters0), as_jax(refs), as_jax(priors), data, jnp.asarray(start_masks[:, -1:], dtype),
-                      jnp.zeros(1, dtype), config, rtol=float(rtol), atol=float(atol), max_steps=int(max_steps))
+        # All the data, no prior.
+        out = _refine(as_jax(parameters0), as_jax(refs), None, data, jnp.asarray(start_masks[:, -1:], dtype),
+                      None, config, rtol=float(rtol), atol=float(atol), max_steps=int(max_steps))
     fitted, refine_costs, oks, residual_rows, jacobians = (np.asarray(x) for x in out)
     winner = int(np.argmin(np.where(np.isfinite(refine_costs), refine_costs, np.inf)))
     p = fitted[winner].astype(float)
