@@ -16,9 +16,11 @@ $(STAMP): pyproject.toml
 demo: $(STAMP)
 	$(BIN)/frbjax demo
 
-# pytest exits 5 when it collects no test; that is reported, not hidden.
+# pytest exits 5 when it collects no test; that is reported, not hidden.  OpenBLAS (scipy's, which
+# jaxlib's LAPACK calls use) gets one thread: its threads gain nothing in these tests and, spinning
+# beside the other worker, made two light-curve inversions take over 300 s each instead of 136 s.
 test: $(STAMP)
-	$(BIN)/python -m pytest -n 2 --dist loadgroup -q --durations=15 tests; rc=$$?; \
+	OPENBLAS_NUM_THREADS=1 $(BIN)/python -m pytest -n 2 --dist loadgroup -q --durations=15 tests; rc=$$?; \
 	if [ $$rc -eq 5 ]; then echo "pytest collected no tests"; fi; exit $$rc
 
 # The documentation site into site/, with every warning an error (mkdocs.yml sets strict too).

@@ -668,8 +668,12 @@ def fit_lightcurve(
     residual = residual_rows[winner]
     m = n
     variance = float(np.sum(residual[:n] ** 2) / max(m - jacobian.shape[1], 1))
+    # (J^T J)^+ from the singular values of J itself: forming J^T J first squares its condition
+    # number, and the pseudo-inverse's cutoff then depends on rounding (as scipy's curve_fit).
+    _, singular, right = np.linalg.svd(jacobian, full_matrices=False)
+    kept = singular > np.finfo(float).eps * max(jacobian.shape) * singular[0]
     covariance = np.zeros((free.size, free.size))
-    covariance[np.ix_(free > 0, free > 0)] = np.linalg.pinv(jacobian.T @ jacobian) * variance
+    covariance[np.ix_(free > 0, free > 0)] = (right[kept].T / singular[kept] ** 2) @ right[kept] * variance
 
     body = _body(jnp.asarray(p[:8], dtype), reference)
     if shape == "convex":
