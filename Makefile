@@ -19,8 +19,11 @@ demo: $(STAMP)
 # pytest exits 5 when it collects no test; that is reported, not hidden.  OpenBLAS (scipy's, which
 # jaxlib's LAPACK calls use) gets one thread: its threads gain nothing in these tests and, spinning
 # beside the other worker, made two light-curve inversions take over 300 s each instead of 136 s.
+# Each test file runs on one worker (--dist loadfile), so that a module's fixtures (the tensor
+# derivatives' diffrax stencil: 4 minutes) are computed once.  (pytest-xdist 3.8's loadgroup does
+# not group under pytest 9: it renames items through an attribute pytest 9 no longer reads.)
 test: $(STAMP)
-	OPENBLAS_NUM_THREADS=1 $(BIN)/python -m pytest -n 2 --dist loadgroup -q --durations=15 tests; rc=$$?; \
+	OPENBLAS_NUM_THREADS=1 $(BIN)/python -m pytest -n 2 --dist loadfile -q --durations=15 tests; rc=$$?; \
 	if [ $$rc -eq 5 ]; then echo "pytest collected no tests"; fi; exit $$rc
 
 # The documentation site into site/, with every warning an error (mkdocs.yml sets strict too).

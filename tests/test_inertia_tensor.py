@@ -405,9 +405,6 @@ def derivatives(derivative_reference):
     return {key: derivative_errors(derivative_reference, *key) for key in _PROGRAMS}
 
 
-# The three tests share the module fixture `derivatives` (a diffrax stencil, minutes): one xdist worker
-# computes it for all of them.
-@pytest.mark.xdist_group("tensor_derivatives")
 @pytest.mark.parametrize("key", list(_PROGRAMS), ids="-".join)
 def test_derivatives_against_stencil(derivatives, key):
     """d(L, q)/dT_ij (T_ij and T_ji together) of FreeRigidBody and free_flow, forward and reverse,
@@ -425,7 +422,6 @@ def test_derivatives_against_stencil(derivatives, key):
     assert errors["L"].max() <= 1.5e-14 and errors["q"].max() <= 8e-14
 
 
-@pytest.mark.xdist_group("tensor_derivatives")
 def test_derivatives_finite_everywhere(derivatives):
     """Finite derivatives at every body: sphere, axisymmetric, L = 0, L along a principal axis (the
     smallest moment's; an axisymmetric body's symmetry axis) and in the plane of two equal moments.
@@ -447,7 +443,6 @@ def test_derivatives_finite_everywhere(derivatives):
 FORWARD_REVERSE_TOLERANCE = {"near_axisymmetric_oblate_1e-06": 4e-10}
 
 
-@pytest.mark.xdist_group("tensor_derivatives")
 def test_forward_and_reverse_agree(derivatives):
     """jacfwd and jacrev differentiate the same function: they agree to rounding at every body."""
     names = STENCIL_BODIES + SPECIAL_BODIES

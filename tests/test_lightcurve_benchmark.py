@@ -14,8 +14,6 @@ import pytest
 
 from _benchmark_runs import finite_positive, run_quick
 
-# With tests/test_lightcurve_fit.py on one worker (see there).
-pytestmark = pytest.mark.xdist_group("lightcurve_inversions")
 
 
 def test_lightcurve_benchmark_quick(tmp_path, request):

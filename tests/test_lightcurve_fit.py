@@ -24,9 +24,6 @@ from frbjax.lightcurve import ConvexShape, brightness, fit_lightcurve, mesh_iner
 
 NOISE = 0.01
 
-# The light-curve inversions run on one pytest-xdist worker, one after another (``--dist loadgroup``
-# in the Makefile): two of them at once on two cores were measured five times slower each.
-pytestmark = pytest.mark.xdist_group("lightcurve_inversions")
 ATTITUDE = np.array([0.8, 0.3, -0.4, 0.33]) / np.linalg.norm([0.8, 0.3, -0.4, 0.33])
 
 
