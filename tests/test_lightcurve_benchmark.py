@@ -10,10 +10,7 @@ from __future__ import annotations
 
 import json
 
-import pytest
-
 from _benchmark_runs import finite_positive, run_quick
-
 
 
 def test_lightcurve_benchmark_quick(tmp_path, request):
@@ -26,5 +23,6 @@ def test_lightcurve_benchmark_quick(tmp_path, request):
     assert forward["rk4_max_relative_flux_error"] < 1e-5
     (inversion,) = result["inversions"]
     assert finite_positive(inversion["first_call_seconds"])
-    # A small search (16 starts, 2 refined, the ellipsoid model): its periods within the ranges.
+    # A small search (16 starts, 2 refined, the ellipsoid model): its periods within the ranges, whose
+    # ends are 7.3e-3 from the truth (measured 1.1e-3: two refined starts end near an alias).
     assert max(inversion["period_relative_error"]) < 0.01

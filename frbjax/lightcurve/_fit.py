@@ -245,12 +245,13 @@ def _least_squares_fn_jvp(config, primals, tangents):
 
 def _solve_start(parameters, reference, prior, data, masks, prior_weights, config, rtol, atol, max_steps):
     """Levenberg-Marquardt on each window of ``masks`` in turn (continuation), the period prior
-    weighted by ``prior_weights`` (one per window; ``prior`` None: no prior)."""
+    weighted by ``prior_weights`` (one per window; ``prior`` and ``prior_weights`` None: no prior,
+    an empty pytree that the scan carries as it is)."""
     solver = optx.LevenbergMarquardt(rtol=rtol, atol=atol)
     fn = lambda p, args: _least_squares_fn(p, args, config)  # noqa: E731
 
     def stage(current, window):
-        mask, prior_weight = window if prior is not None else (window, None)
+        mask, prior_weight = window
         args = (reference, data, (mask, prior, prior_weight))
         solution = optx.least_squares(fn, solver, current, args=args, has_aux=True, max_steps=max_steps,
                                       throw=False)
@@ -258,8 +259,8 @@ def _solve_start(parameters, reference, prior, data, masks, prior_weights, confi
         value = jnp.where(finite, solution.value, current)
         return value, solution.result == optx.RESULTS.successful
 
-    parameters, ok = jax.lax.scan(stage, parameters, masks if prior is None else (masks, prior_weights))
-    last = (masks[-1], prior, None if prior is None else prior_weights[-1])
+    parameters, ok = jax.lax.scan(stage, parameters, (masks, prior_weights))
+    last = (masks[-1], prior, jax.tree.map(lambda weights: weights[-1], prior_weights))
     residual, jacobian = _residuals_and_jacobian(parameters, reference, data, last, config)
     cost = 0.5 * jnp.sum(residual**2)
     return parameters, jnp.where(jnp.isfinite(cost), cost, jnp.inf), ok[-1], residual, jacobian
@@ -666,8 +667,7 @@ def fit_lightcurve(
     reference = tuple(jnp.asarray(r[winner], dtype) for r in refs)
     jacobian = jacobians[winner][:, free > 0]
     residual = residual_rows[winner]
-    m = n
-    variance = float(np.sum(residual[:n] ** 2) / max(m - jacobian.shape[1], 1))
+    variance = float(np.sum(residual[:n] ** 2) / max(n - jacobian.shape[1], 1))
     # (J^T J)^+ from the singular values of J itself: forming J^T J first squares its condition
     # number, and the pseudo-inverse's cutoff then depends on rounding (as scipy's curve_fit).
     _, singular, right = np.linalg.svd(jacobian, full_matrices=False)
