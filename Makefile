@@ -22,8 +22,11 @@ demo: $(STAMP)
 # Each test file runs on one worker (--dist loadfile), so that a module's fixtures (the tensor
 # derivatives' diffrax stencil: 4 minutes) are computed once.  (pytest-xdist 3.8's loadgroup does
 # not group under pytest 9: it renames items through an attribute pytest 9 no longer reads.)
+# A test that runs past 20 minutes (the longest, with its fixture, takes about 5) fails with every
+# thread's stack printed, instead of holding the run until CI's limit.
 test: $(STAMP)
-	OPENBLAS_NUM_THREADS=1 $(BIN)/python -m pytest -n 2 --dist loadfile -q --durations=15 tests; rc=$$?; \
+	OPENBLAS_NUM_THREADS=1 $(BIN)/python -m pytest -n 2 --dist loadfile -q --durations=15 \
+		--timeout 1200 --timeout-method thread tests; rc=$$?; \
 	if [ $$rc -eq 5 ]; then echo "pytest collected no tests"; fi; exit $$rc
 
 # The documentation site into site/, with every warning an error (mkdocs.yml sets strict too).

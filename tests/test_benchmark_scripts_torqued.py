@@ -2,8 +2,7 @@
 
 The JSON must have the expected keys and finite numbers, and what the quick sizes can show must hold:
 at T = 10 the splitting and Dopri8 reach the errors measured, the energy error of the splitting stays
-bounded over its 10^3 steps, example 1's first 200 steps agree with the Fortran output.  Compilation
-dominates the wall time; the subprocesses share the session's persistent compilation cache.
+bounded over its 10^3 steps, example 1's first 200 steps agree with the Fortran output.
 """
 
 from __future__ import annotations
@@ -13,8 +12,8 @@ import json
 from _benchmark_runs import finite_positive, run_quick
 
 
-def test_torqued_quick(tmp_path, request):
-    run_quick("torqued.py", tmp_path, request)
+def test_torqued_quick(tmp_path):
+    run_quick("torqued.py", tmp_path)
     precision = json.loads((tmp_path / "torqued_work_precision.json").read_text())
     assert (tmp_path / "torqued_work_precision.png").stat().st_size > 0
     top = precision["problems"]["heavy_top"]
@@ -36,8 +35,8 @@ def test_torqued_quick(tmp_path, request):
     assert finite_positive(batch["batch"]["microseconds_per_free_flow_per_body"])
 
 
-def test_calgo903_example1_quick(tmp_path, request):
-    run_quick("calgo903_example1.py", tmp_path, request)
+def test_calgo903_example1_quick(tmp_path):
+    run_quick("calgo903_example1.py", tmp_path)
     result = json.loads((tmp_path / "calgo903_example1.json").read_text())
     assert result["steps"] == 200 and result["free_flows"] == 3000
     assert finite_positive(result["run_seconds"])

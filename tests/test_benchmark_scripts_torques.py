@@ -3,28 +3,23 @@
 The JSON must have the expected keys and finite numbers, and what the quick sizes can show must hold:
 at T = 1 h the splitting and Dopri8 reach the errors measured on the damped satellite, the splitting
 keeps the heavy top's energy bounded over its 10^3 steps, and the two-day debris run agrees with
-Dopri8.  Compilation dominates the wall time; the subprocess shares the session's compilation cache.
+Dopri8.
 """
 
 from __future__ import annotations
 
 import json
-import os
 import subprocess
 import sys
 
 from _benchmark_runs import ROOT, finite_positive
 
 
-def test_torques_basilisk_quick(tmp_path, request):
-    env = dict(os.environ)
-    cache = getattr(request.config, "cache", None)
-    if cache is not None:
-        env.setdefault("JAX_COMPILATION_CACHE_DIR", str(cache.mkdir("jax-compilation-cache")))
+def test_torques_basilisk_quick(tmp_path):
     proc = subprocess.run(
         [sys.executable, str(ROOT / "benchmarks" / "torques_basilisk.py"), "--quick", "--without-basilisk",
          "--repeats", "1", "--output-dir", str(tmp_path)],
-        cwd=ROOT, env=env, capture_output=True, text=True, timeout=1800)
+        cwd=ROOT, capture_output=True, text=True, timeout=1800)
     assert proc.returncode == 0, proc.stdout + proc.stderr
 
     basilisk = json.loads((tmp_path / "torques_basilisk.json").read_text())

@@ -443,7 +443,7 @@ def test_one_time_per_body(count):
 def test_jit_and_vmap():
     """The body built inside jax.jit(jax.vmap(...)) gives the values of the op-by-op evaluation.
 
-    (One compilation: 45 to 70 s on CPU, cached on disk by conftest for later runs.)
+    (One compilation: 45 to 70 s on CPU.)
     Measured: 2.2e-15 (L / |L|), 2.9e-15 (q).
     """
     import jax

@@ -36,11 +36,10 @@ GIF_SIGNATURE = b"GIF89a"
 
 
 @pytest.fixture(autouse=True)
-def cache_environment(pytestconfig, monkeypatch):
-    """Environment of a subprocess: compiled programs go to pytest's cache, not the user's."""
-    cache = getattr(pytestconfig, "cache", None)
-    directory = str(cache.mkdir("jax-compilation-cache")) if cache is not None else ""
-    monkeypatch.setenv("FRBJAX_CACHE_DIR", directory)
+def cache_environment(monkeypatch):
+    """No persistent compilation cache (see conftest.py), here and in subprocesses; nothing goes to
+    the user's cache folder."""
+    monkeypatch.setenv("FRBJAX_CACHE_DIR", "")
     return dict(os.environ)
 
 

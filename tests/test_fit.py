@@ -6,10 +6,7 @@ signs on the observed quaternions.
 
 Compiling the fit dominates (see frbjax.fit, "Compilation"): every fit here has the same number of
 samples (CI_SAMPLES) and starts (N_STARTS), so the whole module compiles the solver once; the first
-fit of a process holds a file lock (tests/_compile_lock.py) so that the other xdist worker, and the
-notebook notebooks/fit_inertia.ipynb (the same sizes; it shows the Huber loss with outliers), wait for
-it and then load the compiled program from JAX's persistent cache (tests/conftest.py) instead of
-compiling it again.  The true motions are evaluated by one jitted program (``motion``): evaluating
+The true motions are evaluated by one jitted program (``motion``): evaluating
 FreeRigidBody eagerly costs ~10 s per body.  The acceptance runs (100 problems of 200 samples, and
 sparse asteroid-like observations) are in benchmarks/fit_success.py, which imports
 ``synthetic_problem`` from here.
@@ -19,7 +16,6 @@ from __future__ import annotations
 
 import functools
 
-import _compile_lock
 import jax
 import jax.numpy as jnp
 import numpy as np
@@ -84,25 +80,14 @@ def errors(fit, inertia, omega):
 # ----------------------------------------------------------------------------------- one compilation
 
 
-@pytest.fixture(scope="session")
-def _lock_path(tmp_path_factory):
-    return _compile_lock.path(tmp_path_factory)
-
-
-_fit_once = None
-
-
 @pytest.fixture
-def fit(_lock_path):
-    """fit_attitude at the module's sizes; the first call compiles under the lock."""
-    global _fit_once
-    if _fit_once is None:
-        _fit_once = _compile_lock.first_call_locked(_lock_path, fit_attitude)
+def fit():
+    """fit_attitude at the module's sizes (one compiled program for the module)."""
 
     def run(times, q, **options):
-        assert len(times) == CI_SAMPLES  # one compiled program for the module
+        assert len(times) == CI_SAMPLES
         options.setdefault("n_starts", N_STARTS)
-        return _fit_once(times, q, **options)
+        return fit_attitude(times, q, **options)
 
     return run
 

@@ -6,8 +6,8 @@ over five rotation periods, optionally gyro rates.  The data are made without th
 the motion of the principal frame (FreeRigidBody with principal moments, L_p = R^T L, q_p = q ⊗ q(R))
 turned back to the body frame, q = q_p ⊗ conj(q(R)).
 
-Every fit here has CI_SAMPLES samples and N_STARTS starts: the module compiles the tensor solver once
-(under the same file lock as tests/test_fit.py).  The acceptance run (100 problems with and without
+Every fit here has CI_SAMPLES samples and N_STARTS starts: the module compiles the tensor solver once.
+The acceptance run (100 problems with and without
 gyro data) is benchmarks/fit_tensor_success.py, which imports ``tilted_problem`` from here.
 """
 
@@ -15,7 +15,6 @@ from __future__ import annotations
 
 import functools
 
-import _compile_lock
 import jax
 import jax.numpy as jnp
 import numpy as np
@@ -87,26 +86,15 @@ def tilted_problem(seed, n=CI_SAMPLES, noise=NOISE, periods=5.0, tilt_degrees=20
     return times, q, observed_rates, tensor, omega, attitude
 
 
-@pytest.fixture(scope="session")
-def _lock_path(tmp_path_factory):
-    return _compile_lock.path(tmp_path_factory)
-
-
-_fit_once = None
-
-
 @pytest.fixture
-def fit(_lock_path):
-    """fit_attitude(inertia="tensor") at the module's sizes; the first call compiles under the lock."""
-    global _fit_once
-    if _fit_once is None:
-        _fit_once = _compile_lock.first_call_locked(_lock_path, fit_attitude)
+def fit():
+    """fit_attitude(inertia="tensor") at the module's sizes (one compiled program for the module)."""
 
     def run(times, q, **options):
         assert len(times) == CI_SAMPLES
         options.setdefault("n_starts", N_STARTS)
         options.setdefault("attitude_sigma", NOISE)
-        return _fit_once(times, q, inertia="tensor", **options)
+        return fit_attitude(times, q, inertia="tensor", **options)
 
     return run
 

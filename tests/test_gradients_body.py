@@ -34,8 +34,7 @@ applied to the 32-digit values; the Hessian of (L(t), q(t)) in (I, L, t) at four
 second derivative of R_J at a zero argument (which the constructor's complete Pi has) against mpmath.
 
 Cost: compilation dominates (the attitude is a large program), so there are a few programs, each
-jitted and vmapped over all the points at once and compiled once per session (the persistent cache of
-tests/conftest.py keeps them across runs): the values with the forward-mode Jacobian, the reverse-mode Jacobian, the second
+jitted and vmapped over all the points at once and compiled once per session: the values with the forward-mode Jacobian, the reverse-mode Jacobian, the second
 derivatives in t, the Hessians.  On CPU they are compiled with XLA:CPU's fusion emitters off (as frbjax.fit does), the
 reverse and second-order ones also at XLA backend optimisation level 0: 2-4x less compile time
 (reverse mode: 140 s -> 40 s under load), the same mathematics: with XLA's default options the worst

@@ -9,22 +9,17 @@ sweep agrees with diffrax at the level of the test file (measured L 1.2e-13, q 1
 from __future__ import annotations
 
 import json
-import os
 import subprocess
 import sys
 
 from _benchmark_runs import ROOT, finite_positive
 
 
-def test_inertia_tensor_quick(tmp_path, request):
-    env = dict(os.environ)
-    cache = getattr(request.config, "cache", None)
-    if cache is not None:
-        env.setdefault("JAX_COMPILATION_CACHE_DIR", str(cache.mkdir("jax-compilation-cache")))
+def test_inertia_tensor_quick(tmp_path):
     proc = subprocess.run(
         [sys.executable, str(ROOT / "benchmarks" / "inertia_tensor.py"), "--quick", "--no-orekit",
          "--output-dir", str(tmp_path)],
-        cwd=ROOT, env=env, capture_output=True, text=True, timeout=1800,
+        cwd=ROOT, capture_output=True, text=True, timeout=1800,
     )
     assert proc.returncode == 0, proc.stdout + proc.stderr
     result = json.loads((tmp_path / "inertia_tensor.json").read_text())

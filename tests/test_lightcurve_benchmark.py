@@ -13,8 +13,8 @@ import json
 from _benchmark_runs import finite_positive, run_quick
 
 
-def test_lightcurve_benchmark_quick(tmp_path, request):
-    run_quick("lightcurve.py", tmp_path, request)
+def test_lightcurve_benchmark_quick(tmp_path):
+    run_quick("lightcurve.py", tmp_path)
     result = json.loads((tmp_path / "lightcurve.json").read_text())
     assert (tmp_path / "lightcurve.png").stat().st_size > 0
     forward = result["forward"]

@@ -2,18 +2,13 @@
 
 Each notebook has a code cell tagged ``parameters`` (sizes); a cell injected right after it sets the
 small sizes of SMALL_PARAMETERS.  The notebooks run in the ``python3`` kernel of the Python running
-the tests (ipykernel in the same environment), from a temporary folder, with JAX's compilation cache
-in pytest's cache folder (as in conftest.py).  A notebook that fits (``fit_attitude``) runs under the
-lock of tests/_compile_lock.py, so that frbjax.fit's solver (the sizes of tests/test_fit.py) is
-compiled once per session, by whoever comes first.
+the tests (ipykernel in the same environment), from a temporary folder.
 """
 
 from __future__ import annotations
 
-import contextlib
 import pathlib
 
-import _compile_lock
 import pytest
 
 import nbclient  # noqa: E402
@@ -34,27 +29,15 @@ def with_small_parameters(notebook):
     raise AssertionError("no code cell tagged 'parameters'")
 
 
-@pytest.fixture
-def kernel_environment(pytestconfig, monkeypatch):
-    """The kernel inherits this environment: JAX reads its compilation cache settings from it."""
-    cache = getattr(pytestconfig, "cache", None)
-    if cache is not None:
-        monkeypatch.setenv("JAX_COMPILATION_CACHE_DIR", str(cache.mkdir("jax-compilation-cache")))
-        monkeypatch.setenv("JAX_PERSISTENT_CACHE_MIN_COMPILE_TIME_SECS", "0")
-
-
 @pytest.mark.parametrize("path", NOTEBOOKS, ids=[path.stem for path in NOTEBOOKS])
-def test_notebook_runs(path, tmp_path, tmp_path_factory, kernel_environment):
+def test_notebook_runs(path, tmp_path):
     notebook = nbformat.read(path, as_version=4)
     assert all(not cell.get("outputs") for cell in notebook.cells if cell.cell_type == "code"), (
         f"{path.name} is committed with outputs; clear them")
     client = nbclient.NotebookClient(
         with_small_parameters(notebook), timeout=TIMEOUT, kernel_name="python3",
         resources={"metadata": {"path": str(tmp_path)}})
-    fits = any("fit_attitude" in cell.source for cell in notebook.cells if cell.cell_type == "code")
-    lock = _compile_lock.held(_compile_lock.path(tmp_path_factory)) if fits else contextlib.nullcontext()
-    with lock:
-        client.execute()  # raises CellExecutionError, naming the cell, on any error
+    client.execute()  # raises CellExecutionError, naming the cell, on any error
     errors = [output for cell in notebook.cells if cell.cell_type == "code"
               for output in cell.get("outputs", []) if output.get("output_type") == "error"]
     assert not errors

@@ -12,8 +12,8 @@ import json
 from _benchmark_runs import finite_positive, run_quick
 
 
-def test_setup_cost_quick(tmp_path, request):
-    run_quick("setup_cost.py", tmp_path, request)
+def test_setup_cost_quick(tmp_path):
+    run_quick("setup_cost.py", tmp_path)
     result = json.loads((tmp_path / "setup_cost.json").read_text())
     assert (tmp_path / "setup_cost.png").stat().st_size > 0
     assert set(result["ratios"]) == set(result["targets"]) == set(result["before"])

@@ -82,7 +82,7 @@ SCRIPT = textwrap.dedent(
 )
 
 
-def test_sharded_over_4_devices_equals_one_device(request, tmp_path):
+def test_sharded_over_4_devices_equals_one_device(tmp_path):
     """One test (one subprocess, ~40 s): sharding, padding and equality with one device.
 
     Measured: quaternion and angular_momentum bit-equal (0 ulp) to one device for every body, the hard
@@ -92,10 +92,6 @@ def test_sharded_over_4_devices_equals_one_device(request, tmp_path):
     script.write_text(SCRIPT)
     env = dict(os.environ)
     env.update(XLA_FLAGS="--xla_force_host_platform_device_count=4", JAX_ENABLE_X64="1", JAX_PLATFORMS="cpu")
-    cache = getattr(request.config, "cache", None)
-    if cache is not None:  # share pytest's persistent compilation cache (tests/conftest.py)
-        env["JAX_COMPILATION_CACHE_DIR"] = str(cache.mkdir("jax-compilation-cache"))
-        env["JAX_PERSISTENT_CACHE_MIN_COMPILE_TIME_SECS"] = "0.5"
     process = subprocess.run([sys.executable, str(script)], cwd=ROOT, env=env, capture_output=True, text=True,
                              timeout=900)
     assert process.returncode == 0, process.stderr[-4000:]

@@ -420,7 +420,7 @@ _SAVED_STATES_SCRIPT = textwrap.dedent("""
 
 @pytest.mark.parametrize("bodies, jitted, methods", [(1, False, tuple(ORDERS)), (100, True, ("leapfrog", "aba1064"))],
                          ids=["one body eager", "100 bodies jit"])
-def test_saved_states_compile_for_every_method(request, bodies, jitted, methods):
+def test_saved_states_compile_for_every_method(bodies, jitted, methods):
     """Every method compiles and saves the states of every step (one step, every 2nd of 4, every 5th
     of 10): one body called eagerly (one-kernel regions: XLA:CPU, jaxlib 0.10.2, aborted the process
     on one leapfrog step) and 100 bodies under jit (the ordinary program).  Measured: the saved
@@ -430,10 +430,6 @@ def test_saved_states_compile_for_every_method(request, bodies, jitted, methods)
     jit, one body, and leapfrog's for 100 bodies: 144 cases), to 2.1e-15.  One body eager also calls
     each method's ``RigidBodySplitting.step`` on its own (leapfrog's aborted the process too)."""
     env = dict(os.environ, JAX_PLATFORMS="cpu")
-    cache = getattr(request.config, "cache", None)
-    if cache is not None:  # share pytest's persistent compilation cache (tests/conftest.py)
-        env["JAX_COMPILATION_CACHE_DIR"] = str(cache.mkdir("jax-compilation-cache"))
-        env["JAX_PERSISTENT_CACHE_MIN_COMPILE_TIME_SECS"] = "0.5"
     cases = [(1, 1), (4, 2), (10, 5)]
     process = subprocess.run([sys.executable, "-c", _SAVED_STATES_SCRIPT, json.dumps([methods, cases, bodies, jitted])],
                              cwd=REPOSITORY, env=env, capture_output=True, text=True, timeout=600)

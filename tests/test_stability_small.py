@@ -89,8 +89,7 @@ SADDLE_FACTOR = 60.0
 @functools.lru_cache(maxsize=None)
 def frbjax_values():
     """frbjax's (L, q) at every case's times, (N, K, 3) and (N, K, 4), once per test process: one batch
-    of N bodies at times (K, N), jit-compiled as a user would run it (~35 s of compilation on a cold
-    cache; the persistent compilation cache of conftest.py makes later runs take a second)."""
+    of N bodies at times (K, N), jit-compiled as a user would run it (~35 s of compilation)."""
     import jax
 
     from frbjax import FreeRigidBody

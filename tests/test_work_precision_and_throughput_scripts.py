@@ -1,9 +1,7 @@
 """Smoke runs of benchmarks/work_precision.py and benchmarks/throughput.py, and a check of their peer.
 
 The scripts run with --quick into a temporary directory; the JSON must have the expected keys and
-finite numbers.  Their wall time is dominated by XLA compiling frbjax (tens of seconds per program
-on a cold cache), so the subprocesses share the test session's persistent compilation cache
-(conftest.py; pytest's cache directory), and later runs load the compiled programs from it.
+finite numbers.  Their wall time is dominated by XLA compiling frbjax (tens of seconds per program).
 """
 
 from __future__ import annotations
@@ -23,8 +21,8 @@ from _scipy_closed_form import ScipyFreeRigidBody  # noqa: E402
 from frbjax import FreeRigidBody  # noqa: E402
 
 
-def test_work_precision_quick(tmp_path, request):
-    stdout = run_quick("work_precision.py", tmp_path, request)
+def test_work_precision_quick(tmp_path):
+    stdout = run_quick("work_precision.py", tmp_path)
     result = json.loads((tmp_path / "work_precision.json").read_text())
     assert (tmp_path / "work_precision.png").stat().st_size > 0
     assert {(c["T"], c["kind"]) for c in result["cases"]} == {
@@ -57,8 +55,8 @@ def test_work_precision_quick(tmp_path, request):
     assert "Key ratios" in stdout
 
 
-def test_throughput_quick(tmp_path, request):
-    stdout = run_quick("throughput.py", tmp_path, request)
+def test_throughput_quick(tmp_path):
+    stdout = run_quick("throughput.py", tmp_path)
     result = json.loads((tmp_path / "throughput.json").read_text())
     assert (tmp_path / "throughput.png").stat().st_size > 0
     for key in ("all_cores", "one_core"):
