@@ -34,9 +34,9 @@ the Levenberg-Marquardt solver then minimises the robust cost (scale c = ``loss_
 
 Optimisation
 ------------
-optimistix's Levenberg-Marquardt (``optx.least_squares``), from a batch of starting points run with
-``jax.vmap`` (one compilation for all of them): the observed attitude at t_ref, the angular velocity
-from finite differences of the data around t_ref, and several inertia ratios (permutations of a few
+optimistix's Levenberg-Marquardt (``optx.least_squares``), from a batch of starting points solved in
+one compiled program (one after another on CPU, under ``jax.vmap`` elsewhere: ``frbjax._multistart``):
+the observed attitude at t_ref, the angular velocity from finite differences of the data around t_ref, and several inertia ratios (permutations of a few
 triaxial shapes, then random ones from ``seed``), since the regimes (rotation around the largest or the
 smallest axis) and the orderings of the moments are separate basins.  Each start is solved on growing
 time windows around t_ref (continuation: the phase of a wrong model drifts with time, so a long record
@@ -72,6 +72,7 @@ from jaxtyping import Array, Float
 
 from . import _quaternion as quaternion
 from ._body import FreeRigidBody, with_principal_axes
+from ._multistart import solve_each, starts_in_sequence
 
 __all__ = ["AttitudeFit", "fit_attitude"]
 
@@ -290,11 +291,11 @@ def _solve_start(theta0, reference, data, masks, losses, final_loss, loss_scale,
     return theta, cost, ok[-1], scales[-1], jax.tree.map(lambda a: a[-1], aux)
 
 
-def _fit(thetas0, references, data, masks, final_loss, loss_scale, rtol, atol, max_steps):
+def _fit(thetas0, references, data, masks, final_loss, loss_scale, rtol, atol, max_steps, in_sequence):
     losses = jnp.zeros(masks.shape[0], jnp.int32)
     solve = lambda theta0, reference: _solve_start(  # noqa: E731
         theta0, reference, data, masks, losses, final_loss, loss_scale, rtol, atol, max_steps)
-    thetas, costs, oks, scales, aux = jax.vmap(solve)(thetas0, references)
+    thetas, costs, oks, scales, aux = solve_each(solve, (thetas0, references), in_sequence)
     # The best start: lowest cost among converged ones (any start if none converged).
     finite_costs = jnp.where(jnp.isfinite(costs), costs, jnp.inf)
     best = jnp.argmin(finite_costs)
@@ -427,11 +428,12 @@ DEFAULT_COMPILER_OPTIONS = {"xla_cpu_use_fusion_emitters": False}
 @functools.cache
 def _compiled_fit(options):
     """The jitted solver for XLA compiler options ``options`` (a sorted tuple of items)."""
-    return jax.jit(_fit, static_argnames=("rtol", "atol", "max_steps"),
+    return jax.jit(_fit, static_argnames=("rtol", "atol", "max_steps", "in_sequence"),
                    compiler_options=dict(options) or None)
 
 
 def _solve(options, *args, **static):
+    static["in_sequence"] = starts_in_sequence()
     if options is None:
         options = DEFAULT_COMPILER_OPTIONS if jax.default_backend() == "cpu" else {}
         try:
@@ -519,7 +521,7 @@ def fit_attitude(
     too, as the rotation vector psi of ``principal_axes``, 11 parameters; their starts are the body
     axes, and random orientations for starts beyond the twelfth); ``triangle_inequality``: make the
     fitted moments obey I1 + I2 >= I3, as those of matter do (a penalty: to about 1e-9 relative);
-    ``n_starts``: starting points (solved together under ``jax.vmap``); ``seed`` or ``key`` (a
+    ``n_starts``: starting points (solved in one compiled program); ``seed`` or ``key`` (a
     ``jax.random`` key): randomises the starts beyond the deterministic ones and their inertia guesses.
 
     ``rtol``, ``atol``, ``max_steps``: of each Levenberg-Marquardt solve; ``compiler_options``: XLA

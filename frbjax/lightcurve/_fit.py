@@ -40,7 +40,7 @@ polhode phase, attitude): for given moments the ratio P_psi / P_phi fixes the en
 P_psi then fixes |L|.  The shape of each start is the ellipsoid of the same inertia at uniform
 density.  All starts are evaluated on the first continuation window (the samples nearest the epoch)
 in one vmapped program (thousands of starts); the best ``n_refine`` are solved by optimistix's
-Levenberg-Marquardt under ``vmap`` on growing windows (continuation) with the ellipsoid shape (the
+Levenberg-Marquardt (in one program: one after another on CPU, under ``vmap`` elsewhere) on growing windows (continuation) with the ellipsoid shape (the
 first windows hold fewer samples than a convex shape has areas); for ``shape="convex"`` the convex
 shape, started from the Gaussian image of each fitted ellipsoid, is then solved with the motion on
 all the data.  The lowest cost wins.  Periods, moments and their standard errors come from the
@@ -69,6 +69,7 @@ from jaxtyping import Array, Float
 
 from .. import _quaternion as quaternion
 from .._body import FreeRigidBody
+from .._multistart import solve_each, starts_in_sequence
 from ._brightness import LAWS, check_directions, facet_brightness
 from ._brightness import brightness as _forward
 from ._periods import momentum_from_periods, tumbler_periods
@@ -266,13 +267,15 @@ def _solve_start(parameters, reference, prior, data, masks, prior_weights, confi
     return parameters, jnp.where(jnp.isfinite(cost), cost, jnp.inf), ok[-1], residual, jacobian
 
 
-@functools.partial(jax.jit, static_argnames=("config", "rtol", "atol", "max_steps"))
-def _refine(parameters, references, priors, data, masks, prior_weights, config, rtol, atol, max_steps):
-    """Each start (parameters, reference, prior, masks (W, N): its windows) solved by _solve_start."""
+@functools.partial(jax.jit, static_argnames=("config", "rtol", "atol", "max_steps", "in_sequence"))
+def _refine(parameters, references, priors, data, masks, prior_weights, config, rtol, atol, max_steps,
+            in_sequence):
+    """Each start (parameters, reference, prior, masks (W, N): its windows) solved by _solve_start,
+    one after another or batched (``frbjax._multistart``)."""
     def solve(p, reference, prior, start_masks):
         return _solve_start(p, reference, prior, data, start_masks, prior_weights, config, rtol, atol, max_steps)
 
-    return jax.vmap(solve)(parameters, references, priors, masks)
+    return solve_each(solve, (parameters, references, priors, masks), in_sequence)
 
 
 @functools.partial(jax.jit, static_argnames=("config", "chunk"))
@@ -651,7 +654,8 @@ def fit_lightcurve(
     ellipsoid_config = ("ellipsoid",) + config[1:]
     parameters0 = np.concatenate([theta[best], ellipsoid_start[best]], 1)
     out = _refine(as_jax(parameters0), as_jax(refs), as_jax(priors), ellipsoid_data, jnp.asarray(start_masks, dtype),
-                  jnp.asarray(prior_weights, dtype), ellipsoid_config, rtol=float(rtol), atol=float(atol), max_steps=int(max_steps))
+                  jnp.asarray(prior_weights, dtype), ellipsoid_config, rtol=float(rtol), atol=float(atol), max_steps=int(max_steps),
+                  in_sequence=starts_in_sequence())
     if shape == "convex":
         fitted = np.asarray(out[0])
         fitted_axes = np.concatenate([np.ones((len(best), 1)), np.exp(fitted[:, 8:])], 1)
@@ -660,7 +664,8 @@ def fit_lightcurve(
         parameters0 = np.concatenate([fitted[:, :8], log_areas], 1)
         # All the data, no prior.
         out = _refine(as_jax(parameters0), as_jax(refs), None, data, jnp.asarray(start_masks[:, -1:], dtype),
-                      None, config, rtol=float(rtol), atol=float(atol), max_steps=int(max_steps))
+                      None, config, rtol=float(rtol), atol=float(atol), max_steps=int(max_steps),
+                      in_sequence=starts_in_sequence())
     fitted, refine_costs, oks, residual_rows, jacobians = (np.asarray(x) for x in out)
     winner = int(np.argmin(np.where(np.isfinite(refine_costs), refine_costs, np.inf)))
     p = fitted[winner].astype(float)
