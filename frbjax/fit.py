@@ -36,12 +36,13 @@ Optimisation
 ------------
 optimistix's Levenberg-Marquardt (``optx.least_squares``), from a batch of starting points solved in
 one compiled program (one after another on CPU, under ``jax.vmap`` elsewhere: ``frbjax._multistart``):
-the observed attitude at t_ref, the angular velocity from finite differences of the data around t_ref, and several inertia ratios (permutations of a few
-triaxial shapes, then random ones from ``seed``), since the regimes (rotation around the largest or the
-smallest axis) and the orderings of the moments are separate basins.  Each start is solved on growing
-time windows around t_ref (continuation: the phase of a wrong model drifts with time, so a long record
-alone has many local minima) with the squared loss, the last window (all samples) with the chosen
-loss.  The start with the lowest cost wins.
+the observed attitude at t_ref, the angular velocity from finite differences of the data around
+t_ref, and several inertia ratios (permutations of a few triaxial shapes, then random ones from
+``seed``), since the regimes (rotation around the largest or the smallest axis) and the orderings of
+the moments are separate basins.  Each start is solved on growing time windows around t_ref
+(continuation: the phase of a wrong model drifts with time, so a long record alone has many local
+minima) with the squared loss, the last window (all samples) with the chosen loss.  The start with
+the lowest cost wins.
 
 Compilation
 -----------

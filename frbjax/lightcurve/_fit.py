@@ -40,11 +40,12 @@ polhode phase, attitude): for given moments the ratio P_psi / P_phi fixes the en
 P_psi then fixes |L|.  The shape of each start is the ellipsoid of the same inertia at uniform
 density.  All starts are evaluated on the first continuation window (the samples nearest the epoch)
 in one vmapped program (thousands of starts); the best ``n_refine`` are solved by optimistix's
-Levenberg-Marquardt (in one program: one after another on CPU, under ``vmap`` elsewhere) on growing windows (continuation) with the ellipsoid shape (the
-first windows hold fewer samples than a convex shape has areas); for ``shape="convex"`` the convex
-shape, started from the Gaussian image of each fitted ellipsoid, is then solved with the motion on
-all the data.  The lowest cost wins.  Periods, moments and their standard errors come from the
-covariance (J^T J)^+ s^2 of the winner (s^2 the residual variance of the data rows).
+Levenberg-Marquardt (in one program: one after another on CPU, under ``vmap`` elsewhere) on growing
+windows (continuation) with the ellipsoid shape (the first windows hold fewer samples than a convex
+shape has areas); for ``shape="convex"`` the convex shape, started from the Gaussian image of each
+fitted ellipsoid, is then solved with the motion on all the data.  The lowest cost wins.  Periods,
+moments and their standard errors come from the covariance (J^T J)^+ s^2 of the winner (s^2 the
+residual variance of the data rows).
 
 The windows hold the samples within a radius of the epoch, the first a tenth of the data, each next
 radius 1.8 times the last: a window's fit predicts the phase a factor 1.8 further out, where its
@@ -653,9 +654,10 @@ def fit_lightcurve(
     ellipsoid_data = dict(data, free=jnp.asarray(ellipsoid_free, dtype))
     ellipsoid_config = ("ellipsoid",) + config[1:]
     parameters0 = np.concatenate([theta[best], ellipsoid_start[best]], 1)
+    solver_settings = dict(rtol=float(rtol), atol=float(atol), max_steps=int(max_steps),
+                           in_sequence=starts_in_sequence())
     out = _refine(as_jax(parameters0), as_jax(refs), as_jax(priors), ellipsoid_data, jnp.asarray(start_masks, dtype),
-                  jnp.asarray(prior_weights, dtype), ellipsoid_config, rtol=float(rtol), atol=float(atol), max_steps=int(max_steps),
-                  in_sequence=starts_in_sequence())
+                  jnp.asarray(prior_weights, dtype), ellipsoid_config, **solver_settings)
     if shape == "convex":
         fitted = np.asarray(out[0])
         fitted_axes = np.concatenate([np.ones((len(best), 1)), np.exp(fitted[:, 8:])], 1)
@@ -664,8 +666,7 @@ def fit_lightcurve(
         parameters0 = np.concatenate([fitted[:, :8], log_areas], 1)
         # All the data, no prior.
         out = _refine(as_jax(parameters0), as_jax(refs), None, data, jnp.asarray(start_masks[:, -1:], dtype),
-                      None, config, rtol=float(rtol), atol=float(atol), max_steps=int(max_steps),
-                      in_sequence=starts_in_sequence())
+                      None, config, **solver_settings)
     fitted, refine_costs, oks, residual_rows, jacobians = (np.asarray(x) for x in out)
     winner = int(np.argmin(np.where(np.isfinite(refine_costs), refine_costs, np.inf)))
     p = fitted[winner].astype(float)
