@@ -19,10 +19,12 @@ def starts_in_sequence() -> bool:
     return jax.default_backend() == "cpu"
 
 
-def solve_each(solve, starts, in_sequence: bool):
+def solve_each(solve, starts, in_sequence: bool | None = None):
     """``solve(*start)`` for every start (the leading axis of every leaf of the tuple ``starts``; a
     ``None`` is an absent argument), stacked: by ``jax.lax.map`` when ``in_sequence``, else by
-    ``jax.vmap``."""
+    ``jax.vmap``; by default as the backend prefers (``starts_in_sequence``)."""
+    if in_sequence is None:
+        in_sequence = starts_in_sequence()
     if in_sequence:
         return jax.lax.map(lambda start: solve(*start), starts)
     return jax.vmap(solve)(*starts)

@@ -73,7 +73,7 @@ from jaxtyping import Array, Float
 
 from . import _quaternion as quaternion
 from ._body import FreeRigidBody, with_principal_axes
-from ._multistart import solve_each, starts_in_sequence
+from ._multistart import solve_each
 
 __all__ = ["AttitudeFit", "fit_attitude"]
 
@@ -292,11 +292,11 @@ def _solve_start(theta0, reference, data, masks, losses, final_loss, loss_scale,
     return theta, cost, ok[-1], scales[-1], jax.tree.map(lambda a: a[-1], aux)
 
 
-def _fit(thetas0, references, data, masks, final_loss, loss_scale, rtol, atol, max_steps, in_sequence):
+def _fit(thetas0, references, data, masks, final_loss, loss_scale, rtol, atol, max_steps):
     losses = jnp.zeros(masks.shape[0], jnp.int32)
     solve = lambda theta0, reference: _solve_start(  # noqa: E731
         theta0, reference, data, masks, losses, final_loss, loss_scale, rtol, atol, max_steps)
-    thetas, costs, oks, scales, aux = solve_each(solve, (thetas0, references), in_sequence)
+    thetas, costs, oks, scales, aux = solve_each(solve, (thetas0, references))
     # The best start: lowest cost among converged ones (any start if none converged).
     finite_costs = jnp.where(jnp.isfinite(costs), costs, jnp.inf)
     best = jnp.argmin(finite_costs)
@@ -429,12 +429,11 @@ DEFAULT_COMPILER_OPTIONS = {"xla_cpu_use_fusion_emitters": False}
 @functools.cache
 def _compiled_fit(options):
     """The jitted solver for XLA compiler options ``options`` (a sorted tuple of items)."""
-    return jax.jit(_fit, static_argnames=("rtol", "atol", "max_steps", "in_sequence"),
+    return jax.jit(_fit, static_argnames=("rtol", "atol", "max_steps"),
                    compiler_options=dict(options) or None)
 
 
 def _solve(options, *args, **static):
-    static["in_sequence"] = starts_in_sequence()
     if options is None:
         options = DEFAULT_COMPILER_OPTIONS if jax.default_backend() == "cpu" else {}
         try:

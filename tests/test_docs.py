@@ -61,7 +61,7 @@ def public_names():
 
 
 @pytest.fixture(scope="module")
-def site(tmp_path_factory, pytestconfig):
+def site(tmp_path_factory):
     folder = tmp_path_factory.mktemp("site")
     result = subprocess.run([sys.executable, "-m", "mkdocs", "build", "--strict", "--site-dir", str(folder)],
                             cwd=REPOSITORY, capture_output=True, text=True, timeout=300,
@@ -100,7 +100,7 @@ def test_pages_have_examples():
 
 
 @pytest.mark.parametrize("page", [str(page) for page in PAGES if python_blocks(page)])
-def test_page_examples_run(page, tmp_path, pytestconfig):
+def test_page_examples_run(page, tmp_path):
     script = tmp_path / (pathlib.Path(page).stem + ".py")
     script.write_text("\n\n".join(python_blocks(page)))
     result = subprocess.run([sys.executable, str(script)], cwd=REPOSITORY, capture_output=True,

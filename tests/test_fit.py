@@ -5,11 +5,10 @@ separatrix, samples at uneven times over several rotation periods, 1e-3 rad atti
 signs on the observed quaternions.
 
 Compiling the fit dominates (see frbjax.fit, "Compilation"): every fit here has the same number of
-samples (CI_SAMPLES) and starts (N_STARTS), so the whole module compiles the solver once; the first
-The true motions are evaluated by one jitted program (``motion``): evaluating
-FreeRigidBody eagerly costs ~10 s per body.  The acceptance runs (100 problems of 200 samples, and
-sparse asteroid-like observations) are in benchmarks/fit_success.py, which imports
-``synthetic_problem`` from here.
+samples (CI_SAMPLES) and starts (N_STARTS), so the whole module compiles the solver once.  The true
+motions are evaluated by one jitted program (``motion``): evaluating FreeRigidBody eagerly costs
+~10 s per body.  The acceptance runs (100 problems of 200 samples, and sparse asteroid-like
+observations) are in benchmarks/fit_success.py, which imports ``synthetic_problem`` from here.
 """
 
 from __future__ import annotations

@@ -7,8 +7,7 @@ the motion of the principal frame (FreeRigidBody with principal moments, L_p = R
 turned back to the body frame, q = q_p ⊗ conj(q(R)).
 
 Every fit here has CI_SAMPLES samples and N_STARTS starts: the module compiles the tensor solver once.
-The acceptance run (100 problems with and without
-gyro data) is benchmarks/fit_tensor_success.py, which imports ``tilted_problem`` from here.
+The acceptance run (100 problems with and without gyro data) is benchmarks/fit_tensor_success.py, which imports ``tilted_problem`` from here.
 """
 
 from __future__ import annotations

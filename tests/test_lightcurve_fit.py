@@ -102,8 +102,8 @@ SAMPLES_PER_NIGHT = 16
 
 # Measured (relative errors; the issue asks periods to 1e-4): SAM P_psi 6.3e-6, P_phi 6.2e-5 (standard
 # errors 3.9e-6, 3.1e-4), moments 0.11% and 0.004%, held-out nights 1.10% rms; LAM P_psi 2.4e-6,
-# P_phi 3.5e-6 (standard errors 1.2e-6, 1.9e-5), moments 2.1% and 1.9%, held-out 1.01% rms.  The true motion and shape give 0.90% on
-# the same held-out nights (the noise).  The fitted shape's uniform-density moments against the true
+# P_phi 3.5e-6 (standard errors 1.2e-6, 1.9e-5), moments 2.1% and 1.9%, held-out 1.01% rms.  The
+# true motion and shape give 0.90% on the same held-out nights (the noise).  The fitted shape's uniform-density moments against the true
 # hull's (0.582 : 0.873 : 1), in the fitted body's axes: SAM 1.7% and 1.7%, LAM 0.75% and 0.10%.
 # The search's random states are seed 0 (fit_lightcurve's default); benchmarks/lightcurve.py
 # recovers both tumblers with four seeds each over wider ranges.

@@ -48,5 +48,14 @@ def test_sequence_and_batch_agree():
     np.testing.assert_allclose(np.asarray(sequence), np.tile([1.7, 0.8, 2.3], (4, 1)), rtol=1e-14)
     np.testing.assert_allclose(np.asarray(sequence), np.asarray(batch), rtol=1e-14)
 
+
+def test_default_follows_the_backend():
+    """Without ``in_sequence`` the backend chooses: sequential on CPU (what the fits use here)."""
+    starts = jnp.array([[1.0, 1.0, 2.0], [2.0, 0.5, 2.5]])
+    values, ok = jax.jit(lambda s: solve_each(_solve, (s, jnp.zeros_like(s), None)))(starts)
+    assert np.all(np.asarray(ok))
+    np.testing.assert_allclose(np.asarray(values), np.tile([1.7, 0.8, 2.3], (2, 1)), rtol=1e-14)
+
+
 def test_cpu_solves_in_sequence():
     assert starts_in_sequence() == (jax.default_backend() == "cpu")

@@ -70,7 +70,7 @@ from jaxtyping import Array, Float
 
 from .. import _quaternion as quaternion
 from .._body import FreeRigidBody
-from .._multistart import solve_each, starts_in_sequence
+from .._multistart import solve_each
 from ._brightness import LAWS, check_directions, facet_brightness
 from ._brightness import brightness as _forward
 from ._periods import momentum_from_periods, tumbler_periods
@@ -268,15 +268,14 @@ def _solve_start(parameters, reference, prior, data, masks, prior_weights, confi
     return parameters, jnp.where(jnp.isfinite(cost), cost, jnp.inf), ok[-1], residual, jacobian
 
 
-@functools.partial(jax.jit, static_argnames=("config", "rtol", "atol", "max_steps", "in_sequence"))
-def _refine(parameters, references, priors, data, masks, prior_weights, config, rtol, atol, max_steps,
-            in_sequence):
+@functools.partial(jax.jit, static_argnames=("config", "rtol", "atol", "max_steps"))
+def _refine(parameters, references, priors, data, masks, prior_weights, config, rtol, atol, max_steps):
     """Each start (parameters, reference, prior, masks (W, N): its windows) solved by _solve_start,
     one after another or batched (``frbjax._multistart``)."""
     def solve(p, reference, prior, start_masks):
         return _solve_start(p, reference, prior, data, start_masks, prior_weights, config, rtol, atol, max_steps)
 
-    return solve_each(solve, (parameters, references, priors, masks), in_sequence)
+    return solve_each(solve, (parameters, references, priors, masks))
 
 
 @functools.partial(jax.jit, static_argnames=("config", "chunk"))
@@ -654,8 +653,7 @@ def fit_lightcurve(
     ellipsoid_data = dict(data, free=jnp.asarray(ellipsoid_free, dtype))
     ellipsoid_config = ("ellipsoid",) + config[1:]
     parameters0 = np.concatenate([theta[best], ellipsoid_start[best]], 1)
-    solver_settings = dict(rtol=float(rtol), atol=float(atol), max_steps=int(max_steps),
-                           in_sequence=starts_in_sequence())
+    solver_settings = dict(rtol=float(rtol), atol=float(atol), max_steps=int(max_steps))
     out = _refine(as_jax(parameters0), as_jax(refs), as_jax(priors), ellipsoid_data, jnp.asarray(start_masks, dtype),
                   jnp.asarray(prior_weights, dtype), ellipsoid_config, **solver_settings)
     if shape == "convex":
