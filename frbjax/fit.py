@@ -47,14 +47,18 @@ the lowest cost wins.
 Compilation
 -----------
 Compiling the solver dominates the first call (the Jacobian of the attitude with respect to the
-moments is a large program: about a minute of CPU); later calls with the same number of samples,
-number of starts, dtype, solver settings (``rtol``, ``atol``, ``max_steps``) and compiler options
-reuse it, whatever the data, loss, weights, gyro data or seed.  The compiled program holds one copy of
-the motion's forward-mode derivative (a custom JVP hands the solver the Jacobian from one pass, and
-the same pass gives the model at the solution, so the motion is not compiled again to report it), and
-the continuation windows are one ``lax.scan`` rather than unrolled solves.  On CPU the solver is
+moments is a large program); later calls with the same number of samples, number of starts, dtype,
+solver settings (``rtol``, ``atol``, ``max_steps``) and compiler options reuse it, whatever the
+data, loss, weights, gyro data or seed. The compiled program holds one copy of the motion's
+forward-mode derivative (a custom JVP hands the solver the Jacobian from one pass, and the same pass
+gives the model at the solution, so the motion is not compiled again to report it), and the
+continuation windows are one ``lax.scan`` rather than unrolled solves. The motion's derivatives are
+the elliptic formulas' own (``frbjax._body.state_with_elliptic_derivatives``): the rule that
+`FreeRigidBody` applies to exactly symmetric bodies next to the plane of their equal moments, which
+the iterates of continuous parameters never are, is a conditional branch that the Jacobian would
+compile in full (without it the first call takes about a sixth less time). On CPU the solver is
 compiled with ``DEFAULT_COMPILER_OPTIONS`` (XLA:CPU's fusion emitters off: about 25% less compile
-time, the same run time).  JAX's persistent compilation cache (``jax_compilation_cache_dir``) keeps
+time, the same run time). JAX's persistent compilation cache (``jax_compilation_cache_dir``) keeps
 the program across processes.
 """
 
@@ -72,7 +76,7 @@ import optimistix as optx
 from jaxtyping import Array, Float
 
 from . import _quaternion as quaternion
-from ._body import FreeRigidBody, with_principal_axes
+from ._body import FreeRigidBody, state_with_elliptic_derivatives, with_principal_axes
 from ._multistart import solve_each
 
 __all__ = ["AttitudeFit", "fit_attitude"]
@@ -169,13 +173,14 @@ def _model(theta, reference, times, time_scale):
     attitude = quaternion.multiply(reference, quaternion.exp_pure(theta[5:8]))
     if theta.shape[0] == _PRINCIPAL_PARAMETERS:
         body = FreeRigidBody(inertia, inertia * omega, attitude)
-        # One evaluation gives both (``state``): the Jacobi functions behind q(t) give L(t) too.
-        momentum, attitude_t = body.state(times)
+        # One evaluation gives both (``state``): the Jacobi functions behind q(t) give L(t) too.  The
+        # elliptic formulas' own derivatives: the solver compiles faster (_body docstring there).
+        momentum, attitude_t = state_with_elliptic_derivatives(body, times)
         return attitude_t, momentum / inertia
     axes = quaternion.as_matrix(quaternion.exp_pure(theta[8:11]))
     momentum0 = axes @ (inertia * (axes.T @ omega))
     body = with_principal_axes(inertia, momentum0, attitude, axes)
-    momentum, attitude_t = body.state(times)
+    momentum, attitude_t = state_with_elliptic_derivatives(body, times)
     return attitude_t, (momentum @ axes) / inertia @ axes.T
 
 

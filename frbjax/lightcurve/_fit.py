@@ -69,7 +69,7 @@ import optimistix as optx
 from jaxtyping import Array, Float
 
 from .. import _quaternion as quaternion
-from .._body import FreeRigidBody
+from .._body import FreeRigidBody, quaternion_with_elliptic_derivatives
 from .._multistart import solve_each
 from ._brightness import LAWS, check_directions, facet_brightness
 from ._brightness import brightness as _forward
@@ -124,7 +124,10 @@ def _ellipsoid_shape(shape_parameters, subdivisions):
 def _facet_fluxes(theta, reference, normals, data, law, c):
     """S(mu, mu0) per sample and facet (N, F)."""
     times, sun, observer = data["times"], data["sun"], data["observer"]
-    matrices = _body(theta, reference).rotation_matrix(times)
+    # The elliptic formulas' own derivatives (frbjax._body.quaternion_with_elliptic_derivatives): the
+    # solver's Jacobian compiles without the rule of exactly symmetric bodies, which its iterates
+    # never are.
+    matrices = quaternion.as_matrix(quaternion_with_elliptic_derivatives(_body(theta, reference), times))
     sun_body = jnp.einsum("tji,tj->ti", matrices, sun)
     observer_body = jnp.einsum("tji,tj->ti", matrices, observer)
     return facet_brightness(normals, sun_body, observer_body, law, c)
