@@ -78,6 +78,7 @@ from jaxtyping import Array, Float
 from . import _quaternion as quaternion
 from ._body import FreeRigidBody, state_with_elliptic_derivatives, with_principal_axes
 from ._multistart import solve_each
+from ._trace_once import traced_once
 
 __all__ = ["AttitudeFit", "fit_attitude"]
 
@@ -223,8 +224,10 @@ def _residuals(theta, args):
 # ------------------------------------------------------------------------------------ the solver
 
 
+@traced_once
 def _flat_residuals_and_jacobian(theta, args):
-    """(r, dr/dtheta, model), r flattened, by forward mode (8 tangents in one vmapped pass)."""
+    """(r, dr/dtheta, model), r flattened, by forward mode (8 tangents in one vmapped pass); traced
+    once for the primal and the JVP of ``_least_squares_fn`` (``_trace_once``)."""
 
     def flat(p):
         r, model = _residuals(p, args)

@@ -235,20 +235,14 @@ MODEL_JACOBIAN_DIFFERENCE = {"triaxial": 0.0, "principal_axis": 0.0, "symmetric_
                              "symmetric_1e-6_off_plane": 1.1e-4}
 
 
-def _evaluations():
-    from frbjax._body import quaternion_with_elliptic_derivatives, state_with_elliptic_derivatives
-
-    return {"state": (state_with_elliptic_derivatives, lambda body, t: body.state(t)),
-            "quaternion": (quaternion_with_elliptic_derivatives, lambda body, t: body.quaternion(t))}
-
-
 @functools.cache
-def _model_programs(output, fits):
-    """Jitted (values, Jacobian in (I, L, q, t)) of the fits' evaluation (``fits``) or the body's."""
-    evaluate = _evaluations()[output][0 if fits else 1]
+def _model_program(fits):
+    """Jitted (values, Jacobian in (I, L, q, t)) of the fits' evaluation of the state, or the body's."""
+    from frbjax._body import state_with_elliptic_derivatives
 
     def state(inertia, momentum, attitude, times):
-        return evaluate(FreeRigidBody(inertia, momentum, attitude), times)
+        body = FreeRigidBody(inertia, momentum, attitude)
+        return state_with_elliptic_derivatives(body, times) if fits else body.state(times)
 
     return jax.jit(lambda *args: (state(*args), jax.jacfwd(state, argnums=(0, 1, 2, 3))(*args)))
 
@@ -259,11 +253,16 @@ def test_model_derivatives_are_the_bodys_except_on_exactly_symmetric_bodies(name
     (frbjax._body.state_with_elliptic_derivatives): values bit for bit the body's, and the Jacobian in
     (I, L, q, t) too except for exactly symmetric bodies next to the plane of their equal moments (a
     fit's continuous parameters never are one), where it is finite and close."""
+    from frbjax._body import quaternion_with_elliptic_derivatives
+
     inertia, momentum = (jnp.asarray(a) for a in MODEL_BODIES[name])
     arguments = (inertia, momentum, jnp.asarray([0.9, 0.1, -0.3, 0.2]), jnp.linspace(-3.0, 7.0, 11))
-    for output in ("state", "quaternion"):
-        (values, ours), (expected, theirs) = (_model_programs(output, fits)(*arguments) for fits in (True, False))
-        assert all(np.array_equal(a, b) for a, b in zip(jax.tree.leaves(values), jax.tree.leaves(expected)))
-        assert all(np.all(np.isfinite(a)) for a in jax.tree.leaves(ours))
-        difference = max(float(np.max(np.abs(a - b))) for a, b in zip(jax.tree.leaves(ours), jax.tree.leaves(theirs)))
-        assert difference <= MODEL_JACOBIAN_DIFFERENCE[name], difference
+    (values, ours), (expected, theirs) = (_model_program(fits)(*arguments) for fits in (True, False))
+    assert all(np.array_equal(a, b) for a, b in zip(jax.tree.leaves(values), jax.tree.leaves(expected)))
+    assert all(np.all(np.isfinite(a)) for a in jax.tree.leaves(ours))
+    difference = max(float(np.max(np.abs(a - b))) for a, b in zip(jax.tree.leaves(ours), jax.tree.leaves(theirs)))
+    assert difference <= MODEL_JACOBIAN_DIFFERENCE[name], difference
+    # The light-curve fit's evaluation of the attitude alone: the same values.
+    body = FreeRigidBody(*arguments[:3])
+    attitude = jax.jit(quaternion_with_elliptic_derivatives)(body, arguments[3])
+    assert np.array_equal(attitude, jax.jit(lambda body, t: body.quaternion(t))(body, arguments[3]))

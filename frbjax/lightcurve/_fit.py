@@ -71,6 +71,7 @@ from jaxtyping import Array, Float
 from .. import _quaternion as quaternion
 from .._body import FreeRigidBody, quaternion_with_elliptic_derivatives
 from .._multistart import solve_each
+from .._trace_once import traced_once
 from ._brightness import LAWS, check_directions, facet_brightness
 from ._brightness import brightness as _forward
 from ._periods import momentum_from_periods, tumbler_periods
@@ -191,8 +192,10 @@ def _log_periods(theta, reference, principal_axis):
     return jnp.log(jnp.where(jnp.isfinite(periods), periods, 1.0))
 
 
+@functools.partial(traced_once, static_argnums=4)
 def _residuals_and_jacobian(parameters, reference, data, window, config):
-    """(r (R,), dr/dparameters (R, P)): data rows, the shape's regularisation rows, the period prior's.
+    """(r (R,), dr/dparameters (R, P)): data rows, the shape's regularisation rows, the period prior's
+    (traced once for the primal and the JVP of ``_least_squares_fn``: ``frbjax._trace_once``).
 
     ``window`` = (weights (N,) of the samples, prior (log centre (2,), inverse widths (2,)), prior
     weight): the continuation window, and the start's period cell as a Gaussian prior in log P; a
