@@ -49,17 +49,18 @@ Compilation
 Compiling the solver dominates the first call (the Jacobian of the attitude with respect to the
 moments is a large program); later calls with the same number of samples, number of starts, dtype,
 solver settings (``rtol``, ``atol``, ``max_steps``) and compiler options reuse it, whatever the
-data, loss, weights, gyro data or seed. The compiled program holds one copy of the motion's
+data, loss, weights, gyro data or seed.  The compiled program holds one copy of the motion's
 forward-mode derivative (a custom JVP hands the solver the Jacobian from one pass, and the same pass
 gives the model at the solution, so the motion is not compiled again to report it), and the
-continuation windows are one ``lax.scan`` rather than unrolled solves. The motion's derivatives are
+continuation windows are one ``lax.scan`` rather than unrolled solves.  The motion's derivatives are
 the elliptic formulas' own (``frbjax._body.state_with_elliptic_derivatives``): the rule that
 `FreeRigidBody` applies to exactly symmetric bodies next to the plane of their equal moments, which
 the iterates of continuous parameters never are, is a conditional branch that the Jacobian would
-compile in full (without it the first call takes about a sixth less time). On CPU the solver is
-compiled with ``DEFAULT_COMPILER_OPTIONS`` (XLA:CPU's fusion emitters off: about 25% less compile
-time, the same run time). JAX's persistent compilation cache (``jax_compilation_cache_dir``) keeps
-the program across processes.
+compile in full (without it the first call takes about a sixth less time).  The model is traced
+once although optimistix calls the residuals twice while tracing (``frbjax._trace_once``: a tenth
+of the first call).  On CPU the solver is compiled with ``DEFAULT_COMPILER_OPTIONS`` (XLA:CPU's
+fusion emitters off: about 25% less compile time, the same run time).  JAX's persistent compilation
+cache (``jax_compilation_cache_dir``) keeps the program across processes.
 """
 
 from __future__ import annotations
