@@ -14,7 +14,7 @@
   (they need diffrax).
 - :func:`fit_attitude` (:mod:`frbjax.fit`): the torque-free motion (moments of inertia, angular
   velocity, attitude) that best explains observed attitudes; imported on first use (it needs
-  optimistix).
+  optimistix).  A fit that does not converge raises :class:`FitError` (``throw=False`` returns it).
 
 The library never changes JAX's global configuration: enable float64 yourself
 (``jax.config.update("jax_enable_x64", True)``) for double precision.
@@ -22,15 +22,16 @@ The library never changes JAX's global configuration: enable float64 yourself
 
 from . import special
 from ._body import FreeRigidBody
+from ._errors import FitError
 from ._free_flow import free_flow
 from ._inertia import InertiaTensor
-from ._quaternion import as_matrix as quaternion_to_matrix
-from ._quaternion import from_matrix as quaternion_from_matrix
+from ._quaternion import quaternion_from_matrix, quaternion_to_matrix
 from ._sharding import batch_mesh, pad_batch, shard_batch, shard_bodies
 
 __all__ = [
     "SPLITTING_METHODS",
     "AttitudeFit",
+    "FitError",
     "FreeRigidBody",
     "InertiaTensor",
     "RigidBodySplitting",

@@ -12,6 +12,7 @@ import numpy as np
 from jaxtyping import Array, Float, Int
 
 from . import _quaternion as quaternion
+from ._checks import check_finite, check_nonzero_rows, check_positive, is_concrete, on_host, real_array
 from ._frame import angular_velocity, dot as _dot, matrix_product, matrix_times as _apply, to_principal
 from ._fusion import materialise, sum_last, when_any
 from ._inertia import InertiaTensor, through_principal_frame
@@ -34,7 +35,7 @@ def working_frame(inertia, momentum):
     rank = jnp.stack([(j2 < j1).astype(jnp.int32) + (j3 < j1),
                       (j1 <= j2).astype(jnp.int32) + (j3 < j2),
                       (j1 <= j3).astype(jnp.int32) + (j2 <= j3)], -1)
-    working_axes = jnp.arange(3)
+    working_axes = jnp.broadcast_to(jnp.arange(3), (*rank.shape, 3))
     permutation = (rank[..., :, None] == working_axes).astype(inertia.dtype)
     # An odd permutation has determinant -1: flip the middle working axis to make it a rotation.
     parity = _permutation_sign(rank).astype(inertia.dtype)
@@ -86,6 +87,10 @@ def _validate(inertia, angular_momentum, attitude):
     inputs: a JAX tracer (under jit, vmap, grad) has no value yet, and an invalid body built from
     tracers gives NaN outputs instead (see FreeRigidBody).
     """
+    # Strings, objects and complex numbers are refused by name before JAX's conversion.
+    for name, value in (("inertia", inertia), ("angular_momentum", angular_momentum), ("attitude", attitude)):
+        if value is not None and is_concrete(value):
+            real_array(name, value)
     inertia, angular_momentum = jnp.asarray(inertia), jnp.asarray(angular_momentum)
     attitude = None if attitude is None else jnp.asarray(attitude)
     arrays = dict(inertia=inertia, angular_momentum=angular_momentum)
@@ -104,21 +109,13 @@ def _validate(inertia, angular_momentum, attitude):
         described = ", ".join(f"{name} {shape}" for name, shape in shapes.items())
         raise ValueError(f"incompatible leading (batch) shapes: {described}") from None
 
-    def concrete(value):
-        return None if isinstance(value, jax.core.Tracer) else np.asarray(value)
-
-    value = concrete(inertia)
-    if value is not None and not (np.all(np.isfinite(value)) and np.all(value > 0)):
-        raise ValueError("inertia: the moments of inertia must be finite and > 0")
-    value = concrete(angular_momentum)
-    if value is not None and not np.all(np.isfinite(value)):
-        raise ValueError("angular_momentum must be finite")
-    value = None if attitude is None else concrete(attitude)
-    if value is not None:
-        if not np.all(np.isfinite(value)):
-            raise ValueError("attitude must be finite")
-        if not np.all(np.any(value != 0, axis=-1)):
-            raise ValueError("attitude must be a non-zero quaternion")
+    if is_concrete(inertia):
+        check_positive("inertia", inertia)
+    if is_concrete(angular_momentum):
+        check_finite("angular_momentum", angular_momentum)
+    if attitude is not None and is_concrete(attitude):
+        check_finite("attitude", attitude)
+        check_nonzero_rows("attitude", attitude)
 
 
 def _working_dtype(inertia, angular_momentum):
@@ -213,7 +210,7 @@ def _construct(inertia, angular_momentum, attitude, axes=None):
     # p -> offset ⊗ p ⊗ conj(P) is linear in p: one 4 x 4 matrix per body, columns the images of
     # the unit quaternions, so that each evaluation costs 16 products instead of two Hamilton
     # products.
-    unit = jnp.eye(4, dtype=dtype)
+    unit = jnp.broadcast_to(jnp.eye(4, dtype=dtype), (*offset.shape[:-1], 4, 4))
     columns = quaternion.multiply(
         quaternion.multiply(offset[..., None, :], unit), quaternion.conjugate(frame_rotation)[..., None, :]
     )
@@ -347,6 +344,8 @@ def _compiled(method):
 
     @functools.wraps(method)
     def call(self, t):
+        if on_host(t):
+            check_finite("t", real_array("t", t))
         return compiled(self, jnp.asarray(t))
 
     return call
@@ -383,7 +382,9 @@ class FreeRigidBody(eqx.Module):
     Invalid inputs: wrong trailing shapes or leading shapes that do not broadcast raise ValueError,
     always (shapes are static, under jit too).  With concrete inputs (not JAX tracers) the values are
     checked as well: a moment of inertia that is <= 0 or not finite, a non-finite angular momentum,
-    and a zero or non-finite attitude raise ValueError naming the argument.  Under jax.jit, vmap or
+    a zero or non-finite attitude, entries that are not real numbers, and non-finite times ``t`` of
+    the methods (read where they are on the host) raise ValueError naming the argument and its first
+    offending entry.  Under jax.jit, vmap or
     grad the values are unknown at construction and cannot be checked: a body with any such invalid
     value instead has NaN in all its per-body data (the stored inertia, initial angular momentum,
     initial attitude and momentum_norm included), so that every output for that body (angular
@@ -470,8 +471,9 @@ class FreeRigidBody(eqx.Module):
     # ------------------------------------------------------------------------------------ helpers
 
     def _time(self, t):
-        t = jnp.asarray(t, self.inertia.dtype)
-        return t, self.momentum_norm * t  # unit-|L| time, shape broadcast(batch, t.shape)
+        # t broadcasts against the batch (explicitly: the library does not rely on rank promotion).
+        norm, t = jnp.broadcast_arrays(self.momentum_norm, jnp.asarray(t, self.inertia.dtype))
+        return t, norm * t  # unit-|L| time, shape broadcast(batch, t.shape)
 
     def _uniform(self):
         return self.regime == UNIFORM

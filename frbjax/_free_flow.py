@@ -11,6 +11,7 @@ import jax
 import jax.numpy as jnp
 from jaxtyping import Array, Float
 
+from ._checks import check_finite, on_host, real_array
 from ._body import _validate, _working_dtype, motion_once
 from ._inertia import InertiaTensor, through_principal_frame
 from ._kernel import one_kernel
@@ -70,9 +71,11 @@ def free_flow(inertia, angular_momentum, attitude, t) -> tuple[Float[Array, "...
 
     Exact in every regime, differentiable in every input (forward and reverse mode, any order),
     jit-compiled once per shape and dtype when called eagerly, and composable with ``jit``, ``vmap``
-    and ``grad``.  Invalid inputs raise ValueError as in `FreeRigidBody` (NaN under
-    tracing).
+    and ``grad``.  Invalid inputs raise ValueError as in `FreeRigidBody`, non-finite times ``t``
+    too (NaN under tracing).
     """
+    if on_host(t):
+        check_finite("t", real_array("t", t))
     if isinstance(inertia, InertiaTensor):
         _validate(inertia.principal_moments, angular_momentum, attitude)
         angular_momentum, attitude = jnp.asarray(angular_momentum), jnp.asarray(attitude)

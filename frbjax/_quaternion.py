@@ -6,6 +6,7 @@ import jax.numpy as jnp
 from jax import Array
 from jax.typing import ArrayLike
 
+from ._checks import check_finite, check_rotation_matrices, check_trailing_shape, check_unit_rows, on_host, real_array
 from ._fusion import sum_last
 
 
@@ -26,7 +27,7 @@ def multiply(p: Array, q: Array) -> Array:
 
 def conjugate(q: Array) -> Array:
     r"""$\bar q = (w, -x, -y, -z)$, the inverse of a unit quaternion."""
-    return q * jnp.array([1, -1, -1, -1], dtype=q.dtype)
+    return q * jnp.broadcast_to(jnp.array([1, -1, -1, -1], dtype=q.dtype), q.shape)
 
 
 def as_matrix(q: ArrayLike) -> Array:
@@ -95,3 +96,33 @@ def exp_pure(rotation_vector: Array) -> Array:
     scalar = jnp.where(small, 1 - theta2 / 8, jnp.cos(theta / 2))
     vector_scale = jnp.where(small, 0.5 - theta2 / 48, jnp.sin(theta / 2) / theta)
     return jnp.concatenate([scalar[..., None], vector_scale[..., None] * rotation_vector], axis=-1)
+
+
+def quaternion_to_matrix(q: ArrayLike) -> Array:
+    r"""Rotation matrix $R(q)$ (..., 3, 3) of unit quaternions $q = (w, x, y, z)$ (..., 4), body to space.
+
+    $R(q)\, v = q \otimes (0, v) \otimes \bar q$: the columns of $R$ are the body axes in space
+    ($x_\text{space} = R\, x_\text{body}$).  Refused (ValueError, for values on the host): trailing
+    axis other than 4, non-finite entries, quaternions whose norm is not 1 (to 1e-6; 1e-3 in float32).
+    """
+    check_trailing_shape("q", q, (4,))
+    if on_host(q):
+        values = real_array("q", q)
+        check_finite("q", values)
+        check_unit_rows("q", values)
+    return as_matrix(jnp.asarray(q))
+
+
+def quaternion_from_matrix(matrix: ArrayLike) -> Array:
+    r"""Unit quaternions (..., 4), $w \ge 0$ where possible, of rotation matrices $R$ (..., 3, 3)
+    (Shepperd's method: the largest of $1 + \mathrm{tr}\,R$ and $1 + 2R_{ii} - \mathrm{tr}\,R$ under the
+    square root).  Refused (ValueError, for values on the host): trailing axes other than (3, 3),
+    non-finite entries, matrices that are not rotations ($|R^T R - 1|$ above 1e-6, 1e-3 in float32,
+    or a negative determinant).
+    """
+    check_trailing_shape("matrix", matrix, (3, 3))
+    if on_host(matrix):
+        values = real_array("matrix", matrix)
+        check_finite("matrix", values)
+        check_rotation_matrices("matrix", values)
+    return from_matrix(jnp.asarray(matrix))

@@ -77,11 +77,13 @@ import optimistix as optx
 from jaxtyping import Array, Float
 
 from . import _quaternion as quaternion
+from . import _checks as checks
 from ._body import FreeRigidBody, state_with_elliptic_derivatives, with_principal_axes
+from ._errors import FitError
 from ._multistart import solve_each
 from ._trace_once import traced_once
 
-__all__ = ["AttitudeFit", "fit_attitude"]
+__all__ = ["AttitudeFit", "FitError", "fit_attitude"]
 
 _LOSSES = {"squared": 0, "huber": 1, "cauchy": 2}
 _PRINCIPAL_PARAMETERS, _TENSOR_PARAMETERS = 8, 11
@@ -497,6 +499,69 @@ def _start_shapes(n_starts, rng):
     return np.asarray(shapes)
 
 
+# ------------------------------------------------------------------------------------ arguments
+
+
+def _checked_data(times, quaternions, angular_velocity_data, nan_policy):
+    """(times, quaternions, gyro or None, omitted rows, dtype) of the samples to fit, numpy; ValueError for
+    data the fit cannot use, naming the argument and the first offending entry (module ``_checks``)."""
+    checks.choice("nan_policy", nan_policy, ("raise", "omit"))
+    times_np = checks.real_array("times", times)
+    q_np = checks.real_array("quaternions", quaternions)
+    if times_np.ndim != 1:
+        raise ValueError(f"times must be one-dimensional (N,), got shape {times_np.shape}")
+    n = len(times_np)
+    if q_np.shape != (n, 4):
+        raise ValueError(f"quaternions must have shape (N, 4) = ({n}, 4) like times, got {q_np.shape}")
+    arrays = [times_np, q_np]
+    gyro_np = None
+    if angular_velocity_data is not None:
+        gyro_np = checks.real_array("angular_velocity_data", angular_velocity_data)
+        if gyro_np.shape != (n, 3):
+            raise ValueError(f"angular_velocity_data must have shape (N, 3) = ({n}, 3) like times, "
+                             f"got {gyro_np.shape}")
+        arrays.append(gyro_np)
+    omitted = checks.nonfinite_rows(*arrays)
+    if np.any(omitted) and nan_policy == "raise":
+        names = "times, quaternions or angular_velocity_data" if gyro_np is not None else "times or quaternions"
+        raise ValueError(f"samples {checks.describe_rows(omitted)} have non-finite {names}; pass "
+                         "nan_policy='omit' to leave them out")
+    kept = np.flatnonzero(~omitted)
+    # The checks below see the kept rows under their input indices (rows left out read as valid).
+    checked = np.where(omitted[:, None], np.array([1.0, 0.0, 0.0, 0.0]), q_np)
+    checks.check_nonzero_rows("quaternions", checked)
+    checks.check_unit_rows("quaternions", checked.astype(q_np.dtype))
+    checks.check_distinct_times("times", times_np[kept], kept)
+    if len(kept) < 4:
+        raise ValueError(f"times: the fit needs at least 4 samples, got {len(kept)}"
+                         + (f" after leaving out {n - len(kept)}" if np.any(omitted) else ""))
+    dtype = jnp.result_type(times_np.dtype, q_np.dtype, float)  # the fit runs in the data's dtype
+    gyro_np = None if gyro_np is None else gyro_np[kept].astype(float)
+    return times_np[kept].astype(float), q_np[kept].astype(float), gyro_np, omitted, dtype
+
+
+def _check_options(*, loss, loss_scale, attitude_sigma, angular_velocity_sigma, inertia, n_starts, seed,
+                   rtol, atol, max_steps):
+    checks.choice("loss", loss, _LOSSES)
+    checks.choice("inertia", inertia, ("principal", "tensor"))
+    if loss_scale is not None:
+        checks.scalar("loss_scale", loss_scale, positive=True)
+    checks.scalar("attitude_sigma", attitude_sigma, positive=True)
+    checks.scalar("angular_velocity_sigma", angular_velocity_sigma, positive=True)
+    checks.integer("n_starts", n_starts, minimum=1)
+    checks.integer("seed", seed, minimum=0)
+    checks.scalar("rtol", rtol, positive=True)
+    checks.scalar("atol", atol, positive=True)
+    checks.integer("max_steps", max_steps, minimum=1)
+
+
+def _with_omitted_rows(rows, omitted):
+    """``rows`` of the fitted samples placed at their input indices, NaN at the omitted ones."""
+    full = np.full((len(omitted),) + rows.shape[1:], np.nan, dtype=rows.dtype)
+    full[~omitted] = rows
+    return full
+
+
 def fit_attitude(
     times,
     quaternions,
@@ -515,6 +580,8 @@ def fit_attitude(
     atol: float = 1e-10,
     max_steps: int = 200,
     compiler_options: dict | None = None,
+    nan_policy: str = "raise",
+    throw: bool = True,
 ) -> AttitudeFit:
     """Fit moments of inertia (ratios), angular velocity and attitude to observed attitudes.
 
@@ -537,6 +604,17 @@ def fit_attitude(
     compiler options of the solver (default ``DEFAULT_COMPILER_OPTIONS`` on CPU; ``{}`` for XLA's
     defaults; e.g. ``{"xla_backend_optimization_level": 0}`` compiles faster and runs slower).
 
+    ``nan_policy``: what to do with samples that have a non-finite time, quaternion or angular
+    velocity (a dropped sample): ``"raise"`` (default) refuses them, naming their indices;
+    ``"omit"`` leaves them out (their rows of ``residuals`` are NaN).  ``throw``: a fit whose best
+    start did not converge raises :class:`frbjax.FitError` (default), whose ``result`` is the
+    unconverged fit; with ``throw=False`` that result is returned (``success`` False).
+
+    Refused with a ValueError naming the argument and the first offending entry: times that are not
+    one-dimensional or repeat a value, quaternions that are not (N, 4) or not unit (norm 1 to
+    1e-6; 1e-3 for float32 data), angular velocity data that are not (N, 3), fewer than 4 samples,
+    non-finite or non-positive sigmas, scales and tolerances, counts below 1, unknown option names.
+
     Only the ratios of the moments are identifiable (I -> c I, L -> c L give the same motion): see the
     module docstring for the fitted parameters.  A tensor fit of a (nearly) axisymmetric body cannot
     determine the principal axes about the symmetry axis: ``AttitudeFit.axes_identifiable`` is then
@@ -544,20 +622,13 @@ def fit_attitude(
     All starts share one compilation for a given (N, n_starts), dtype, solver settings and compiler
     options (module docstring, "Compilation").
     """
-    if loss not in _LOSSES:
-        raise ValueError(f"loss must be one of {sorted(_LOSSES)}, got {loss!r}")
-    if inertia not in ("principal", "tensor"):
-        raise ValueError(f"inertia must be 'principal' or 'tensor', got {inertia!r}")
+    times_np, q_np, gyro_np, omitted, dtype = _checked_data(times, quaternions, angular_velocity_data, nan_policy)
+    _check_options(loss=loss, loss_scale=loss_scale, attitude_sigma=attitude_sigma,
+                   angular_velocity_sigma=angular_velocity_sigma, inertia=inertia, n_starts=n_starts,
+                   seed=seed if key is None else 0, rtol=rtol, atol=atol, max_steps=max_steps)
     tensor = inertia == "tensor"
     n_parameters = _TENSOR_PARAMETERS if tensor else _PRINCIPAL_PARAMETERS
-    times_np = np.asarray(times, dtype=float)
-    q_np = np.asarray(quaternions, dtype=float)
-    if times_np.ndim != 1 or q_np.shape != times_np.shape + (4,):
-        raise ValueError("times must be (N,) and quaternions (N, 4)")
     n = len(times_np)
-    if n < 4:
-        raise ValueError("need at least 4 samples")
-    dtype = jnp.result_type(jnp.asarray(times), jnp.asarray(quaternions), float)
     if key is not None:
         seed = int(jax.random.randint(key, (), 0, 2**31 - 1))
     rng = np.random.default_rng(seed)
@@ -571,8 +642,8 @@ def fit_attitude(
 
     # Angular velocity guesses from finite differences around t_ref (short and longer spans).
     rates = [_finite_difference_rate(times_sorted, q_sorted, index, span) for span in (1, 3)]
-    if angular_velocity_data is not None:
-        gyro = np.asarray(angular_velocity_data, dtype=float)[order]
+    if gyro_np is not None:
+        gyro = gyro_np[order]
         rates.insert(0, gyro[index])
     rate_norm = max(float(np.linalg.norm(rates[0])), 1e-300)
     time_scale = 1.0 / rate_norm if rate_norm > 1e-300 else 1.0
@@ -602,7 +673,7 @@ def fit_attitude(
         count = n if fraction >= 1 else min(n, max(math.ceil(fraction * n), _MIN_WINDOW))
         masks[k, :n] = distance <= ranked[count - 1]
 
-    if angular_velocity_data is None:
+    if gyro_np is None:
         gyro = np.zeros((n, 3))
         gyro_weight = 0.0
     else:
@@ -638,14 +709,14 @@ def fit_attitude(
     moments = tensor_result["principal_moments"]
     inertia_covariance = tensor_result["moments_covariance"]
     unsort = np.argsort(order)
-    residuals = out["residuals"][unsort]
-    if angular_velocity_data is None:
+    residuals = _with_omitted_rows(out["residuals"][unsort], omitted)
+    if gyro_np is None:
         w_residuals = np.zeros_like(residuals)
     else:
-        w_residuals = out["gyro_residuals"][unsort]
+        w_residuals = _with_omitted_rows(out["gyro_residuals"][unsort], omitted)
     costs, oks, best = out["costs"], out["oks"], int(out["best"])
     as_float = functools.partial(jnp.asarray, dtype=dtype)
-    return AttitudeFit(
+    result = AttitudeFit(
         inertia=as_float(moments),
         inertia_tensor=as_float(tensor_result["inertia_tensor"]),
         principal_axes=as_float(tensor_result["principal_axes"]),
@@ -667,3 +738,10 @@ def fit_attitude(
         reference_time=as_float(t_ref),
         loss_scale=as_float(out["scale"]),
     )
+    if throw and not (bool(oks[best]) and np.isfinite(costs[best])):
+        raise FitError(
+            f"fit_attitude did not converge: the best of {n_starts} starts stopped at cost {costs[best]:.6g} "
+            f"without meeting rtol={rtol}, atol={atol} within max_steps={max_steps} ({int(np.sum(oks))} "
+            "starts converged).  Check the data and their units, raise max_steps or n_starts, or pass "
+            "throw=False for the unconverged result (FitError.result).", result)
+    return result

@@ -14,13 +14,14 @@ observations) are in benchmarks/fit_success.py, which imports ``synthetic_proble
 from __future__ import annotations
 
 import functools
+import re
 
 import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from frbjax import AttitudeFit, FreeRigidBody, fit_attitude
+from frbjax import AttitudeFit, FitError, FreeRigidBody, fit_attitude
 from frbjax import _quaternion as quaternion
 from frbjax.fit import _attitude_residual
 
@@ -189,13 +190,96 @@ def test_asteroid_sparse_noisy(fit):
     assert inertia_error < 0.01 and omega_error < 0.01, (inertia_error, omega_error)
 
 
-def test_rejects_bad_input():
-    with pytest.raises(ValueError):
-        fit_attitude(np.zeros(5), np.zeros((5, 3)))
-    with pytest.raises(ValueError):
-        fit_attitude(np.arange(5.0), np.ones((5, 4)), loss="l1")
-    with pytest.raises(ValueError):
-        fit_attitude(np.arange(3.0), np.ones((3, 4)))
+def _clean_problem():
+    times, q, *_ = problem(0)
+    return times.copy(), q.copy()
+
+
+def _with_row(array, row, value):
+    array = np.array(array, dtype=float)
+    array[row] = value
+    return array
+
+
+# (argument named by the message, a fragment of it, how the clean problem is spoiled): the cases a
+# user meets in telemetry (a dropped sample, a zero-filled record, a frozen clock) and misuse.
+REFUSED = {
+    "one NaN quaternion row": ("quaternions", "samples 7 \\(1 of 64\\)", lambda t, q: (t, _with_row(q, 7, np.nan))),
+    "all-NaN quaternions": ("quaternions", "64 of 64", lambda t, q: (t, np.full_like(q, np.nan))),
+    "an infinite time": ("times", "samples 3 ", lambda t, q: (_with_row(t, 3, np.inf), q)),
+    "all-zero quaternions": ("quaternions", "quaternions\\[0\\] is zero", lambda t, q: (t, np.zeros_like(q))),
+    "one zero quaternion": ("quaternions", "quaternions\\[5\\] is zero", lambda t, q: (t, _with_row(q, 5, 0.0))),
+    "every time equal": ("times", "times\\[0\\] and times\\[1\\]", lambda t, q: (np.zeros_like(t), q)),
+    "a repeated time": ("times", "times\\[2\\] and times\\[9\\]", lambda t, q: (_with_row(t, 9, t[2]), q)),
+    "non-unit quaternions": ("quaternions", "unit quaternions", lambda t, q: (t, 2 * q)),
+    "quaternions (N, 3)": ("quaternions", "shape", lambda t, q: (t, q[:, :3])),
+    "times (N, 1)": ("times", "one-dimensional", lambda t, q: (t[:, None], q)),
+    "mismatched lengths": ("quaternions", "\\(64, 4\\)", lambda t, q: (t, q[:-1])),
+    "three samples": ("times", "at least 4", lambda t, q: (t[:3], q[:3])),
+    "string times": ("times", "real numbers", lambda t, q: (t.astype(str), q)),
+    "complex quaternions": ("quaternions", "real numbers", lambda t, q: (t, q.astype(complex))),
+}
+
+
+@pytest.mark.parametrize("case", REFUSED)
+def test_refuses_data_it_cannot_use(case):
+    """Refused before anything is compiled, naming the argument and the offending rows or entry."""
+    argument, fragment, spoil = REFUSED[case]
+    times, q = spoil(*_clean_problem())
+    with pytest.raises(ValueError, match=argument) as error:
+        fit_attitude(times, q)
+    assert re.search(fragment, str(error.value)), str(error.value)
+
+
+REFUSED_OPTIONS = {
+    "loss": "l1", "inertia": "diagonal", "nan_policy": "drop", "attitude_sigma": -1.0,
+    "angular_velocity_sigma": np.nan, "loss_scale": 0.0, "n_starts": 0, "max_steps": 1.5, "rtol": -1e-10,
+    "seed": -3, "angular_velocity_data": np.zeros((5, 3)),
+}
+
+
+@pytest.mark.parametrize("option", REFUSED_OPTIONS)
+def test_refuses_options_it_cannot_use(option):
+    times, q = _clean_problem()
+    with pytest.raises(ValueError, match=option):
+        fit_attitude(times, q, **{option: REFUSED_OPTIONS[option]})
+
+
+def test_omitted_rows_fit_as_clean_data(fit):
+    """nan_policy="omit": samples with a NaN or infinite time, quaternion or gyro entry are left out,
+    and the fit of the rest is the fit of the clean samples alone (the same numbers) and as accurate
+    (1%, as every fit here).  The residuals keep the input's rows, NaN where a sample was left out."""
+    times, q, inertia, omega, _ = synthetic_problem(11, n=CI_SAMPLES + 6)
+    gyro = np.array(motion(inertia, inertia * omega, np.array([1.0, 0, 0, 0]), times)[1])  # any finite rates
+    bad = np.array([0, 5, 17, 40, 41, CI_SAMPLES + 5])
+    times[bad[:2]] = [np.nan, np.inf]
+    q[bad[2:4], 1] = np.nan
+    gyro[bad[4:], 2] = -np.inf
+    kept = np.setdiff1d(np.arange(CI_SAMPLES + 6), bad)
+    with pytest.raises(ValueError, match="samples 0, 5, 17, 40, 41, 69 \\(6 of 70\\)"):
+        fit_attitude(times, q, angular_velocity_data=gyro, angular_velocity_sigma=1e6)
+    # gyro weighted off (sigma 1e6): the rates above are not the body's, only their rows' NaNs matter.
+    omitted = fit_attitude(times, q, angular_velocity_data=gyro, angular_velocity_sigma=1e6, nan_policy="omit",
+                           n_starts=N_STARTS)  # CI_SAMPLES kept: the module's compiled fit
+    clean = fit(times[kept], q[kept], angular_velocity_data=gyro[kept], angular_velocity_sigma=1e6)
+    np.testing.assert_array_equal(np.asarray(omitted.parameters), np.asarray(clean.parameters))
+    inertia_error, omega_error = errors(omitted, inertia, omega)
+    assert inertia_error < 0.01 and omega_error < 0.01, (inertia_error, omega_error)
+    residuals = np.asarray(omitted.residuals)
+    assert residuals.shape == (CI_SAMPLES + 6, 3)
+    assert np.isnan(residuals[bad]).all() and np.array_equal(residuals[kept], np.asarray(clean.residuals))
+
+
+def test_a_fit_that_does_not_converge_raises():
+    """Two Levenberg-Marquardt steps cannot converge: FitError by default, carrying the unconverged
+    result; ``throw=False`` returns that result, marked ``success`` False, instead."""
+    times, q = _clean_problem()
+    with pytest.raises(FitError, match="did not converge") as error:
+        fit_attitude(times, q, n_starts=N_STARTS, max_steps=2)
+    assert isinstance(error.value.result, AttitudeFit) and not bool(error.value.result.success)
+    result = fit_attitude(times, q, n_starts=N_STARTS, max_steps=2, throw=False)
+    assert not bool(result.success)
+    np.testing.assert_array_equal(np.asarray(result.parameters), np.asarray(error.value.result.parameters))
 
 
 def test_attitude_residual_ignores_quaternion_sign():

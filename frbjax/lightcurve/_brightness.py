@@ -33,6 +33,7 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, Float
 
+from .. import _checks as checks
 from .._body import FreeRigidBody
 from ._shape import ConvexShape
 
@@ -52,9 +53,13 @@ def _scattering(mu, mu0, law, c):
 
 def facet_brightness(normals, sun_body, observer_body, law="lommel_seeliger_lambert", c=0.1):
     """S(mu, mu0) 1(mu > 0 and mu0 > 0) per facet: (..., T, F) for normals (..., F, 3) and body-frame
-    directions (..., T, 3).  The brightness is this contracted with the areas; it is linear in them."""
-    if law not in LAWS:
-        raise ValueError(f"law must be one of {LAWS}, got {law!r}")
+    directions (..., T, 3).  The brightness is this contracted with the areas; it is linear in them.
+    Refused (ValueError): an unknown ``law``, a non-finite or negative ``c``, trailing axes other than 3."""
+    checks.choice("law", law, LAWS)
+    if checks.is_concrete(c):
+        checks.scalar("c", c, positive=True, allow_zero=True)
+    for name, value in (("normals", normals), ("sun_body", sun_body), ("observer_body", observer_body)):
+        checks.check_trailing_shape(name, value, (3,))
     mu = jnp.einsum("...tk,...fk->...tf", observer_body, normals)
     mu0 = jnp.einsum("...tk,...fk->...tf", sun_body, normals)
     lit_and_seen = (mu > 0) & (mu0 > 0)
@@ -63,25 +68,16 @@ def facet_brightness(normals, sun_body, observer_body, law="lommel_seeliger_lamb
     return jnp.where(lit_and_seen, _scattering(safe_mu, safe_mu0, law, c), 0)
 
 
-def _concrete(*values):
-    return not any(isinstance(v, jax.core.Tracer) for v in jax.tree.leaves(values))
-
-
 def check_directions(name, directions, n_times):
     """Raise ValueError unless ``directions`` is (T, 3) (or (3,)), finite, unit (concrete inputs)."""
-    if directions.shape[-1:] != (3,) or (directions.ndim >= 2 and n_times is not None
-                                          and directions.shape[-2] != n_times):
-        raise ValueError(f"{name} must have shape (T, 3) with T = len(times) = {n_times}, "
+    if directions.shape[-1:] != (3,) or directions.ndim > 2 or (directions.ndim == 2 and n_times is not None
+                                                               and directions.shape[0] != n_times):
+        raise ValueError(f"{name} must have shape (T, 3) with T = len(times) = {n_times}, or (3,), "
                          f"got {directions.shape}")
-    if _concrete(directions):
+    if checks.is_concrete(directions):
         values = np.asarray(directions)
-        if not np.all(np.isfinite(values)):
-            raise ValueError(f"{name} has non-finite entries")
-        norms = np.linalg.norm(values, axis=-1)
-        tolerance = 1e-3 if values.dtype == np.float32 else 1e-6
-        if np.any(np.abs(norms - 1) > tolerance):
-            worst = float(np.max(np.abs(norms - 1)))
-            raise ValueError(f"{name} must be unit vectors (|{name}| - 1 is up to {worst:.2e})")
+        checks.check_finite(name, values)
+        checks.check_unit_rows(name, values, what="unit vectors")
 
 
 def brightness(
@@ -103,8 +99,15 @@ def brightness(
 
     Differentiable in everything (the body's parameters, the shape, the times, the directions);
     jit/vmap compatible; the dtype is that of the inputs.  With concrete (non-traced) inputs the
-    directions are checked: finite, unit, one per time.
+    directions are checked: finite, unit, one per time; and the times finite.  ``body`` must be a
+    `FreeRigidBody` and ``shape`` a `ConvexShape` (ValueError otherwise).
     """
+    if not isinstance(body, FreeRigidBody):
+        raise ValueError(f"body must be a FreeRigidBody, got {type(body).__name__}")
+    if not isinstance(shape, ConvexShape):
+        raise ValueError(f"shape must be a ConvexShape, got {type(shape).__name__}")
+    if checks.is_concrete(times):
+        checks.check_finite("times", checks.real_array("times", times))
     times = jnp.asarray(times)
     if times.ndim != 1:
         raise ValueError(f"times must be one-dimensional (T,), got shape {times.shape}")

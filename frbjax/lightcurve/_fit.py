@@ -68,11 +68,13 @@ import numpy as np
 import optimistix as optx
 from jaxtyping import Array, Float
 
+from .. import _checks as checks
 from .. import _quaternion as quaternion
 from .._body import FreeRigidBody, quaternion_with_elliptic_derivatives
+from .._errors import FitError
 from .._multistart import solve_each
 from .._trace_once import traced_once
-from ._brightness import LAWS, check_directions, facet_brightness
+from ._brightness import LAWS, facet_brightness
 from ._brightness import brightness as _forward
 from ._periods import momentum_from_periods, tumbler_periods
 from ._shape import ConvexShape, icosphere
@@ -431,6 +433,13 @@ def _laplacian(faces):
 # ------------------------------------------------------------------------------------ the fit
 
 
+def _with_omitted_rows(rows, omitted):
+    """``rows`` of the fitted samples placed at their input indices, NaN at the omitted ones."""
+    full = np.full(omitted.shape + rows.shape[1:], np.nan)
+    full[~omitted] = rows
+    return full
+
+
 def _continuation_windows(distance):
     """Masks (W, N) of the continuation windows: the samples within a radius of the epoch, the first
     radius holding a tenth of them (at least ``_MIN_WINDOW``), each next ``_WINDOW_GROWTH`` times the
@@ -443,33 +452,97 @@ def _continuation_windows(distance):
     return np.stack([distance <= radius for radius in radii] + [np.ones(count, bool)]).astype(float)
 
 
-def _validate(times, flux, sun, observer, lightcurve, magnitudes):
-    times = np.asarray(times, float)
+def _validate(times, flux, sun, observer, lightcurve, magnitudes, nan_policy):
+    """(times, flux, sun, observer, lightcurve, omitted rows) of the samples to fit, numpy; ValueError
+    for data the fit cannot use, naming the argument and the first offending entry."""
+    checks.choice("nan_policy", nan_policy, ("raise", "omit"))
+    times = checks.real_array("times", times)
     if times.ndim != 1:
-        raise ValueError(f"times must be one-dimensional, got shape {times.shape}")
-    if not np.all(np.isfinite(times)):
-        raise ValueError("times has non-finite entries")
+        raise ValueError(f"times must be one-dimensional (N,), got shape {times.shape}")
     n = len(times)
-    flux = np.asarray(flux, float)
+    flux = checks.real_array("brightness", flux)
     if flux.shape != (n,):
         raise ValueError(f"brightness must have shape (N,) = ({n},) like times, got {flux.shape}")
-    if not np.all(np.isfinite(flux)):
-        raise ValueError("brightness has non-finite entries")
-    if not magnitudes and np.any(flux <= 0):
-        raise ValueError("brightness must be > 0 (its logarithm is fitted)")
+    directions = {}
     for name, value in (("sun", sun), ("observer", observer)):
-        check_directions(name, jnp.asarray(value), n)
-    sun = np.broadcast_to(np.asarray(sun, float), (n, 3))
-    observer = np.broadcast_to(np.asarray(observer, float), (n, 3))
-    if np.any(np.sum(sun * observer, -1) <= -1 + 1e-9):
-        raise ValueError("sun and observer are opposite at some epochs (phase angle 180 degrees): no "
-                         "facet is both lit and seen")
+        value = checks.real_array(name, value)
+        if value.shape not in ((3,), (n, 3)):
+            raise ValueError(f"{name} must have shape (N, 3) = ({n}, 3) like times, or (3,), got {value.shape}")
+        directions[name] = np.broadcast_to(value, (n, 3))
     if lightcurve is None:
         lightcurve = np.zeros(n, int)
     lightcurve = np.asarray(lightcurve)
     if lightcurve.shape != (n,):
         raise ValueError(f"lightcurve must have shape (N,) = ({n},) like times, got {lightcurve.shape}")
-    return times, flux, sun, observer, lightcurve
+    omitted = checks.nonfinite_rows(times, flux, directions["sun"], directions["observer"])
+    if np.any(omitted) and nan_policy == "raise":
+        raise ValueError(f"samples {checks.describe_rows(omitted)} have non-finite times, brightness, sun or "
+                         "observer; pass nan_policy='omit' to leave them out")
+    kept = np.flatnonzero(~omitted)
+    if len(kept) == 0:
+        raise ValueError("times: no sample to fit" + (f" after leaving out {n}" if n else ""))
+    for name, value in directions.items():
+        # The kept rows under their input indices (rows left out read as valid).
+        checks.check_unit_rows(name, np.where(omitted[:, None], np.array([1.0, 0.0, 0.0]), value).astype(value.dtype),
+                               what="unit vectors")
+    if not magnitudes:
+        checks.check_positive("brightness", np.where(omitted, 1.0, flux))
+    sun, observer = (directions[name][kept].astype(float) for name in ("sun", "observer"))
+    opposite = np.sum(sun * observer, -1) <= -1 + 1e-9
+    if np.any(opposite):
+        raise ValueError(f"sun and observer are opposite at sample {kept[np.argmax(opposite)]} (phase angle "
+                         "180 degrees): no facet is both lit and seen")
+    return times[kept].astype(float), flux[kept].astype(float), sun, observer, lightcurve[kept], omitted
+
+
+def _check_options(*, periods, principal_axis, period_grid, inertia_range, shape, convex_subdivisions, law, c,
+                   sigma, regularisation, epoch, starts_per_period, n_refine, seed, rtol, atol, max_steps,
+                   search_chunk, mode, initial):
+    """The search's options, as (periods, period_grid) arrays; ValueError naming a bad option."""
+    checks.choice("shape", shape, ("convex", "ellipsoid"))
+    checks.choice("law", law, LAWS)
+    checks.choice("mode", mode, ("SAM", "LAM", "both"))
+    if periods is None:
+        raise ValueError("periods: give the search ranges ((P_psi_min, P_psi_max), (P_phi_min, P_phi_max)), "
+                         "or (P_min, P_max) with principal_axis=True")
+    period_array = checks.real_array("periods", periods)
+    if principal_axis:
+        ranges = [checks.interval("periods", period_array)]
+    else:
+        if period_array.shape != (2, 2):
+            raise ValueError("periods must be the ranges ((P_psi_min, P_psi_max), (P_phi_min, P_phi_max)) "
+                             f"(shape (2, 2); (P_min, P_max) with principal_axis=True), got shape {period_array.shape}")
+        ranges = [checks.interval(f"periods[{k}]", period_array[k]) for k in range(2)]
+    grid = np.atleast_1d(np.asarray(period_grid, dtype=object))
+    expected = 1 if principal_axis else 2
+    if grid.shape not in ((expected,),) + (((2,),) if principal_axis else ()):
+        raise ValueError(f"period_grid must be {expected} number{'s' if expected > 1 else ''} of grid points, "
+                         f"got {period_grid!r}")
+    grid = [checks.integer(f"period_grid[{k}]", value, minimum=1) for k, value in enumerate(grid)]
+    if not principal_axis:
+        checks.interval("inertia_range", inertia_range, upper=1.0)
+    checks.integer("convex_subdivisions", convex_subdivisions, minimum=0)
+    checks.scalar("c", c, positive=True, allow_zero=True)
+    checks.scalar("sigma", sigma, positive=True)
+    weights = checks.real_array("regularisation", regularisation)
+    if weights.shape != (2,):
+        raise ValueError(f"regularisation must be (closure weight, smoothness weight), got shape {weights.shape}")
+    checks.check_positive("regularisation", weights, allow_zero=True)
+    if epoch is not None:
+        checks.scalar("epoch", epoch)
+    checks.integer("starts_per_period", starts_per_period, minimum=1)
+    checks.integer("n_refine", n_refine, minimum=1)
+    checks.integer("seed", seed, minimum=0)
+    checks.scalar("rtol", rtol, positive=True)
+    checks.scalar("atol", atol, positive=True)
+    checks.integer("max_steps", max_steps, minimum=1)
+    checks.integer("search_chunk", search_chunk, minimum=1)
+    if initial is not None:
+        if not isinstance(initial, FreeRigidBody):
+            raise ValueError(f"initial must be a FreeRigidBody (e.g. an earlier fit's body), got {type(initial).__name__}")
+        if initial.inertia.shape != (3,):
+            raise ValueError(f"initial must be one body, got a batch of shape {initial.inertia.shape[:-1]}")
+    return ranges, grid
 
 
 def fit_lightcurve(
@@ -500,6 +573,8 @@ def fit_lightcurve(
     max_steps: int = 100,
     search_chunk: int = 256,
     initial: FreeRigidBody | None = None,
+    nan_policy: str = "raise",
+    throw: bool = True,
 ) -> LightcurveFit:
     """Fit a tumbling (or principal-axis) body and its convex shape to light curves.
 
@@ -523,19 +598,29 @@ def fit_lightcurve(
     ``law``, ``c``: the scattering law (:func:`brightness`); ``sigma``: the relative
     noise (weights the data against the regularisation).
 
+    ``nan_policy``: samples with a non-finite time, brightness, sun or observer direction are
+    refused, naming their indices (``"raise"``, default), or left out (``"omit"``: their
+    ``residuals`` are NaN).  ``throw``: a fit whose winner did not converge raises
+    :class:`frbjax.FitError` (default), whose ``result`` is the unconverged fit; ``throw=False``
+    returns it (``success`` False).
+
+    Refused with a ValueError naming the argument and the first offending entry: brightness <= 0
+    (without ``magnitudes``), directions that are not unit vectors or are opposite (phase angle 180
+    degrees), period ranges that are not finite, positive and increasing (a range given upside down),
+    an ``inertia_range`` outside (0, 1], counts below 1, negative weights, non-finite scalars,
+    unknown option names, an ``initial`` that is not one body.
+
     Runs in float64 when JAX has it enabled (recommended).  Module docstring: the parameters, the
     residuals and the search.
     """
-    if shape not in ("convex", "ellipsoid"):
-        raise ValueError(f"shape must be 'convex' or 'ellipsoid', got {shape!r}")
-    if law not in LAWS:
-        raise ValueError(f"law must be one of {LAWS}, got {law!r}")
-    if mode not in ("SAM", "LAM", "both"):
-        raise ValueError(f"mode must be 'SAM', 'LAM' or 'both', got {mode!r}")
-    if periods is None:
-        raise ValueError("periods: give the search ranges ((P_psi_min, P_psi_max), (P_phi_min, P_phi_max)), "
-                         "or (P_min, P_max) with principal_axis=True")
-    times, flux, sun, observer, lightcurve = _validate(times, brightness, sun, observer, lightcurve, magnitudes)
+    _check_options(
+        periods=periods, principal_axis=principal_axis, period_grid=period_grid, inertia_range=inertia_range,
+        shape=shape, convex_subdivisions=convex_subdivisions, law=law, c=c, sigma=sigma,
+        regularisation=regularisation, epoch=epoch, starts_per_period=starts_per_period, n_refine=n_refine,
+        seed=seed, rtol=rtol, atol=atol, max_steps=max_steps, search_chunk=search_chunk, mode=mode,
+        initial=initial)
+    times, flux, sun, observer, lightcurve, omitted = _validate(
+        times, brightness, sun, observer, lightcurve, magnitudes, nan_policy)
     log_brightness = -0.4 * np.log(10.0) * flux if magnitudes else np.log(flux)
     n = len(times)
     dtype = jnp.result_type(float)
@@ -715,14 +800,21 @@ def fit_lightcurve(
     offsets = (curves.T @ difference) / curves.sum(0)
     residuals = difference - curves @ offsets
 
-    return LightcurveFit(
+    result = LightcurveFit(
         body=body, shape=fitted_shape, epoch=epoch, law=law, c=float(c),
         periods=jnp.asarray(period_values), period_sigma=jnp.asarray(period_sigma),
         long_axis_mode=bool(lam) and not principal_axis, energy_ratio=energy_ratio,
         inertia=jnp.asarray(moments, dtype), inertia_sigma=jnp.asarray(inertia_sigma, dtype),
         momentum_direction=jnp.asarray(momentum_direction, dtype), parameters=jnp.asarray(p, dtype),
         covariance=jnp.asarray(covariance, dtype), scales=jnp.asarray(np.exp(offsets), dtype),
-        residuals=jnp.asarray(residuals, dtype), cost=float(refine_costs[winner]),
+        residuals=jnp.asarray(_with_omitted_rows(residuals, omitted), dtype), cost=float(refine_costs[winner]),
         success=bool(oks[winner]), search_periods=jnp.asarray(np.stack([period_psi, period_phi], -1), dtype),
         search_costs=jnp.asarray(costs, dtype), refine_costs=jnp.asarray(refine_costs, dtype))
+    if throw and not (bool(oks[winner]) and np.isfinite(refine_costs[winner])):
+        raise FitError(
+            f"fit_lightcurve did not converge: the best of {len(best)} refined starts stopped at cost "
+            f"{refine_costs[winner]:.6g} without meeting rtol={rtol}, atol={atol} within max_steps={max_steps} "
+            f"({int(np.sum(oks))} converged).  Check the data, widen or refine the period search, raise "
+            "max_steps, or pass throw=False for the unconverged result (FitError.result).", result)
+    return result
 

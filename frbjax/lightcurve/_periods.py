@@ -32,6 +32,7 @@ import jax.numpy as jnp
 from jaxtyping import Array, Float
 
 from .. import special
+from .._body import _validate
 
 __all__ = ["tumbler_periods"]
 
@@ -63,8 +64,12 @@ def tumbler_periods(inertia: Float[Array, "... 3"], angular_momentum: Float[Arra
 
     P_psi: the mean precession period of the body about L; P_phi: the period of the body-frame
     motion (rotation about the circulated axis); ``long_axis_mode``: True for LAM.  In the units of
-    time of the motion; batched, differentiable.  On the separatrix P_phi is infinite.
+    time of the motion; batched, differentiable.  On the separatrix P_phi is infinite.  Refused
+    (ValueError, as by `FreeRigidBody`): trailing axes other than 3, leading axes that do not
+    broadcast, and for concrete inputs moments that are not finite and > 0 or a non-finite
+    angular momentum (under ``jit`` only the shapes are checked).
     """
+    _validate(inertia, angular_momentum, None)
     inertia = jnp.asarray(inertia)
     momentum = jnp.asarray(angular_momentum)
     order = jnp.argsort(inertia, axis=-1)

@@ -26,6 +26,8 @@ import numpy as np
 import optimistix as optx
 from jaxtyping import Array, Float, Int
 
+from .. import _checks as checks
+
 __all__ = ["ConvexShape", "mesh_inertia", "icosphere"]
 
 
@@ -33,8 +35,10 @@ def icosphere(subdivisions: int = 2) -> tuple[np.ndarray, np.ndarray]:
     """A triangulated unit sphere: (vertices (V, 3), faces (F, 3) counter-clockwise seen from outside).
 
     The icosahedron with each triangle split into four ``subdivisions`` times and the new vertices
-    pushed onto the sphere: F = 20 * 4**subdivisions facets of nearly equal size.
+    pushed onto the sphere: F = 20 * 4**subdivisions facets of nearly equal size.  ``subdivisions``:
+    an integer >= 0.
     """
+    checks.integer("subdivisions", subdivisions, minimum=0)
     golden = (1 + 5**0.5) / 2
     vertices = [(-1, golden, 0), (1, golden, 0), (-1, -golden, 0), (1, -golden, 0),
                 (0, -1, golden), (0, 1, golden), (0, -1, -golden), (0, 1, -golden),
@@ -62,6 +66,28 @@ def icosphere(subdivisions: int = 2) -> tuple[np.ndarray, np.ndarray]:
     return np.asarray(vertices), np.asarray(faces, dtype=np.int32)
 
 
+def _checked_mesh(vertices, faces):
+    """(vertices as a JAX array, faces as numpy) of a triangulated surface; ValueError for a mesh that
+    is not one (vertices (..., V, 3), finite when concrete; faces (F, 3) integers in [0, V), F >= 4)."""
+    if checks.is_concrete(vertices):
+        checks.check_finite("vertices", checks.real_array("vertices", vertices))
+    vertices = jnp.asarray(vertices)
+    checks.check_trailing_shape("vertices", vertices, (3,))
+    if vertices.ndim < 2:
+        raise ValueError(f"vertices must have shape (..., V, 3), got shape {vertices.shape}")
+    faces = np.asarray(faces)
+    if faces.dtype.kind not in "iu" or faces.ndim != 2 or faces.shape[1] != 3:
+        raise ValueError(f"faces must be integer vertex indices of shape (F, 3), got {faces.dtype} of shape {faces.shape}")
+    if len(faces) < 4:
+        raise ValueError(f"faces: a closed surface has at least 4 triangles, got {len(faces)}")
+    outside = (faces < 0) | (faces >= vertices.shape[-2])
+    if np.any(outside):
+        row, column = np.argwhere(outside)[0]
+        raise ValueError(f"faces must index the {vertices.shape[-2]} vertices: faces[{row}, {column}] is "
+                         f"{faces[row, column]}")
+    return vertices, faces
+
+
 def _facets(vertices, faces):
     """(normals, areas) of the triangles of a closed convex mesh, normals turned outward."""
     corners = vertices[..., faces, :]  # (..., F, 3, 3)
@@ -84,8 +110,7 @@ def mesh_inertia(vertices: Float[Array, "... V 3"], faces: Int[Array, "F 3"]) ->
     (sum_i v_i)(sum_i v_i)^T) (vertices relative to c, c itself among them at 0); I = tr(C) 1 - C.
     Faces may be in either orientation (convex meshes: each is turned outward).
     """
-    vertices = jnp.asarray(vertices)
-    faces = np.asarray(faces)
+    vertices, faces = _checked_mesh(vertices, faces)
     centre = jnp.mean(vertices, -2, keepdims=True)
     corners = (vertices - centre)[..., faces, :]  # (..., F, 3, 3)
     volumes = jnp.linalg.det(corners) / 6
@@ -117,19 +142,35 @@ class ConvexShape(eqx.Module):
     normals: Float[Array, "... F 3"]
     areas: Float[Array, "... F"]
 
+    def __check_init__(self):
+        checks.check_trailing_shape("normals", self.normals, (3,))
+        if tuple(np.shape(self.areas)) != tuple(np.shape(self.normals))[:-1]:
+            raise ValueError(f"areas must have the shape of normals without its last axis, "
+                             f"{tuple(np.shape(self.normals))[:-1]}, got {tuple(np.shape(self.areas))}")
+        if checks.is_concrete(self.normals, self.areas):
+            checks.check_finite("normals", self.normals)
+            checks.check_unit_rows("normals", self.normals, what="unit vectors")
+            checks.check_positive("areas", self.areas, allow_zero=True)
+
     @classmethod
     def from_mesh(cls, vertices: Float[Array, "... V 3"], faces: Int[Array, "F 3"]) -> "ConvexShape":
         """The Gaussian image of a closed convex triangulated surface (``faces`` index ``vertices``;
         either orientation): n = e1 x e2 / |e1 x e2|, A = |e1 x e2| / 2 per triangle.  Differentiable
-        in the vertices."""
-        normals, areas = _facets(jnp.asarray(vertices), np.asarray(faces))
+        in the vertices.  Refused (ValueError): vertices not (..., V, 3) or not finite, faces not
+        integer indices (F, 3) into the vertices, fewer than 4 faces."""
+        vertices, faces = _checked_mesh(vertices, faces)
+        normals, areas = _facets(vertices, faces)
         return cls(normals, areas)
 
     @classmethod
     def ellipsoid(cls, a, b, c, subdivisions: int = 3) -> "ConvexShape":
         """The triaxial ellipsoid x^2/a^2 + y^2/b^2 + z^2/c^2 = 1 (semi-axes along principal axes 1, 2,
         3), triangulated: the icosphere of ``subdivisions`` (20 * 4**subdivisions facets) stretched by
-        (a, b, c).  Differentiable in a, b, c; a batch of ellipsoids from arrays a, b, c."""
+        (a, b, c).  Differentiable in a, b, c; a batch of ellipsoids from arrays a, b, c.  Semi-axes
+        that are not finite and > 0 are refused (ValueError) when concrete."""
+        for name, value in (("a", a), ("b", b), ("c", c)):
+            if checks.is_concrete(value):
+                checks.check_positive(name, checks.real_array(name, value))
         unit_vertices, faces = icosphere(subdivisions)
         axes = jnp.stack(jnp.broadcast_arrays(jnp.asarray(a), jnp.asarray(b), jnp.asarray(c)), -1)
         vertices = unit_vertices * axes[..., None, :].astype(jnp.result_type(axes, float))
@@ -157,6 +198,9 @@ class ConvexShape(eqx.Module):
         positive).  Facets whose area is negligible may be absent.  One
         shape at a time (no batch dimension).
         """
+        checks.scalar("rtol", rtol, positive=True)
+        checks.scalar("atol", atol, positive=True)
+        checks.integer("max_steps", max_steps, minimum=1)
         normals = np.asarray(self.normals, dtype=float)
         areas = np.asarray(self.areas, dtype=float)
         if normals.ndim != 2:
@@ -175,6 +219,7 @@ class ConvexShape(eqx.Module):
         """(volume, inertia tensor (3, 3) about the centroid) of the polyhedron of :meth:`polyhedron`
         at uniform ``density``, in the frame of the normals: compare its diagonal (or eigenvalues)
         with fitted moments (ratios)."""
+        checks.scalar("density", density, positive=True)
         vertices, faces = self.polyhedron()
         volume, _, inertia = mesh_inertia(vertices, faces)
         return np.asarray(volume), density * np.asarray(inertia)
