@@ -180,6 +180,23 @@ def integrate_matrix(inertia, momentum, matrix, times, rtol=RTOL, atol=ATOL, max
     return np.asarray(L), np.asarray(R), np.asarray(steps)
 
 
+def diffrax_references(inertia, momentum, attitude, times, rtol=RTOL, atol=ATOL, max_steps=MAX_STEPS):
+    """Both diffrax references for a batch of bodies, as tests/data/make_diffrax_references.py stores them.
+
+    Returns a dict of arrays: ``L_quaternion`` (N, K, 3) and ``q`` (N, K, 4) from the (L, q) equations,
+    ``L_matrix`` (N, K, 3) and ``R`` (N, K, 3, 3) from the (L, R) equations started at the matrix of
+    the attitude, and the accepted steps of each (``steps_quaternion``, ``steps_matrix``, (N,)).
+    """
+    L_quaternion, q, steps_quaternion = integrate_quaternion(
+        inertia, momentum, attitude, times, rtol=rtol, atol=atol, max_steps=max_steps
+    )
+    L_matrix, R, steps_matrix = integrate_matrix(
+        inertia, momentum, matrix_of(attitude), times, rtol=rtol, atol=atol, max_steps=max_steps
+    )
+    return dict(L_quaternion=L_quaternion, q=q, L_matrix=L_matrix, R=R, steps_quaternion=steps_quaternion,
+                steps_matrix=steps_matrix)
+
+
 # --------------------------------------------------------------------------------------------------
 # mpmath references (arbitrary precision).
 
@@ -275,9 +292,19 @@ def separatrix_distance(inertia, momentum, dps=50):
 
 
 CHUNK = 8192
+# The series path's blocks: SERIES_BODIES bodies at SERIES_TIMES times each, padded to that size, so that
+# a test session compiles each of FreeRigidBody's programs for one shape only (the compile costs
+# seconds per program, evaluating a block milliseconds).
+SERIES_BODIES, SERIES_TIMES = 64, 32
 
 
 PATHS = ("one_time", "series")
+
+
+def _pad_rows(a, size):
+    """``a`` padded along its first axis to a multiple of ``size`` by repeating its first row."""
+    padded = -(-len(a) // size) * size
+    return np.concatenate([a, np.repeat(a[:1], padded - len(a), axis=0)])
 
 
 def evaluate(inertia, momentum, attitude, times, quantities=("angular_momentum", "quaternion"), path="one_time"):
@@ -287,7 +314,9 @@ def evaluate(inertia, momentum, attitude, times, quantities=("angular_momentum",
     (the one-shot path, ``frbjax.free_flow``) inside ``jax.vmap``, op by op (no jit: a jit of the attitude
     takes over a minute to compile on CPU), in chunks of CHUNK pairs padded to that size, so that a
     test session compiles each op for one shape only.  ``path="series"``: every body is evaluated at
-    its K times at once (the per-body theta series), under ``jax.vmap`` over the bodies.
+    its times at once (the per-body theta series), under ``jax.vmap`` over the bodies, in blocks of
+    SERIES_BODIES bodies by SERIES_TIMES times (padded; a body's values at a time do not depend on its
+    other times).
     """
     from frbjax import FreeRigidBody, free_flow, quaternion_to_matrix
 
@@ -298,13 +327,23 @@ def evaluate(inertia, momentum, attitude, times, quantities=("angular_momentum",
             body = FreeRigidBody(inertia, momentum, attitude)
             return tuple(getattr(body, name)(times) for name in quantities)
 
-        values = jax.vmap(body_at_times)(*(jnp.asarray(a) for a in (inertia, momentum, attitude, times)))
-        return tuple(np.asarray(v) for v in values)
+        batched = jax.vmap(body_at_times)
+        bodies = [_pad_rows(a, SERIES_BODIES) for a in (inertia, momentum, attitude)]
+        padded_times = _pad_rows(_pad_rows(times, SERIES_BODIES).T, SERIES_TIMES).T
+        rows = []
+        for start in range(0, len(padded_times), SERIES_BODIES):
+            block = slice(start, start + SERIES_BODIES)
+            columns = [
+                batched(*(jnp.asarray(a[block]) for a in bodies),
+                        jnp.asarray(padded_times[block, column : column + SERIES_TIMES]))
+                for column in range(0, padded_times.shape[1], SERIES_TIMES)
+            ]
+            rows.append([np.concatenate([np.asarray(c[i]) for c in columns], axis=1) for i in range(len(quantities))])
+        return tuple(np.concatenate([r[i] for r in rows])[:n, :k] for i in range(len(quantities)))
     assert path == "one_time", path
     pairs = [np.repeat(a, k, axis=0) for a in (inertia, momentum, attitude)] + [times.reshape(-1)]
     total = n * k
-    padded = -(-total // CHUNK) * CHUNK
-    pairs = [np.concatenate([a, np.repeat(a[:1], padded - total, axis=0)]) for a in pairs]
+    pairs = [_pad_rows(a, CHUNK) for a in pairs]
 
     def one(inertia, momentum, attitude, time):
         momentum_at, attitude_at = free_flow(inertia, momentum, attitude, time)
@@ -314,7 +353,7 @@ def evaluate(inertia, momentum, attitude, times, quantities=("angular_momentum",
 
     batched = jax.vmap(one)
     chunks = [
-        batched(*(jnp.asarray(a[start : start + CHUNK]) for a in pairs)) for start in range(0, padded, CHUNK)
+        batched(*(jnp.asarray(a[start : start + CHUNK]) for a in pairs)) for start in range(0, len(pairs[0]), CHUNK)
     ]
     return tuple(
         np.concatenate([np.asarray(c[i]) for c in chunks])[:total].reshape((n, k) + chunks[0][i].shape[1:])
