@@ -1,25 +1,34 @@
 """The wheel: built from the tracked files alone, installed into a new virtual environment, run elsewhere.
 
 What a user who installs frbjax gets: ``python -m build --wheel`` on a copy of the tracked files (so
-that nothing untracked in this checkout can make it pass), ``pip install`` of that wheel into a fresh
-venv (its dependencies come from the package index, as for a user), and then, from a folder with no
-source tree in it, the installed ``frbjax`` command and package: ``frbjax demo`` runs (without
-matplotlib, which the wheel does not require: it prints its table and says that the plot is left
-out), the version is the one of ``frbjax/__init__.py`` and ``py.typed`` ships.
+that nothing untracked in this checkout can make it pass), ``pip install --no-deps --no-index`` of
+that wheel into a fresh venv, its dependencies being those that pip would install for a user: the
+closure of the wheel's own ``Requires-Dist`` (extras left out), taken from this environment (linked
+into a folder that the venv reads through a ``.pth`` file) instead of downloaded again, so that a
+module the wheel uses without declaring it (matplotlib, the test extras) is missing there as it would
+be for a user.  Then, from a folder with no source tree in it, the installed ``frbjax`` command and
+package: ``frbjax demo`` runs (without matplotlib, which the wheel does not require: it prints its
+table and says that the plot is left out), the version is the one of ``frbjax/__init__.py`` and
+``py.typed`` ships.
 
-Slow (a build and an install, ~1-2 minutes with pip's cache warm); CI runs it.
+Slow (a build, with setuptools >= 77 fetched into build's isolated environment, and a demo run).
 """
 
 from __future__ import annotations
 
+import email.parser
+import importlib.metadata
 import os
 import pathlib
 import re
 import shutil
 import subprocess
 import sys
+import zipfile
 
 import pytest
+from packaging.requirements import Requirement
+from packaging.utils import canonicalize_name
 
 REPOSITORY = pathlib.Path(__file__).resolve().parents[1]
 UNTRACKED_DIRECTORIES = {".git", ".venv", "__pycache__", ".pytest_cache", ".hypothesis", "build",
@@ -43,6 +52,36 @@ def clean_environment(**extra):
            if key not in ("PYTHONPATH", "VIRTUAL_ENV", "PYTHONHOME") and not key.startswith("JAX_")}
     env.update(extra)
     return env
+
+
+def dependency_closure(wheel):
+    """This environment's distributions that ``pip install wheel`` would install beside it: the
+    closure of the wheel's Requires-Dist under this Python, without extras."""
+    with zipfile.ZipFile(wheel) as archive:
+        metadata = next(name for name in archive.namelist() if name.endswith(".dist-info/METADATA"))
+        requirements = email.parser.Parser().parsestr(archive.read(metadata).decode()).get_all("Requires-Dist") or []
+    found, pending = {}, list(requirements)
+    while pending:
+        requirement = Requirement(pending.pop())
+        if requirement.marker is not None and not requirement.marker.evaluate({"extra": ""}):
+            continue
+        name = canonicalize_name(requirement.name)
+        if name not in found:
+            found[name] = importlib.metadata.distribution(requirement.name)
+            pending += found[name].requires or []
+    return found
+
+
+def link_distributions(distributions, folder):
+    """``folder`` holding links to the top-level files and folders (packages, modules, .dist-info)
+    of ``distributions``, as their installation put them in site-packages."""
+    folder.mkdir()
+    for distribution in distributions.values():
+        site = pathlib.Path(distribution.locate_file(""))
+        for top in {pathlib.PurePath(path).parts[0] for path in distribution.files or []}:
+            if top != ".." and (site / top).exists() and not (folder / top).exists():
+                (folder / top).symlink_to(site / top)
+    return folder
 
 
 def run(command, cwd, timeout, env=None):
@@ -69,9 +108,16 @@ def test_wheel_installs_and_runs_from_another_folder(tmp_path):
     assert wheels[0].name.startswith(f"frbjax-{version}-")
 
     venv = tmp_path / "venv"
-    run([sys.executable, "-m", "venv", str(venv)], tmp_path, 300)
+    run([sys.executable, "-m", "venv", "--without-pip", str(venv)], tmp_path, 300)
     python = venv / "bin" / "python"
-    run([str(python), "-m", "pip", "install", "--quiet", str(wheels[0])], tmp_path, 900)
+    run([sys.executable, "-m", "pip", "--python", str(python), "install", "--quiet", "--no-deps", "--no-index",
+         str(wheels[0])], tmp_path, 300)
+    dependencies = dependency_closure(wheels[0])
+    assert {"jax", "jaxlib", "numpy", "diffrax"} <= set(dependencies) and "matplotlib" not in dependencies
+    site_packages = pathlib.Path(run([str(python), "-c", "import sysconfig; print(sysconfig.get_path('purelib'))"],
+                                     tmp_path, 60).stdout.strip())
+    linked = link_distributions(dependencies, tmp_path / "dependencies")
+    (site_packages / "frbjax_test_dependencies.pth").write_text(f"{linked}\n")
 
     elsewhere = tmp_path / "elsewhere"
     elsewhere.mkdir()
