@@ -501,6 +501,7 @@ class FreeRigidBody(eqx.Module):
     def _through_tensor(self, method, t):
         """method(self, t); for a body built from an inertia tensor, its derivatives with respect to
         the tensor taken through the principal frame (``_inertia.through_principal_frame``)."""
+        self, t = _common_rank(self, t)
         if self.inertia_tensor is None:
             return method(self, t)
         t = jnp.asarray(t, self.inertia.dtype)
@@ -577,6 +578,18 @@ class FreeRigidBody(eqx.Module):
 _FIELDS = tuple(field.name for field in dataclasses.fields(FreeRigidBody))
 
 
+def _common_rank(body, t):
+    """The body and the times with leading unit axes added to whichever has the fewer batch axes: the
+    motion then broadcasts the body's batch against ``t`` explicitly, without rank promotion (every
+    array of a body has its batch axes first)."""
+    extra = jnp.ndim(t) - body.momentum_norm.ndim
+    if extra > 0:
+        body = jax.tree.map(lambda leaf: jnp.reshape(leaf, (1,) * extra + jnp.shape(leaf)), body)
+    elif extra < 0:
+        t = jnp.reshape(t, (1,) * -extra + jnp.shape(t))
+    return body, t
+
+
 def _body_of(fields):
     """A FreeRigidBody with the given fields (those of ``_construct``; no inertia tensor unless given),
     without the constructor's checks: for bodies built inside derivative rules and the fit."""
@@ -598,12 +611,14 @@ def state_with_elliptic_derivatives(body, t):
     conditional that the model's forward-mode Jacobian compiles in full whether or not a body takes
     it: without it ``fit_attitude``'s first call takes about a sixth less time.
     """
-    return body._elliptic_state(jnp.asarray(t, body.inertia.dtype))
+    body, t = _common_rank(body, jnp.asarray(t, body.inertia.dtype))
+    return body._elliptic_state(t)
 
 
 def quaternion_with_elliptic_derivatives(body, t):
     """``body.quaternion(t)`` with the derivatives of ``state_with_elliptic_derivatives``."""
-    return body._elliptic_quaternion(jnp.asarray(t, body.inertia.dtype))
+    body, t = _common_rank(body, jnp.asarray(t, body.inertia.dtype))
+    return body._elliptic_quaternion(t)
 
 
 def with_principal_axes(inertia, angular_momentum, attitude, axes):

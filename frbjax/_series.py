@@ -271,7 +271,7 @@ def coefficients(m, mc, characteristic, integrals=None, complete=None) -> Series
     q_c, q_c_over_mc = nome(jnp.where(candidate, mc, 0.5), jnp.where(candidate, m, 0.5))
     # beta' = pi a'/(2K') and pi/2 - beta' = pi b/(2K'): each sine from the smaller angle, so that
     # sin beta' keeps its digits as chi -> 0 and cos beta' as chi -> -infinity (one call for both).
-    sin_shift, cos_shift = cos_sin(np.pi / 2 * jnp.stack([shift, distance]) / complement_quarter)[1]
+    sin_shift, cos_shift = cos_sin(np.pi / 2 * jnp.stack([shift, distance]) / complement_quarter[None])[1]
     # cos 3x = cos x (4 cos^2 x - 3), sin 3x = sin x (3 - 4 sin^2 x): relative precision kept.
     cos_triple = cos_shift * (4 * cos_shift * cos_shift - 3)
     sin_triple = sin_shift * (3 - 4 * sin_shift * sin_shift)

@@ -180,12 +180,12 @@ def _model(theta, reference, times, time_scale):
         # One evaluation gives both (``state``): the Jacobi functions behind q(t) give L(t) too.  The
         # elliptic formulas' own derivatives: the solver compiles faster (_body docstring there).
         momentum, attitude_t = state_with_elliptic_derivatives(body, times)
-        return attitude_t, momentum / inertia
+        return attitude_t, momentum / inertia[None, :]
     axes = quaternion.as_matrix(quaternion.exp_pure(theta[8:11]))
     momentum0 = axes @ (inertia * (axes.T @ omega))
     body = with_principal_axes(inertia, momentum0, attitude, axes)
     momentum, attitude_t = state_with_elliptic_derivatives(body, times)
-    return attitude_t, (momentum @ axes) / inertia @ axes.T
+    return attitude_t, (momentum @ axes) / inertia[None, :] @ axes.T
 
 
 def _attitude_residual(q_model, q_observed):

@@ -6,9 +6,16 @@
 * No persistent compilation cache: in CI a worker died with a segmentation fault inside
   `executable.serialize()` while writing a program to the cache (jaxlib 0.10.2, CPU), and the run then
   hung until CI's limit.  Each worker compiles what it runs.
+* The time budget (tests/_time_budget.py): a test over 60 s fails unless it is marked ``slow``, and
+  the slow tests together must stay under 180 s.
 """
 
 import jax
+from _time_budget import (  # noqa: F401  (pytest finds the hooks among this module's names)
+    pytest_runtest_logreport,
+    pytest_runtest_makereport,
+    pytest_sessionfinish,
+    pytest_terminal_summary,
+)
 
 jax.config.update("jax_enable_x64", True)
-
