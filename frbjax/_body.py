@@ -15,7 +15,7 @@ from . import _quaternion as quaternion
 from ._checks import check_finite, check_nonzero_rows, check_positive, is_concrete, on_host, real_array
 from ._frame import angular_velocity, dot as _dot, matrix_product, matrix_times as _apply, to_principal
 from ._fusion import materialise, sum_last, when_any
-from ._inertia import InertiaTensor, through_principal_frame
+from ._inertia import InertiaTensor, through_principal_frame, validate_tensor
 from ._precession import precessing, with_precession_derivatives
 from ._regimes import UNIFORM, classify, constants, evaluate, evaluate_once, orbit_constants
 from ._regimes import reference as regime_reference
@@ -466,14 +466,16 @@ class FreeRigidBody(eqx.Module):
         Derivatives with respect to every tensor entry are finite and correct, repeated moments
         included (`InertiaTensor`; docs/theory.md §12).
         """
+        if is_concrete(inertia_tensor):
+            real_array("inertia_tensor", inertia_tensor)
+        validate_tensor(jnp.asarray(inertia_tensor), "inertia_tensor")
         return cls(InertiaTensor(inertia_tensor), angular_momentum, attitude)
 
     # ------------------------------------------------------------------------------------ helpers
 
     def _time(self, t):
-        # t broadcasts against the batch (explicitly: the library does not rely on rank promotion).
-        norm, t = jnp.broadcast_arrays(self.momentum_norm, jnp.asarray(t, self.inertia.dtype))
-        return t, norm * t  # unit-|L| time, shape broadcast(batch, t.shape)
+        t = jnp.asarray(t, self.inertia.dtype)
+        return t, self.momentum_norm * t  # unit-|L| time, shape broadcast(batch, t.shape)
 
     def _uniform(self):
         return self.regime == UNIFORM

@@ -31,6 +31,7 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, Float
 
+from ._checks import check_finite, is_concrete, real_array
 from ._fusion import when_any
 
 # Pairs of principal axes (ascending moments) whose moments may meet.
@@ -158,7 +159,7 @@ def _through_principal_frame_jvp(motion, evaluate, primals, tangents):
     return value, tangent
 
 
-def _validate_tensor(matrix, name):
+def validate_tensor(matrix, name):
     """Shape always; symmetry (beyond rounding), finiteness and positive definiteness when concrete."""
     shape = tuple(matrix.shape)
     if len(shape) < 2 or shape[-2:] != (3, 3):
@@ -166,8 +167,7 @@ def _validate_tensor(matrix, name):
     if isinstance(matrix, jax.core.Tracer):
         return
     value = np.asarray(matrix, dtype=np.float64 if matrix.dtype == np.float64 else np.float32)
-    if not np.all(np.isfinite(value)):
-        raise ValueError(f"{name} must be finite")
+    check_finite(name, value)
     asymmetry = np.max(np.abs(value - np.swapaxes(value, -1, -2)), axis=(-2, -1))
     scale = np.max(np.abs(value), axis=(-2, -1))
     if np.any(asymmetry > _SYMMETRY_TOLERANCE * np.finfo(value.dtype).eps * scale):
@@ -216,10 +216,12 @@ class InertiaTensor(eqx.Module):
     principal_axes: Float[Array, "... 3 3"]
 
     def __init__(self, matrix):
+        if is_concrete(matrix):
+            real_array("matrix", matrix)
         matrix = jnp.asarray(matrix)
         if not jnp.issubdtype(matrix.dtype, jnp.floating):
             matrix = matrix.astype(float)
-        _validate_tensor(matrix, "inertia_tensor")
+        validate_tensor(matrix, "matrix")
         symmetric = _symmetric_part(matrix)
         moments, axes = principal_decomposition(symmetric)
         # Under tracing, invalid tensors cannot raise: their data become NaN (class docstring).

@@ -40,6 +40,8 @@ import jax.numpy as jnp
 import numpy as np
 from jax.sharding import Mesh, NamedSharding, PartitionSpec
 
+from ._checks import integer
+
 if TYPE_CHECKING:
     from ._body import FreeRigidBody
 
@@ -51,24 +53,28 @@ __all__ = ["batch_mesh", "pad_batch", "shard_batch", "shard_bodies"]
 def batch_mesh(devices: Sequence[jax.Device] | None = None, axis_name: str = "batch") -> Mesh:
     """A one-dimensional mesh over ``devices`` (default: all of ``jax.devices()``)."""
     devices = jax.devices() if devices is None else list(devices)
+    if not devices:
+        raise ValueError("devices: a mesh needs at least one device")
     return Mesh(np.array(devices), (axis_name,))
 
 
 def _batch_size(tree) -> int:
     leaves = jax.tree_util.tree_leaves(tree)
     if not leaves:
-        raise ValueError("nothing to shard: the tree has no array leaves")
+        raise ValueError("tree: nothing to shard, the tree has no array leaves")
     sizes = {np.shape(leaf)[0] if np.ndim(leaf) > 0 else None for leaf in leaves}
     if None in sizes:
-        raise ValueError("every array must have a leading batch axis (a 0-d array has none)")
+        raise ValueError("tree: every array must have a leading batch axis (a 0-d array has none)")
     if len(sizes) != 1:
-        raise ValueError(f"the arrays disagree on the leading batch size: {sorted(sizes)}")
+        raise ValueError(f"tree: the arrays disagree on the leading batch size: {sorted(sizes)}")
     return sizes.pop()
 
 
 def pad_batch(tree: Tree, multiple: int) -> Tree:
     """Pad every array of ``tree`` along its leading axis to a multiple of ``multiple``, repeating the
-    last entry (for bodies: the last body, which evaluates like any other)."""
+    last entry (for bodies: the last body, which evaluates like any other).  ``multiple``: an
+    integer >= 1 (ValueError otherwise)."""
+    multiple = integer("multiple", multiple, minimum=1)
     n = _batch_size(tree)
     if n == 0:
         raise ValueError("cannot pad an empty batch")
@@ -116,5 +122,5 @@ def shard_bodies(body: FreeRigidBody, mesh: Mesh | None = None, *, pad: bool = T
     batch size $N$ (``[:N]``) when $N$ was padded.  A single body (no batch axis) raises ValueError.
     """
     if jnp.ndim(body.momentum_norm) == 0:
-        raise ValueError("shard_bodies needs a batch of bodies (inputs of shape (N, 3)), got a single body")
+        raise ValueError("body: shard_bodies needs a batch of bodies (inputs of shape (N, 3)), got a single body")
     return shard_batch(body, mesh, pad=pad)

@@ -49,7 +49,8 @@ from jaxtyping import Array, Float
 
 from . import _quaternion as quaternion
 from ._free_flow import free_flow
-from ._inertia import InertiaTensor
+from ._checks import is_concrete, real_array
+from ._inertia import InertiaTensor, validate_tensor
 from ._kernel import one_kernel
 
 __all__ = ["METHODS", "RigidBodySplitting", "RigidBodyTerm", "splitting_trajectory"]
@@ -273,6 +274,8 @@ class RigidBodyTerm(diffrax.AbstractTerm):
             if function is not None and not callable(function):
                 raise ValueError(f"{name} must be a function {signatures[name]}")
         if not isinstance(inertia, InertiaTensor):
+            if is_concrete(inertia):
+                real_array("inertia", inertia)
             inertia = jnp.asarray(inertia)
             if inertia.ndim == 0 or inertia.shape[-1] != 3:
                 raise ValueError(f"inertia must have shape (..., 3), got shape {tuple(inertia.shape)}")
@@ -301,6 +304,7 @@ class RigidBodyTerm(diffrax.AbstractTerm):
     def from_inertia_tensor(cls, inertia_tensor, **functions) -> RigidBodyTerm:
         """The term of a body with inertia tensor ``inertia_tensor`` (..., 3, 3) in its body frame:
         ``RigidBodyTerm(InertiaTensor(inertia_tensor), **functions)``; L, q, torques in that frame."""
+        validate_tensor(jnp.asarray(inertia_tensor), "inertia_tensor")
         return cls(InertiaTensor(inertia_tensor), **functions)
 
     def angular_velocity(self, momentum) -> Float[Array, "... 3"]:
@@ -683,6 +687,8 @@ def _affine_kick(term, t, s, momentum, attitude, args):
 
 def _checked_step(dt):
     """dt if finite and > 0; ValueError when concrete, NaN (hence NaN states) when traced."""
+    if is_concrete(dt):
+        real_array("dt", dt)
     dt = jnp.asarray(dt)
     value = _concrete(dt)
     if value is not None:
@@ -694,6 +700,9 @@ def _checked_step(dt):
 
 def _checked_state(y0, term):
     momentum, attitude = y0
+    for name, value in (("y0[0] (angular momentum)", momentum), ("y0[1] (attitude)", attitude)):
+        if is_concrete(value):
+            real_array(name, value)
     momentum, attitude = jnp.asarray(momentum), jnp.asarray(attitude)
     for name, value, size in (("y0[0] (angular momentum)", momentum, 3), ("y0[1] (attitude)", attitude, 4)):
         if value.ndim == 0 or value.shape[-1] != size:

@@ -36,6 +36,7 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, Float
 
+from ._checks import check_positive, real_array
 from ._inertia import InertiaTensor
 from ._quaternion import as_matrix, conjugate, multiply
 
@@ -56,7 +57,9 @@ __all__ = [
 # ---------------------------------------------------------------------------------- parameters
 
 
-def _float_array(value):
+def _float_array(value, name="value"):
+    if _is_concrete(value):
+        real_array(name, value)  # strings, objects, complex numbers: refused by name
     value = jnp.asarray(value)
     return value if jnp.issubdtype(value.dtype, jnp.floating) else value.astype(float)
 
@@ -73,7 +76,7 @@ def _moments(inertia):
                              f"{tuple(inertia.matrix.shape)}")
         axes, moments = inertia.principal_axes, inertia.principal_moments
         return inertia.matrix, (axes / moments) @ axes.T
-    inertia = _float_array(inertia)
+    inertia = _float_array(inertia, "inertia")
     if inertia.shape != (3,):
         raise ValueError(f"inertia must be the three principal moments, shape (3,), or an InertiaTensor, "
                          f"got shape {tuple(inertia.shape)}")
@@ -83,7 +86,7 @@ def _moments(inertia):
 
 
 def _vector(value, name):
-    value = _float_array(value)
+    value = _float_array(value, name)
     if value.shape != (3,):
         raise ValueError(f"{name} must be a (3,) vector, got shape {tuple(value.shape)}")
     if _is_concrete(value) and not np.all(np.isfinite(value)):
@@ -93,7 +96,7 @@ def _vector(value, name):
 
 def _positive_semidefinite(value, name):
     """A scalar, (3,) diagonal or (3, 3) matrix as a symmetric positive semidefinite (3, 3) matrix."""
-    value = _float_array(value)
+    value = _float_array(value, name)
     if value.shape == ():
         matrix = value * jnp.eye(3, dtype=value.dtype)
     elif value.shape == (3,):
@@ -262,7 +265,8 @@ class CircularOrbit(eqx.Module):
     phase: Float[Array, ""]
 
     def __init__(self, radius, mu, *, inclination=0.0, phase=0.0):
-        radius, mu = jnp.asarray(radius, dtype=float), jnp.asarray(mu, dtype=float)
+        radius, mu = (jnp.asarray(_float_array(value, name), dtype=float)
+                      for name, value in (("radius", radius), ("mu", mu)))
         if _is_concrete((radius, mu)) and not (np.isfinite(radius) and np.isfinite(mu) and radius > 0
                                                and mu > 0):
             raise ValueError("CircularOrbit needs a finite radius > 0 and gravitational parameter mu > 0")
@@ -308,7 +312,9 @@ class GravityGradient(AbstractTorque):
             mu = position.rate**2 * position.radius**3
         self.inertia, self.inverse_inertia = _moments(inertia)
         self.position = _function_of_time(position, "position")
-        self.mu = jnp.asarray(mu, dtype=float)
+        self.mu = jnp.asarray(_float_array(mu, "mu"), dtype=float)
+        if _is_concrete(self.mu):
+            check_positive("mu", self.mu)
 
     def _direction_and_strength(self, t, q):
         position = _body(q, self.position(t))
@@ -449,7 +455,7 @@ class BDot(AbstractTorque):
 
     def __init__(self, inertia, gain, field):
         self.inertia, self.inverse_inertia = _moments(inertia)
-        gain = jnp.asarray(gain, dtype=float)
+        gain = jnp.asarray(_float_array(gain, "gain"), dtype=float)
         if gain.shape != ():
             raise ValueError(f"gain must be a scalar, got shape {tuple(gain.shape)}")
         if _is_concrete(gain) and not (np.isfinite(gain) and gain >= 0):

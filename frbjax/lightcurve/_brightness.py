@@ -59,6 +59,8 @@ def facet_brightness(normals, sun_body, observer_body, law="lommel_seeliger_lamb
     if checks.is_concrete(c):
         checks.scalar("c", c, positive=True, allow_zero=True)
     for name, value in (("normals", normals), ("sun_body", sun_body), ("observer_body", observer_body)):
+        if checks.is_concrete(value):
+            checks.check_finite(name, checks.real_array(name, value))
         checks.check_trailing_shape(name, value, (3,))
     mu = jnp.einsum("...tk,...fk->...tf", observer_body, normals)
     mu0 = jnp.einsum("...tk,...fk->...tf", sun_body, normals)
@@ -75,7 +77,7 @@ def check_directions(name, directions, n_times):
         raise ValueError(f"{name} must have shape (T, 3) with T = len(times) = {n_times}, or (3,), "
                          f"got {directions.shape}")
     if checks.is_concrete(directions):
-        values = np.asarray(directions)
+        values = checks.real_array(name, directions)
         checks.check_finite(name, values)
         checks.check_unit_rows(name, values, what="unit vectors")
 

@@ -45,16 +45,18 @@ def _mode_quantities(sorted_inertia, momentum_squared, twice_energy, long_axis):
     k2 = jnp.clip((i2 - first) * (twice_energy * last - momentum_squared) / p, 0.0, 1.0)
     quarter = special.ellipk(k2)
     period_phi = 4 * quarter * jnp.sqrt(i1 * i2 * i3 / p)
-    # dpsi/dt / M = (alpha + beta s) / (gamma + delta s), s = sn^2 u, is
-    # beta/delta + (alpha delta - beta gamma) / (gamma delta) / (1 - n s), n = -delta/gamma, whose mean
-    # over a period of u is that of 1 / (1 - n sn^2 u): Pi(n | k^2) / K(k^2).
+    # dpsi/dt / M = (alpha + beta s) / (gamma (1 - n s)), s = sn^2 u, n = -delta/gamma.  Over a period
+    # of u, <1 / (1 - n s)> = Pi(n | k^2) / K(k^2) = 1 + n R / (3 K) and <s / (1 - n s)> = R / (3 K), with
+    # R = R_J(0, 1 - k^2, 1, 1 - n) (DLMF 19.25.2): no quotient by delta, which vanishes for a
+    # symmetric body (I2 equal to the first moment), where the mean is (alpha + beta <sin^2>) / gamma.
     alpha = 1 / (last - first)
     beta = 1 / (last - i2) - alpha
     gamma = first * alpha
     delta = i2 / (last - i2) - gamma
     characteristic = -delta / gamma
-    mean_rate = beta / delta + (alpha * delta - beta * gamma) / (gamma * delta) * (
-        special.ellippi(characteristic, k2) / quarter)
+    third_kind_over_k = special.elliprj(jnp.zeros_like(k2), 1 - k2, jnp.ones_like(k2), 1 - characteristic) / (
+        3 * quarter)
+    mean_rate = (alpha * (1 + characteristic * third_kind_over_k) + beta * third_kind_over_k) / gamma
     return period_phi, mean_rate
 
 
@@ -64,7 +66,10 @@ def tumbler_periods(inertia: Float[Array, "... 3"], angular_momentum: Float[Arra
 
     P_psi: the mean precession period of the body about L; P_phi: the period of the body-frame
     motion (rotation about the circulated axis); ``long_axis_mode``: True for LAM.  In the units of
-    time of the motion; batched, differentiable.  On the separatrix P_phi is infinite.  Refused
+    time of the motion; batched, differentiable.  On the separatrix P_phi is infinite; so it is for a
+    uniform rotation (a sphere, L along a principal axis or in the plane of two equal moments), whose
+    P_psi is 2 pi / |Omega|.  Symmetric bodies take the same formulas as triaxial ones (the mean
+    precession rate through R_J, without a quotient by the moments' difference).  Refused
     (ValueError, as by `FreeRigidBody`): trailing axes other than 3, leading axes that do not
     broadcast, and for concrete inputs moments that are not finite and > 0 or a non-finite
     angular momentum (under ``jit`` only the shapes are checked).
@@ -75,12 +80,25 @@ def tumbler_periods(inertia: Float[Array, "... 3"], angular_momentum: Float[Arra
     order = jnp.argsort(inertia, axis=-1)
     sorted_inertia = jnp.take_along_axis(inertia, order, -1)
     sorted_momentum = jnp.take_along_axis(momentum, order, -1)
-    momentum_squared = jnp.sum(sorted_momentum**2, -1)
-    twice_energy = jnp.sum(sorted_momentum**2 / sorted_inertia, -1)
-    long_axis = momentum_squared < twice_energy * sorted_inertia[..., 1]
-    period_phi, mean_rate = _mode_quantities(sorted_inertia, momentum_squared, twice_energy, long_axis)
-    norm = jnp.sqrt(momentum_squared)
-    return 2 * jnp.pi / (norm * mean_rate), period_phi, long_axis
+    # Uniform rotation (Omega parallel to L: a sphere, L along a principal axis or in the plane of two
+    # equal moments): the body frame is at rest relative to L, P_psi = 2 pi / |Omega|, P_phi infinite.
+    # Such bodies enter the elliptic formulas at a harmless triaxial point (safe where).
+    omega = sorted_momentum / sorted_inertia
+    scale = jnp.sum(sorted_momentum**2, -1) * jnp.sum(omega**2, -1)
+    transverse = jnp.sum(jnp.cross(sorted_momentum, omega) ** 2, -1)
+    uniform = transverse <= (64 * jnp.finfo(omega.dtype).eps) ** 2 * scale
+    harmless = jnp.asarray([1.0, 2.0, 3.0], sorted_inertia.dtype)
+    elliptic_inertia = jnp.where(uniform[..., None], harmless, sorted_inertia)
+    elliptic_momentum = jnp.where(uniform[..., None], jnp.asarray([0.6, 0.0, 0.8], omega.dtype), sorted_momentum)
+    momentum_squared = jnp.sum(elliptic_momentum**2, -1)
+    twice_energy = jnp.sum(elliptic_momentum**2 / elliptic_inertia, -1)
+    long_axis = momentum_squared < twice_energy * elliptic_inertia[..., 1]
+    period_phi, mean_rate = _mode_quantities(elliptic_inertia, momentum_squared, twice_energy, long_axis)
+    period_psi = 2 * jnp.pi / (jnp.sqrt(momentum_squared) * mean_rate)
+    omega_norm = jnp.sqrt(jnp.sum(jnp.where(uniform[..., None], omega, 1.0) ** 2, -1))
+    period_psi = jnp.where(uniform, 2 * jnp.pi / omega_norm, period_psi)
+    period_phi = jnp.where(uniform, jnp.inf, period_phi)
+    return period_psi, period_phi, long_axis & ~uniform
 
 
 def momentum_from_periods(sorted_inertia, period_psi, period_phi, long_axis, polhode_phase, iterations=60):

@@ -739,10 +739,12 @@ def elliprc(x: ArrayLike, y: ArrayLike) -> Array:
     $$R_C(x, y) = \tfrac12 \int_0^\infty \frac{dt}{\sqrt{t+x}\,(t+y)}$$
 
     for $x \ge 0$, $y \ne 0$.  For $y < 0$ the Cauchy principal value
-    $R_C(x, y) = \sqrt{x/(x - y)}\, R_C(x - y, -y)$ (DLMF 19.6.16), as ``scipy.special.elliprc``.
+    $R_C(x, y) = \sqrt{x/(x - y)}\, R_C(x - y, -y)$ (DLMF 19.6.16), as ``scipy.special.elliprc``;
+    NaN for $x < 0$ (as scipy).
     """
     x, y = promote(x, y)
     positive = y > 0
     # One evaluation, its arguments chosen per point.
     factor = jnp.sqrt(jnp.where(positive, 1, x / jnp.where(positive, 1, x - y)))  # safe at x = 0
-    return factor * _rc_positive(jnp.where(positive, x, x - y), jnp.where(positive, y, -y))
+    value = factor * _rc_positive(jnp.where(positive, x, x - y), jnp.where(positive, y, -y))
+    return jnp.where(x >= 0, value, jnp.nan)

@@ -8,8 +8,20 @@ from jax import lax
 
 
 def promote(*args):
-    """Broadcast the arguments to one floating dtype (float64 only when x64 is on)."""
-    arrays = [jnp.asarray(a) for a in args]
+    """Broadcast the arguments to one floating dtype (float64 only when x64 is on).
+
+    Arguments that are not real numbers (strings, complex numbers, objects) raise ValueError: the
+    functions' domain is real, and values outside it give NaN (as in scipy.special).
+    """
+    arrays = []
+    for a in args:
+        try:
+            array = jnp.asarray(a)
+        except TypeError as error:
+            raise ValueError(f"the elliptic functions take real numbers: {error}") from None
+        if jnp.issubdtype(array.dtype, jnp.complexfloating):
+            raise ValueError(f"the elliptic functions take real numbers, got dtype {array.dtype}")
+        arrays.append(array)
     dtype = jnp.result_type(*arrays, float)
     arrays = [a.astype(dtype) for a in arrays]
     return jnp.broadcast_arrays(*arrays)

@@ -198,10 +198,11 @@ def ellipe(m: ArrayLike, *, mc: ArrayLike | None = None) -> Array:
 
     $$E(m) = \int_0^{\pi/2} \sqrt{1 - m \sin^2\theta}\, d\theta$$
 
-    As ``scipy.special.ellipe``, for every $m \le 1$: $m < 0$ by DLMF 19.7.2 (``_complete_second``).
+    As ``scipy.special.ellipe``, for every $m \le 1$: $m < 0$ by DLMF 19.7.2 (``_complete_second``);
+    NaN for $m > 1$, where $E$ is complex (scipy gives NaN too).
     """
     m, mc = complement(m, mc)
-    return _ellipe(m, mc)
+    return jnp.where(mc >= 0, _ellipe(m, jnp.where(mc >= 0, mc, 0)), jnp.nan)
 
 
 # ------------------------------------------------------------------------------------ incomplete F
@@ -294,10 +295,15 @@ def _pi_reduced_terms(n, s, c, m, mc):
 
 def _moved_characteristic(n, m):
     """(transformed, characteristic, kappa): n < -1 moves to omega = m/n by DLMF 19.7.8 (see
-    ``pi_without_first_kind``), with kappa = (1 - n)(1 - omega); n itself otherwise."""
-    transformed = n < _LARGE_NEGATIVE_CHARACTERISTIC
+    ``pi_without_first_kind``), with kappa = (1 - n)(1 - omega); n itself otherwise.
+
+    The move needs omega < 1, i.e. m > n: a parameter m <= n < -1 (both negative) would make kappa
+    <= 0 and the result NaN, so such points keep n (their terms K and (n/3) R_J cancel by at most
+    the factor sqrt(1 - n) that the move avoids, and only for n far below m's -1 ... 0 range).
+    The untaken branch's omega is 0, so that kappa > 0 and its derivatives stay finite."""
+    transformed = (n < _LARGE_NEGATIVE_CHARACTERISTIC) & (m > n)
     n_far = jnp.where(transformed, n, 2 * _LARGE_NEGATIVE_CHARACTERISTIC)
-    omega = m / n_far
+    omega = jnp.where(transformed, m / n_far, 0)
     return transformed, jnp.where(transformed, omega, n), (1 - n_far) * (1 - omega)
 
 
