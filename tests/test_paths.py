@@ -69,12 +69,14 @@ def test_prebuilt_bodies_evaluate_through_their_series(monkeypatch):
     rng, inertia, momentum, attitude = _bodies(6, 64)
     times = rng.uniform(-20, 20, (5, len(inertia)))
     body = FreeRigidBody(inertia, momentum, attitude)
+    # One jitted function for every shape of t (a program per shape, traced under the patch above).
+    state = jax.jit(lambda b, t: b.state(t))
     # t of shape (5, N): every body at five times, a times axis in front of the batch.
-    L_axis, q_axis = jax.jit(lambda b, t: b.state(t))(body, times)
-    rows = [jax.jit(lambda b, t: b.state(t))(body, row) for row in times]
+    L_axis, q_axis = state(body, times)
+    rows = [state(body, row) for row in times]
     L_mapped, q_mapped = jax.jit(jax.vmap(lambda b, t: b.state(t), in_axes=(None, 0)))(body, times)
-    L_scalar, q_scalar = jax.jit(lambda b, t: b.state(t))(body, times[0, 0])
-    L_scalar_axis, q_scalar_axis = jax.jit(lambda b, t: b.state(t))(body, np.full((1, 1), times[0, 0]))
+    L_scalar, q_scalar = state(body, times[0, 0])
+    L_scalar_axis, q_scalar_axis = state(body, np.full((1, 1), times[0, 0]))
     L_rows, q_rows = np.stack([row[0] for row in rows]), np.stack([row[1] for row in rows])
     scale = np.maximum(np.linalg.norm(momentum, axis=-1), 1)[:, None]
     for L, q, L_want, q_want in ((L_rows, q_rows, L_axis, q_axis), (L_mapped, q_mapped, L_axis, q_axis),
@@ -95,18 +97,43 @@ def _state(x, series):
     return jnp.concatenate([momentum, attitude])
 
 
-def test_derivatives_agree_and_are_finite():
-    """Generic bodies: the same Jacobian from both paths.  Special bodies (spheres, principal axes, the
-    separatrix): finite on both (their one-sided derivatives are conventions; test_gradients_body)."""
+@pytest.fixture(scope="module")
+def derivative_points():
+    """24 random bodies (|tau| up to 30) and the special families: rows of x = (I, L, q0, t)."""
     rng, inertia, momentum, attitude = _bodies(6, 24)
     tau = 10.0 ** rng.uniform(-2, 1.5, len(inertia)) * rng.choice([-1.0, 1.0], len(inertia))
     norm = np.linalg.norm(momentum, axis=-1)
-    x = np.concatenate([inertia, momentum, attitude, (tau / np.where(norm > 0, norm, 1))[:, None]], -1)
-    once = np.asarray(jax.jit(jax.vmap(jax.jacfwd(lambda x: _state(x, False))))(x))
-    series = np.asarray(jax.jit(jax.vmap(jax.jacfwd(lambda x: _state(x, True))))(x))
-    assert np.isfinite(once).all() and np.isfinite(series).all()
-    scale = np.maximum(np.abs(series[:24]).max(1, keepdims=True), 1)
-    error = np.abs(once[:24] - series[:24]) / scale
+    return np.concatenate([inertia, momentum, attitude, (tau / np.where(norm > 0, norm, 1))[:, None]], -1)
+
+
+# Each path's Jacobian is one jitted program (20 to 30 s of compilation on CPU), computed once for the
+# module and shared by the tests below, so that no test pays for both.
+@pytest.fixture(scope="module")
+def jacobian_once(derivative_points):
+    return np.asarray(jax.jit(jax.vmap(jax.jacfwd(lambda x: _state(x, False))))(derivative_points))
+
+
+@pytest.fixture(scope="module")
+def jacobian_series(derivative_points):
+    return np.asarray(jax.jit(jax.vmap(jax.jacfwd(lambda x: _state(x, True))))(derivative_points))
+
+
+def test_derivatives_of_the_one_shot_path_are_finite(jacobian_once):
+    """Finite at every point, the special bodies (spheres, principal axes, the separatrix) included:
+    their one-sided derivatives are conventions (test_gradients_body), so only finiteness is asked."""
+    assert np.isfinite(jacobian_once).all()
+
+
+def test_derivatives_of_the_series_are_finite(jacobian_series):
+    """As for the one-shot path, on the prebuilt body's series."""
+    assert np.isfinite(jacobian_series).all()
+
+
+def test_derivatives_agree(jacobian_once, jacobian_series):
+    """Generic bodies: the same Jacobian from both paths."""
+    once, series = jacobian_once[:24], jacobian_series[:24]
+    scale = np.maximum(np.abs(series).max(1, keepdims=True), 1)
+    error = np.abs(once - series) / scale
     assert error.max() <= DERIVATIVE_TOLERANCE, error.max()
 
 
