@@ -15,8 +15,11 @@ short-axis-mode tumbler with Apophis's moments (0.61 : 0.965 : 1, $E/E_0 = 1.024
 spin (precession period 4.8 hours), its shape a bumpy convex hull (not the model's facets: no
 inverse crime), observed 16 times a night on 24 nights over 90 days at changing geometry with 1%
 noise and an unknown scale per night; four later nights are held out."""),
-    code("""# Number of times at which the model light curves are drawn; the tests run with fewer.
-N_SAMPLES = 20000""", metadata={"tags": ["parameters"]}),
+    code("""# Number of times at which the model light curves are drawn, and the inversion's settings (those of
+# tests/test_lightcurve_fit.py, described below); the tests run smaller.
+N_SAMPLES = 20000
+FIT_SETTINGS = dict(shape="convex", convex_subdivisions=2, period_grid=(3, 3), starts_per_period=128, n_refine=16)""",
+         metadata={"tags": ["parameters"]}),
     code("""import pathlib
 import sys
 import time
@@ -71,7 +74,7 @@ last window, then the convex shape (log-areas on 320 fixed normals) is fitted wi
 result = fit_lightcurve(times, flux, sun, observer, lightcurve=night,
                         periods=tuple((p * (1 + problem.RANGE_OFFSET - 0.005), p * (1 + problem.RANGE_OFFSET + 0.005))
                                       for p in periods), mode="SAM",
-                        **problem.FIT_OPTIONS)
+                        **{**problem.FIT_OPTIONS, **FIT_SETTINGS})
 print(f"fit in {time.perf_counter() - start:.1f} s (including compilation)")
 print("periods (h):", np.asarray(result.periods) * 24, "+-", np.asarray(result.period_sigma) * 24,
       " true:", periods * 24)

@@ -1,7 +1,8 @@
 """The ``frbjax`` command: ``run`` on the CALGO 903 example files, its errors, and ``demo``.
 
-Most tests call :func:`frbjax.cli.main` in this process (sharing its compiled programs); two run the
-installed console script in a subprocess, end to end.
+The tests call :func:`frbjax.cli.main` in this process (sharing its compiled programs); three run the
+installed console script in a subprocess, end to end (a run and a malformed file: exit statuses 0 and
+2; the demo that ``make demo`` runs, at its quick size).
 """
 
 from __future__ import annotations
@@ -104,24 +105,18 @@ def test_console_script(tmp_path, cache_environment):
 
 
 @needs_data
-def test_console_script_example1_leaves_xla_flags_alone(tmp_path, cache_environment):
+def test_example1_leaves_xla_flags_alone(tmp_path, capsys, monkeypatch):
     """The command runs one body's steps as one kernel through the library (frbjax._kernel), not
-    through XLA_FLAGS, which it leaves as it found them.
+    through XLA_FLAGS, which it leaves as it found them (here: absent).
 
-    Its own process; 1000 steps against the Fortran output: measured 7.0e-13 (5e-12 is the
-    in-process tolerance).
+    1000 steps against the Fortran output: measured 7.0e-13 (5e-12 is the tolerance).
     """
+    monkeypatch.delenv("XLA_FLAGS", raising=False)
     output = tmp_path / "out.dat"
-    environment = {key: value for key, value in cache_environment.items() if key != "XLA_FLAGS"}
-    script = ("import os, sys; from frbjax import cli; status = cli.main(sys.argv[1:]); "
-              "print('XLA_FLAGS' in os.environ); sys.exit(status)")
-    result = subprocess.run(
-        [sys.executable, "-c", script, "run", str(DATA / "init_example1.dat"), "-o", str(output),
-         "--steps", "1000"],
-        capture_output=True, text=True, cwd=tmp_path, env=environment, timeout=300)
-    assert result.returncode == 0, result.stderr
-    assert result.stdout.strip().splitlines()[-1] == "False"
+    assert cli.main(["run", str(DATA / "init_example1.dat"), "-o", str(output), "--steps", "1000"]) == 0
+    assert "XLA_FLAGS" not in os.environ
     assert compare(output, "example1", 1001) <= 5e-12
+    capsys.readouterr()
 
 
 def test_help_mentions_that_np_is_ignored(capsys):
@@ -229,18 +224,16 @@ def test_write_atomically(tmp_path):
 # ----------------------------------------------------------------------------------------------- demo
 
 
-def test_demo_console_script(tmp_path, cache_environment):
+def test_demo_quick(tmp_path, capsys):
     """``frbjax demo --quick``: a PNG, a GIF next to it, the table, and flips recurring with the period 4K/B."""
     output = tmp_path / "tmp.png"
-    result = subprocess.run([*console_script(), "demo", "--quick", "--out", str(output)],
-                            capture_output=True, text=True, cwd=tmp_path, env=cache_environment,
-                            timeout=300)
-    assert result.returncode == 0, result.stderr
+    assert cli.main(["demo", "--quick", "--out", str(output)]) == 0
+    stdout = capsys.readouterr().out
     assert output.read_bytes().startswith(PNG_SIGNATURE)
     assert (tmp_path / "tmp.gif").read_bytes().startswith(GIF_SIGNATURE)
     assert sorted(p.name for p in tmp_path.iterdir()) == ["tmp.gif", "tmp.png"]
-    assert f"saved to {tmp_path / 'tmp.gif'}" in result.stdout
-    lines = result.stdout.splitlines()
+    assert f"saved to {tmp_path / 'tmp.gif'}" in stdout
+    lines = stdout.splitlines()
     table = [line for line in lines if line[:8].strip().replace(".", "").isdigit()]
     assert len(table) == 11
     flips = next(line for line in lines if line.startswith("flips"))
@@ -249,7 +242,7 @@ def test_demo_console_script(tmp_path, cache_environment):
     assert 100 < period < 120
     observed = next(line for line in lines if "rises through 0 every" in line)
     assert float(observed.split("relative difference")[1].strip(" )")) < 1e-10
-    assert "plot saved" in result.stdout
+    assert "plot saved" in stdout
 
 
 def test_flip_period_against_the_published_value():
@@ -368,12 +361,15 @@ def test_demo_animation_frames(tmp_path):
 # ------------------------------------------------------------------------------------- README
 
 
-def test_readme_quick_start_commands(cache_environment):
-    """The README's Quick start block is exactly `make demo` and `make test`, and `make demo` runs.
+def test_readme_quick_start_commands(tmp_path, cache_environment):
+    """The README's Quick start block is exactly `make demo` and `make test`, and what `make demo` runs
+    runs, end to end in its own process (the console script).
 
-    (`make test` is what CI runs: this very suite.)  `make demo` reuses the .venv that `make test`
-    created, so it costs one demo run here; its plot and its animation go to frbjax_demo.png and
-    frbjax_demo.gif at the root (git-ignored, as `make demo` leaves them).
+    (`make test` is what CI runs: this very suite.)  The command is read from ``make --dry-run demo``
+    (its last line: the stamp's install commands come before it when pyproject.toml is newer than
+    the stamp, and are not run here) and run with ``--quick`` into a temporary folder: the same code
+    as the full-size demo at fewer samples, frames and dots per inch (the full size draws 180 frames
+    for about a minute); its plot and its animation are written, its table printed.
     """
     root = pathlib.Path(__file__).resolve().parent.parent
     readme = (root / "README.md").read_text()
@@ -381,8 +377,16 @@ def test_readme_quick_start_commands(cache_environment):
     block = section.split("```", 2)[1]
     commands = [line.strip() for line in block.splitlines()[1:] if line.strip()]
     assert commands == ["make demo", "make test"]
-    result = subprocess.run(["make", "demo"], capture_output=True, text=True, cwd=root,
-                            env=cache_environment, timeout=600)
+    dry_run = subprocess.run(["make", "--dry-run", "demo"], capture_output=True, text=True, cwd=root,
+                             env=cache_environment, timeout=60)
+    assert dry_run.returncode == 0, dry_run.stdout + dry_run.stderr
+    program, *arguments = dry_run.stdout.strip().splitlines()[-1].split()
+    assert program.endswith("/frbjax") and arguments == ["demo"], dry_run.stdout
+    output = tmp_path / "frbjax_demo.png"
+    result = subprocess.run([str(root / program), *arguments, "--quick", "--out", str(output)],
+                            capture_output=True, text=True, cwd=tmp_path, env=cache_environment, timeout=300)
     assert result.returncode == 0, result.stdout + result.stderr
-    assert "4K(m)/B" in result.stdout and "plot saved to frbjax_demo.png" in result.stdout
-    assert "saved to frbjax_demo.gif" in result.stdout
+    assert "4K(m)/B" in result.stdout and f"plot saved to {output}" in result.stdout
+    assert f"saved to {tmp_path / 'frbjax_demo.gif'}" in result.stdout
+    assert output.read_bytes().startswith(PNG_SIGNATURE)
+    assert (tmp_path / "frbjax_demo.gif").read_bytes().startswith(GIF_SIGNATURE)
