@@ -15,7 +15,7 @@ one ulp), spin about a principal axis, L near the middle axis and near the separ
 - scaling (I, L0) -> (c I, c L0) leaves the angular velocity and the attitude unchanged.
 
 Speed: every evaluation goes through one jit-compiled function of fixed shapes (BATCH bodies x TIMES
-times), so the whole file compiles once (~20-30 s on CPU, cached on disk by conftest.py).  The errors
+times), so the whole file compiles once (~7 s of CPU), and the examples take a second.  The errors
 of the group property and of the symmetries grow like eps |L| |t| (the phase is known to eps |L| t):
 they are compared with eps (1 + |L| |t|max).  Tolerances: measured worst (over the examples of these
 settings) times ~2, given next to each.
