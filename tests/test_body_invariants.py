@@ -357,11 +357,14 @@ def test_quaternion_is_continuous():
 # Shapes and transformations.
 
 
-# Batched evaluation against the loop over single bodies, eagerly as a user calls the methods (each
-# call compiles a program per method and shape, so the bodies are SHAPE_COUNT = 3, one size for all the
-# layouts).  Measured: a batch of one body reproduces the loop exactly; evaluating under vmap differs by
-# up to 5e-16 (L, |L| < 7), 1.8e-15 (q) and 2.9e-15 (R) from it, so the tolerances allow ~2x the vmap
-# differences (L: absolute, |L| <= 10).
+# Batched evaluation against single bodies: the same bodies evaluated one at a time under vmap
+# (tests/_reference.py, the series path: each body unbatched at its own times; its programs are those
+# the random bodies above compiled).  The batched layouts are evaluated eagerly as a user calls the
+# methods; each call compiles a program per method and shape, so the bodies are SHAPE_COUNT = 3, one
+# size for all the layouts.  Measured differences here: 0 for the two layouts at T times, 2.2e-16 at one
+# time per body; with other batches (5 bodies, vmap against a loop) up to 5e-16 (L, |L| < 7), 1.8e-15
+# (q) and 2.9e-15 (R), as XLA vectorises differently by shape: the tolerances allow ~2x those (L:
+# absolute, |L| <= 10).
 SHAPE_ATOL = dict(angular_momentum=4e-15, quaternion=4e-15, rotation_matrix=6e-15)
 NAMES = ("angular_momentum", "quaternion", "rotation_matrix")
 # N = 3, the length of the vector axis of L, with T = 7 times: a batch axis mixed up with the vector
@@ -370,19 +373,13 @@ SHAPE_COUNT = 3
 
 
 @functools.lru_cache(maxsize=None)
-def _loop():
-    """Bodies, times and a Python loop over single bodies: (N, T, ...) arrays of L, q, R, T = 7."""
-    from frbjax import FreeRigidBody
-
+def _single_bodies():
+    """Bodies, times (T = 7) and their L, q, R one body at a time: (N, T, ...) arrays."""
     rng = np.random.default_rng(SEED + 6)
     inertia, momentum, attitude = random_bodies(rng, SHAPE_COUNT, (-1.0, 1.0))
     times = np.linspace(-7.0, 11.0, 7)
-    out = [[], [], []]
-    for i in range(SHAPE_COUNT):
-        body = FreeRigidBody(inertia[i], momentum[i], attitude[i])
-        for k, name in enumerate(NAMES):
-            out[k].append(np.asarray(getattr(body, name)(times)))
-    return (inertia, momentum, attitude, times), [np.stack(v) for v in out]
+    values = ref.evaluate(inertia, momentum, attitude, np.tile(times, (SHAPE_COUNT, 1)), NAMES, "series")
+    return (inertia, momentum, attitude, times), list(values)
 
 
 def _compare(got, expected, shape):
@@ -392,26 +389,26 @@ def _compare(got, expected, shape):
 
 
 def test_bodies_n_by_1_at_times_t():
-    """Bodies of batch shape (N, 1) at t of shape (T,) give (N, T, ...), equal to a loop over bodies."""
+    """Bodies of batch shape (N, 1) at t of shape (T,) give (N, T, ...), equal to the bodies one at a time."""
     from frbjax import FreeRigidBody
 
-    (inertia, momentum, attitude, times), expected = _loop()
+    (inertia, momentum, attitude, times), expected = _single_bodies()
     body = FreeRigidBody(inertia[:, None], momentum[:, None], attitude[:, None])
     got = [getattr(body, name)(times) for name in NAMES]
     _compare(got, expected, (SHAPE_COUNT, len(times)))
 
 
 def test_bodies_n_at_times_t_by_1():
-    """Bodies of batch shape (N,) at t of shape (T, 1) give (T, N, ...), equal to a loop over bodies."""
+    """Bodies of batch shape (N,) at t of shape (T, 1) give (T, N, ...), equal to the bodies one at a time."""
     from frbjax import FreeRigidBody
 
-    (inertia, momentum, attitude, times), expected = _loop()
+    (inertia, momentum, attitude, times), expected = _single_bodies()
     body = FreeRigidBody(inertia, momentum, attitude)
     got = [getattr(body, name)(times[:, None]) for name in NAMES]
     _compare(got, [np.swapaxes(e, 0, 1) for e in expected], (len(times), SHAPE_COUNT))
 
 
-# One time per body (t of shape (N,)) and the loop (t of shape (T,)) both evaluate the bodies' series
+# One time per body (t of shape (N,)) and single bodies (t of shape (T,)) both evaluate the bodies' series
 # (a FreeRigidBody never takes the one-shot path); the broadcast differs, so the two agree to rounding.
 ONE_TIME_TOLERANCE = 3e-15
 
@@ -420,7 +417,7 @@ def test_one_time_per_body():
     """Bodies of batch shape (N,) at t of shape (N,): body i at times[i] only, shape (N, ...)."""
     from frbjax import FreeRigidBody
 
-    (inertia, momentum, attitude, times), expected = _loop()
+    (inertia, momentum, attitude, times), expected = _single_bodies()
     body = FreeRigidBody(inertia, momentum, attitude)
     got = [np.asarray(getattr(body, name)(times[:SHAPE_COUNT])) for name in NAMES]
     scales = (np.linalg.norm(momentum, axis=-1)[:, None], 1.0, 1.0)
