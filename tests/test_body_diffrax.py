@@ -267,7 +267,7 @@ def stored_references(seed):
 
 
 def references(seed):
-    """The file's references for a stored seed; for any other seed, the same integration live (minutes)."""
+    """The file's references for a stored seed; for any other seed, the same integration live (~10 s)."""
     if seed in STORED_SEEDS:
         return stored_references(seed)
     _, inertia, momentum, attitude, times = stack(build_cases(seed))
@@ -351,7 +351,7 @@ def test_against_diffrax_other_seeds():
     """The same families drawn with other seeds (FRBJAX_SLOW_SEEDS, comma-separated; default 1).
 
     The tolerances were set from the default seed and seeds 1..4 (near_symmetric_plane: seeds 1, 2).
-    Seed 1's references are stored; any other seed is integrated live (minutes of CPU).
+    Seed 1's references are stored; any other seed is integrated live (~10 s of CPU).
     """
     seeds = [int(s) for s in os.environ.get("FRBJAX_SLOW_SEEDS", "1").split(",")]
     families = list(TOLERANCE)

@@ -1,6 +1,6 @@
 """Regenerate tests/data/diffrax_references.npz: diffrax solutions for the bodies of tests/test_body_diffrax.py.
 
-    .venv/bin/python tests/data/make_diffrax_references.py      # about 4 minutes of CPU
+    .venv/bin/python tests/data/make_diffrax_references.py      # about 10 s of CPU
 
 For each seed in SEEDS the bodies of ``build_cases(seed)`` (tests/test_body_diffrax.py: every case
 family, 20 times per body) are integrated by diffrax's 8th-order Dormand-Prince method in float64 at
@@ -10,7 +10,7 @@ per seed, the inputs (inertia, momentum, attitude, times: the test checks that t
 ``build_cases`` draws) and the four solutions with the accepted steps of each.
 
 A binary .npz rather than JSON: float64 values round-trip exactly and the ~120,000 of them take
-about 1 MB instead of 3.  The test recomputes a few bodies live at a modest tolerance
+about 0.8 MB instead of 3.  The test recomputes a few bodies live at a modest tolerance
 (``test_live_diffrax_cross_check``) so that this method stays exercised.
 """
 
