@@ -5,7 +5,7 @@ VENV := .venv
 BIN := $(VENV)/bin
 STAMP := $(VENV)/.frbjax-installed
 
-.PHONY: demo test docs bench clean
+.PHONY: demo test test-floor docs bench clean
 
 $(STAMP): pyproject.toml
 	test -x $(BIN)/python || $(PYTHON) -m venv $(VENV)
@@ -22,12 +22,33 @@ demo: $(STAMP)
 # Each test file runs on one worker (--dist loadfile), so that a module's fixtures (the tensor
 # derivatives' diffrax stencil: 4 minutes) are computed once.  (pytest-xdist 3.8's loadgroup does
 # not group under pytest 9: it renames items through an attribute pytest 9 no longer reads.)
-# A test that runs past 20 minutes (the longest, with its fixture, takes about 5) fails with every
-# thread's stack printed, instead of holding the run until CI's limit.
+# The time budget (tests/_time_budget.py): a test whose setup and call take over 60 s fails unless
+# marked slow, and the slow tests must stay under 180 s together (the run prints their total).  A
+# test that runs past 10 minutes, hung, fails with every thread's stack printed, instead of holding
+# the run until CI's limit.
 test: $(STAMP)
 	OPENBLAS_NUM_THREADS=1 $(BIN)/python -m pytest -n 2 --dist loadfile -q --durations=15 \
-		--timeout 1200 --timeout-method thread tests; rc=$$?; \
+		--timeout 600 --timeout-method thread tests; rc=$$?; \
 	if [ $$rc -eq 5 ]; then echo "pytest collected no tests"; fi; exit $$rc
+
+# The oldest versions the project declares (pyproject.toml's floors, each `name>=version` pinned to
+# `name==version`) in a venv of their own, and a smoke set of the suite against them: the motion and
+# its validation, the Jacobi functions, a fit (optimistix), a torque (diffrax), a light curve.  It
+# checks that they work, not how fast: older JAX compiles the suite's programs several times slower,
+# so one test may take up to 10 minutes (FRBJAX_TEST_TIME_LIMIT; 60 s in `make test`).
+FLOOR_VENV := .venv-floor
+FLOOR_TESTS := tests/test_validation.py tests/special/test_jacobi.py tests/test_fit.py::test_gyro_data \
+	tests/test_torques.py::test_damped_sphere_exact_damping_kick tests/test_lightcurve.py::test_periods_against_the_motion
+test-floor:
+	rm -rf $(FLOOR_VENV)
+	$(PYTHON) -m venv $(FLOOR_VENV)
+	$(FLOOR_VENV)/bin/python -m pip install --quiet --upgrade pip
+	$(FLOOR_VENV)/bin/python -c 'import re, tomllib; \
+		floors = [re.fullmatch(r"([A-Za-z0-9_.-]+)>=([^,;]+)", d).groups() for d in tomllib.load(open("pyproject.toml", "rb"))["project"]["dependencies"]]; \
+		print("\n".join(f"{name}=={version}" for name, version in floors))' > $(FLOOR_VENV)/constraints.txt
+	$(FLOOR_VENV)/bin/python -m pip install --quiet -c $(FLOOR_VENV)/constraints.txt -e . pytest mpmath
+	$(FLOOR_VENV)/bin/python -m pip list | grep -E '^(jax|jaxlib|numpy|equinox|jaxtyping|optimistix|diffrax|lineax) '
+	OPENBLAS_NUM_THREADS=1 FRBJAX_TEST_TIME_LIMIT=600 $(FLOOR_VENV)/bin/python -m pytest -q -p no:cacheprovider $(FLOOR_TESTS)
 
 # The documentation site into site/, with every warning an error (mkdocs.yml sets strict too).
 docs: $(STAMP)
@@ -37,4 +58,4 @@ bench: $(STAMP)
 	$(BIN)/python benchmarks/special.py
 
 clean:
-	rm -rf $(VENV) .pytest_cache .hypothesis site
+	rm -rf $(VENV) $(FLOOR_VENV) .pytest_cache .hypothesis site
