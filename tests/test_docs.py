@@ -4,8 +4,11 @@
   link, a docstring mkdocstrings cannot render, a missing figure) fails the build;
 - every public name of frbjax (the top-level functions and classes, the methods of FreeRigidBody,
   every function of frbjax.special, the command's entry point) has its entry in the API reference;
-- the ```python blocks of each page run, in order, in a fresh interpreter (one per page, from the
-  repository root), so that the examples cannot rot.  The blocks assert what they show;
+- the ```python blocks of each page run, in order, in a fresh namespace of this interpreter (from the
+  repository root, with JAX's default configuration: float32 and numpy rank promotion allowed, so that
+  a page that needs float64 must say so as a user would), so that the examples cannot rot.  The
+  blocks assert what they show.  One interpreter for all pages: the programs the pages share (the
+  same bodies and fits on several guides) are compiled once;
 - the API pages typeset the docstrings' mathematics (arithmatex's MathJax markup, as on the theory
   page) and show typed signatures, while ``help()`` keeps the plain text;
 - the front door: the README stays short, its links resolve, its headline figures are on the pages
@@ -15,8 +18,10 @@
 
 from __future__ import annotations
 
+import contextlib
 import html
 import inspect
+import linecache
 import logging
 import os
 import pathlib
@@ -24,6 +29,7 @@ import re
 import subprocess
 import sys
 
+import jax
 import pytest
 
 import frbjax
@@ -99,13 +105,41 @@ def test_pages_have_examples():
         assert page in with_examples, page
 
 
-@pytest.mark.parametrize("page", [str(page) for page in PAGES if python_blocks(page)])
-def test_page_examples_run(page, tmp_path):
-    script = tmp_path / (pathlib.Path(page).stem + ".py")
-    script.write_text("\n\n".join(python_blocks(page)))
-    result = subprocess.run([sys.executable, str(script)], cwd=REPOSITORY, capture_output=True,
-                            text=True, timeout=600, env=environment())
-    assert result.returncode == 0, f"docs/{page}:\n{result.stdout}\n{result.stderr}"
+@contextlib.contextmanager
+def default_jax_configuration():
+    """JAX's defaults, as a user's fresh interpreter has them (tests/conftest.py sets float64 and
+    rank promotion "raise" for the tests), restored afterwards whatever the page changed."""
+    names = ("jax_enable_x64", "jax_numpy_rank_promotion")
+    saved = {name: getattr(jax.config, name) for name in names}
+    jax.config.update("jax_enable_x64", False)
+    jax.config.update("jax_numpy_rank_promotion", "allow")
+    try:
+        yield
+    finally:
+        for name, value in saved.items():
+            jax.config.update(name, value)
+
+
+# Pages whose examples compile for over a minute (CPU seconds measured in one interpreter, the pages
+# in order): marked slow, with the reason.
+SLOW_PAGES = {
+    # jax.jacrev through the tensor body's construction and evaluation (70 s of its 100 s).
+    "inertia-tensors.md": "its reverse-mode derivative in the tensor's entries compiles for about 70 s",
+}
+
+
+@pytest.mark.parametrize("page", [
+    pytest.param(str(page), marks=pytest.mark.slow(reason=SLOW_PAGES[str(page)])) if str(page) in SLOW_PAGES
+    else str(page) for page in PAGES if python_blocks(page)])
+def test_page_examples_run(page, monkeypatch):
+    """The page's blocks as one script, in a fresh namespace, from the repository root; a failure's
+    traceback names the page and shows its lines."""
+    source = "\n\n".join(python_blocks(page))
+    filename = f"docs/{page}"
+    linecache.cache[filename] = (len(source), None, source.splitlines(keepends=True), filename)
+    monkeypatch.chdir(REPOSITORY)
+    with default_jax_configuration():
+        exec(compile(source, filename, "exec"), {"__name__": "__main__"})
 
 
 # ------------------------------------------------------------------ mathematics and types on the API pages
