@@ -10,9 +10,11 @@ from __future__ import annotations
 
 import json
 
+import pytest
 from _benchmark_runs import finite_positive, run_quick
 
 
+@pytest.mark.slow(reason="85 s CPU: its own process compiles fit_lightcurve's search and refinement programs")
 def test_lightcurve_benchmark_quick(tmp_path):
     run_quick("lightcurve.py", tmp_path)
     result = json.loads((tmp_path / "lightcurve.json").read_text())
