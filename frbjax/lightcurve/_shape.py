@@ -148,9 +148,10 @@ class ConvexShape(eqx.Module):
             raise ValueError(f"areas must have the shape of normals without its last axis, "
                              f"{tuple(np.shape(self.normals))[:-1]}, got {tuple(np.shape(self.areas))}")
         if checks.is_concrete(self.normals, self.areas):
-            checks.check_finite("normals", self.normals)
-            checks.check_unit_rows("normals", self.normals, what="unit vectors")
-            checks.check_positive("areas", self.areas, allow_zero=True)
+            normals, areas = checks.real_array("normals", self.normals), checks.real_array("areas", self.areas)
+            checks.check_finite("normals", normals)
+            checks.check_unit_rows("normals", normals, what="unit vectors")
+            checks.check_positive("areas", areas, allow_zero=True)
 
     @classmethod
     def from_mesh(cls, vertices: Float[Array, "... V 3"], faces: Int[Array, "F 3"]) -> "ConvexShape":
