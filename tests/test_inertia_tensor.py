@@ -18,12 +18,26 @@ Errors are absolute: |L - L_ref| / |L(0)|, |q - q_ref| (the continuous lift, not
 itself accurate to ~1e-11 (tests/_reference.py: ~1e-10 at tau ~ 50), so the tolerances below
 measure the reference; each states the measured worst error (seed SEED) and is ~1.5x that.
 
+The integrations are stored in tests/data/tensor_references.npz (tests/data/make_tensor_references.py
+runs this file's ``integrate``, ``integrate_both_ways`` and ``stencil_derivatives``); the tests check
+that the stored inputs are still the bodies built here, bit for bit, and integrate a few of them live
+(``test_live_diffrax_cross_check``).
+
+Cost: compilation dominates.  The four derivative programs (FreeRigidBody and free_flow, jacfwd and
+jacrev, each vmapped over the 19 bodies of ``derivative_bodies``) take 10-15 s of tracing and 35-90 s
+of XLA compilation each (CPU seconds, measured on 2 shared cores); each is compiled once, by the
+parametrization of test_derivatives_against_stencil that checks it, with XLA's default options: at
+backend optimisation level 0 (a third less compile time for free_flow) |jacfwd - jacrev| at the
+1e-6-gap body measured 4.2e-10, above the figures below, and XLA:CPU's fusion emitters off made
+FreeRigidBody's jacfwd compile longer (90 s).
+
 Run ``python tests/test_inertia_tensor.py`` to print every measured figure.
 """
 
 from __future__ import annotations
 
 import functools
+import os
 
 import diffrax
 import jax
@@ -37,6 +51,7 @@ from frbjax import FreeRigidBody, InertiaTensor, free_flow
 
 SEED = 20261125
 RTOL = ATOL = 1e-13
+DATA = os.path.join(os.path.dirname(os.path.abspath(__file__)), "data", "tensor_references.npz")
 
 # --------------------------------------------------------------------------------------------------
 # The reference: diffrax Dopri8 on the full-tensor equations in the body frame.
@@ -86,6 +101,24 @@ def integrate_both_ways(tensor, momentum, attitude, times):
     L = np.concatenate([L[:n, ::-1], L[n:]], axis=1)
     q = np.concatenate([q[:n, ::-1], q[n:]], axis=1)
     return np.swapaxes(L, 0, 1), np.swapaxes(q, 0, 1)
+
+
+# --------------------------------------------------------------------------------------------------
+# The stored references (tests/data/make_tensor_references.py).
+
+
+@functools.cache
+def stored(prefix):
+    """{name: array} of the stored solutions whose keys start with ``prefix`` ("motion", "derivative")."""
+    with np.load(DATA) as data:
+        assert float(data["rtol"]) == RTOL and float(data["atol"]) == ATOL and float(data["step"]) == STEP
+        return {key[len(prefix) + 1:]: data[key] for key in data.files if key.startswith(prefix + "_")}
+
+
+def check_stored_inputs(prefix, **inputs):
+    for name, value in inputs.items():
+        np.testing.assert_array_equal(stored(prefix)[name], value,
+                                      err_msg=f"{prefix} {name}; rerun tests/data/make_tensor_references.py")
 
 
 # --------------------------------------------------------------------------------------------------
@@ -174,7 +207,8 @@ TIMES = np.array([-7.0, -4.5, -2.0, -0.6, 0.6, 2.0, 4.5, 7.0])
 @pytest.fixture(scope="module")
 def motion():
     names, tensor, momentum, attitude = stack(build_bodies())
-    L_ref, q_ref = integrate_both_ways(tensor, momentum, attitude, TIMES)
+    check_stored_inputs("motion", tensor=tensor, momentum=momentum, attitude=attitude, times=TIMES)
+    L_ref, q_ref = stored("motion")["L"], stored("motion")["q"]
     body = FreeRigidBody.from_inertia_tensor(tensor, momentum, attitude)
     times = TIMES[:, None]
     values = dict(L=np.asarray(body.angular_momentum(times)), q=np.asarray(body.quaternion(times)),
@@ -318,36 +352,37 @@ def _flow_outputs(tensor, momentum, attitude, time):
     return outputs, outputs
 
 
-# One compiled program each (vmapped over the bodies: also the check that vmap over tensors works).
+# One program each (vmapped over the bodies: also the check that vmap over tensors works).
 _PROGRAMS = {
-    ("FreeRigidBody", "jacfwd"): jax.jit(jax.vmap(jax.jacfwd(_body_outputs, has_aux=True))),
-    ("FreeRigidBody", "jacrev"): jax.jit(jax.vmap(jax.jacrev(_body_outputs, has_aux=True))),
-    ("free_flow", "jacfwd"): jax.jit(jax.vmap(jax.jacfwd(_flow_outputs, has_aux=True))),
-    ("free_flow", "jacrev"): jax.jit(jax.vmap(jax.jacrev(_flow_outputs, has_aux=True))),
+    ("FreeRigidBody", "jacfwd"): jax.vmap(jax.jacfwd(_body_outputs, has_aux=True)),
+    ("FreeRigidBody", "jacrev"): jax.vmap(jax.jacrev(_body_outputs, has_aux=True)),
+    ("free_flow", "jacfwd"): jax.vmap(jax.jacfwd(_flow_outputs, has_aux=True)),
+    ("free_flow", "jacrev"): jax.vmap(jax.jacrev(_flow_outputs, has_aux=True)),
 }
 
 
 def library_derivatives(path, mode, tensor, momentum, attitude, times):
     """((L, q) values, (dL, dq) along DIRECTIONS) from frbjax; free_flow at each body's last time."""
-    program = _PROGRAMS[(path, mode)]
     arguments = [jnp.asarray(a) for a in (tensor, momentum, attitude, times if path == "FreeRigidBody"
                                            else times[:, -1])]
-    (dL, dq), (L, q) = program(*arguments)
+    (dL, dq), (L, q) = jax.jit(_PROGRAMS[(path, mode)])(*arguments)
     return (np.asarray(L), np.asarray(q)), (symmetric_derivative(np.asarray(dL)),
                                             symmetric_derivative(np.asarray(dq)))
 
 
-@pytest.fixture(scope="module")
+@functools.cache
 def derivative_reference():
+    """The stored values and derivatives at the bodies of ``derivative_bodies``.
+
+    The derivatives are Richardson's (16 D(h/2) - D(h)) / 15 of the stencil at h and h/2: the
+    stencil's own error (h^4) is up to 1e-11 at the generic bodies and 8e-6 at the long times;
+    Richardson's, against the same from h/2 and h/4, 6.4e-10 at the middle axis at tau = 40
+    (derivatives up to 26), 6.3e-11 below."""
     names, tensor, momentum, attitude, times = derivative_bodies()
-    values = integrate(tensor, momentum, attitude, times)
-    # Richardson's (16 D(h/2) - D(h)) / 15 of the stencil at h and h/2: the stencil's own error (h^4)
-    # is up to 1e-11 at the generic bodies and 8e-6 at the long times; Richardson's, against the same
-    # from h/2 and h/4, 6.4e-10 at the middle axis at tau = 40 (derivatives up to 26), 6.3e-11 below.
-    coarse = stencil_derivatives(tensor, momentum, attitude, times)
-    fine = stencil_derivatives(tensor, momentum, attitude, times, step=STEP / 2)
-    derivatives = tuple((16 * f - c) / 15 for f, c in zip(fine, coarse))
-    return dict(names=names, inputs=(tensor, momentum, attitude, times), values=values, derivatives=derivatives)
+    check_stored_inputs("derivative", tensor=tensor, momentum=momentum, attitude=attitude, times=times)
+    data = stored("derivative")
+    return dict(names=names, inputs=(tensor, momentum, attitude, times), values=(data["L"], data["q"]),
+                derivatives=(data["dL"], data["dq"]))
 
 
 def derivative_errors(reference, path, mode):
@@ -399,12 +434,30 @@ DERIVATIVE_TOLERANCE = {
 }
 
 
+@functools.cache
+def errors_of(key):
+    """Errors of one of the four programs, compiled and run once per test session."""
+    return derivative_errors(derivative_reference(), *key)
+
+
+class _Derivatives:
+    """The four programs' errors by key, each computed when first asked for: each parametrization of
+    test_derivatives_against_stencil pays for its own program's compilation (module docstring), and
+    the tests that use all four come after them."""
+
+    def __getitem__(self, key):
+        return errors_of(key)
+
+    def items(self):
+        return ((key, errors_of(key)) for key in _PROGRAMS)
+
+
 @pytest.fixture(scope="module")
-def derivatives(derivative_reference):
-    """Errors of the four programs, computed once per test session."""
-    return {key: derivative_errors(derivative_reference, *key) for key in _PROGRAMS}
+def derivatives():
+    return _Derivatives()
 
 
+@pytest.mark.slow(reason="compiles one of the four derivative programs: 50-100 s of CPU (module docstring)")
 @pytest.mark.parametrize("key", list(_PROGRAMS), ids="-".join)
 def test_derivatives_against_stencil(derivatives, key):
     """d(L, q)/dT_ij (T_ij and T_ji together) of FreeRigidBody and free_flow, forward and reverse,
@@ -537,15 +590,17 @@ BAD = {
 @pytest.mark.parametrize("kind", list(BAD))
 def test_bad_tensor_raises_eagerly(kind):
     momentum, attitude = np.array([0.3, -0.2, 0.9]), np.array([1.0, 0, 0, 0])
-    for build in (lambda T: InertiaTensor(T), lambda T: FreeRigidBody.from_inertia_tensor(T, momentum),
-                  lambda T: free_flow(InertiaTensor(T), momentum, attitude, 1.0)):
-        with pytest.raises(ValueError, match="inertia_tensor"):
+    # Each message names the argument: InertiaTensor(matrix), from_inertia_tensor(inertia_tensor, ...).
+    for argument, build in (("matrix", lambda T: InertiaTensor(T)),
+                            ("inertia_tensor", lambda T: FreeRigidBody.from_inertia_tensor(T, momentum)),
+                            ("matrix", lambda T: free_flow(InertiaTensor(T), momentum, attitude, 1.0))):
+        with pytest.raises(ValueError, match=argument):
             build(BAD[kind])
 
 
 @pytest.mark.parametrize("shape", [(3,), (3, 4), (2, 2), (4, 4), (2, 3, 2)])
 def test_wrong_shape_raises(shape):
-    with pytest.raises(ValueError, match="inertia_tensor"):
+    with pytest.raises(ValueError, match="matrix"):
         InertiaTensor(np.ones(shape))
     with pytest.raises(ValueError, match="inertia_tensor"):
         jax.jit(lambda T: FreeRigidBody.from_inertia_tensor(T, jnp.ones(3)).quaternion(1.0))(jnp.ones(shape))
@@ -602,6 +657,20 @@ def test_triangle_inequality_not_required(motion):
     assert np.all(np.isfinite(motion["values"]["q"][:, k]))
 
 
+def test_live_diffrax_cross_check():
+    """The generator's integration, run live at the stored tolerance on three stored bodies of the
+    derivative checks (a tilted one, the unstable spin to tau = 40, a symmetric one next to the plane of
+    its equal moments), reproduces the stored values: measured identical to the last bit; the bound
+    allows a few ulp of another machine's rounding."""
+    reference = derivative_reference()
+    rows = [reference["names"].index(name) for name in ("tilted_minor_axis_0", "middle_axis_long",
+                                                        "near_plane_oblate_1e-06")]
+    tensor, momentum, attitude, times = (a[rows] for a in reference["inputs"])
+    L, q = integrate(tensor, momentum, attitude, times)
+    L_stored, q_stored = (a[rows] for a in reference["values"])
+    assert np.abs(L - L_stored).max() <= 1e-14 and np.abs(q - q_stored).max() <= 1e-14
+
+
 # --------------------------------------------------------------------------------------------------
 # float32.
 
@@ -635,11 +704,8 @@ if __name__ == "__main__":
         e, f = result["errors"], result["flow_errors"]
         print(f"{name:34s} L {e['L'][:, k].max():.1e} q {e['q'][:, k].max():.1e} R {e['R'][:, k].max():.1e} "
               f"Omega {e['omega'][:, k].max():.1e} | free_flow L {f['L'][k]:.1e} q {f['q'][k]:.1e}")
-    reference = derivative_reference.__wrapped__()
-    names, tensor, momentum, attitude, times = derivative_bodies()
-    half = stencil_derivatives(tensor, momentum, attitude, times, STEP / 2)
-    print("stencil: |h - h/2| dL", np.abs(half[0] - reference["derivatives"][0]).max((1, 2, 3)).round(12))
-    print("stencil: |h - h/2| dq", np.abs(half[1] - reference["derivatives"][1]).max((1, 2, 3)).round(12))
+    reference = derivative_reference()
+    names = reference["names"]
     for key in _PROGRAMS:
         errors = derivative_errors(reference, *key)
         print(*key)
