@@ -75,7 +75,7 @@ def _moments(inertia):
             raise ValueError(f"inertia must be the inertia tensor of one body, shape (3, 3), got shape "
                              f"{tuple(inertia.matrix.shape)}")
         axes, moments = inertia.principal_axes, inertia.principal_moments
-        return inertia.matrix, (axes / moments) @ axes.T
+        return inertia.matrix, (axes / moments[None, :]) @ axes.T
     inertia = _float_array(inertia, "inertia")
     if inertia.shape != (3,):
         raise ValueError(f"inertia must be the three principal moments, shape (3,), or an InertiaTensor, "
