@@ -503,10 +503,10 @@ class FreeRigidBody(eqx.Module):
     def _through_tensor(self, method, t):
         """method(self, t); for a body built from an inertia tensor, its derivatives with respect to
         the tensor taken through the principal frame (``_inertia.through_principal_frame``)."""
-        self, t = _common_rank(self, t)
-        if self.inertia_tensor is None:
-            return method(self, t)
-        t = jnp.asarray(t, self.inertia.dtype)
+        body, t = _common_rank(self, t)
+        if body.inertia_tensor is None:
+            return method(body, t)
+        t = jnp.asarray(t, body.inertia.dtype)
 
         def motion(moments, axes, arguments):
             momentum, attitude, t = arguments
@@ -518,9 +518,9 @@ class FreeRigidBody(eqx.Module):
         # The series already built: their own derivatives are not needed (the rule rebuilds along
         # the tangent), and cutting them keeps forward mode from computing them.
         prepared = jax.lax.stop_gradient(_body_of(dict(
-            (name, getattr(self, name)) for name in _FIELDS if name != "inertia_tensor")))
-        return through_principal_frame(motion, evaluate, self.inertia_tensor, prepared,
-                                       (self.initial_angular_momentum, self.initial_attitude, t))
+            (name, getattr(body, name)) for name in _FIELDS if name != "inertia_tensor")))
+        return through_principal_frame(motion, evaluate, body.inertia_tensor, prepared,
+                                       (body.initial_angular_momentum, body.initial_attitude, t))
 
     @_precession_derivatives("momentum")
     def _angular_momentum(self, t):

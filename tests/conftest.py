@@ -3,6 +3,9 @@
 * The library never enables 64-bit mode by itself; the tests do, at import of this file (before any
   test module creates an array), so that float64 inputs stay float64.  float32 behaviour is tested
   by passing float32 arrays explicitly.
+* Implicit rank promotion is an error (``jax_numpy_rank_promotion = "raise"``, as in diffrax's
+  tests): the library broadcasts arrays of different ranks explicitly, so that a user's shape mistake
+  is not silently broadcast inside it.  The library never sets this itself either.
 * No persistent compilation cache: in CI a worker died with a segmentation fault inside
   `executable.serialize()` while writing a program to the cache (jaxlib 0.10.2, CPU), and the run then
   hung until CI's limit.  Each worker compiles what it runs.
@@ -19,3 +22,4 @@ from _time_budget import (  # noqa: F401  (pytest finds the hooks among this mod
 )
 
 jax.config.update("jax_enable_x64", True)
+jax.config.update("jax_numpy_rank_promotion", "raise")
