@@ -60,6 +60,9 @@ def test_non_finite_rows_are_refused_with_their_indices():
         fit_lightcurve(times, flux, sun, observer, lightcurve=night, **OPTIONS)
 
 
+# The smallest inversion compiles for about 40 s of CPU (its search and refinement programs; the
+# other tests of this file reuse them): over the suite's 60 s on a loaded machine.
+@pytest.mark.slow
 def test_omitted_rows_fit_as_clean_data():
     (times, flux, sun, observer, night), mask = spoiled()
     omitted = fit_lightcurve(times, flux, sun, observer, lightcurve=night, nan_policy="omit", **OPTIONS)
@@ -85,7 +88,7 @@ def test_a_fit_that_does_not_converge_raises(monkeypatch):
         fitted, costs, oks, residuals, jacobians = refine(*args, **kwargs)
         return fitted, costs, oks & False, residuals, jacobians
 
-    monkeypatch.setattr(_fit, "_refine", unconverged)
+    monkeypatch.setattr(_fit, "_refine", unconverged)  # the module's programs, no compilation of its own
     (times, flux, sun, observer, night), mask = spoiled()
     kept = ~mask
     arguments = (times[kept], flux[kept], sun[kept], observer[kept])

@@ -232,7 +232,7 @@ def _residuals_and_jacobian(parameters, reference, data, window, config):
         d_prior = prior_scale[:, None] * jax.jacfwd(log_periods)(parameters[:8])
         residual = jnp.concatenate([residual, prior_scale * (log_periods(parameters[:8]) - prior_centre)])
         jacobian = jnp.concatenate([jacobian, jnp.pad(d_prior, ((0, 0), (0, parameters.size - 8)))])
-    jacobian = jacobian * data["free"]
+    jacobian = jacobian * data["free"][None, :]
     finite = jnp.isfinite(residual)
     return jnp.where(finite, residual, 0.0), jnp.where(finite[:, None] & jnp.isfinite(jacobian), jacobian, 0.0)
 
