@@ -1,6 +1,7 @@
 """The time budget of tests/_time_budget.py, on a throwaway suite run in a subprocess with the limits
-lowered to fractions of a second, under pytest-xdist as `make test` runs it and without it.  A loaded
-machine only lengthens the sleeps, so what is over a limit stays over it; what must pass is far under."""
+lowered to fractions of a second, under pytest-xdist as `make test` runs it and without it.  The
+throwaway tests spin for given CPU times (the budget counts CPU time, which a loaded machine does not
+lengthen); what must pass is far under its limit."""
 
 import os
 import subprocess
@@ -16,23 +17,31 @@ _FILES = {
     "test_unmarked.py": (
         "import time\n"
         "import pytest\n\n"
+        "def spin(seconds):\n"
+        "    start = time.process_time()\n"
+        "    while time.process_time() - start < seconds:\n"
+        "        pass\n\n"
         "@pytest.fixture(scope='module')\n"
         "def shared():\n"
-        "    time.sleep(0.4)\n\n"
+        "    spin(0.4)\n\n"
         "def test_quick():\n"
         "    pass\n\n"
         "def test_setup_and_call_over(shared):\n"
-        "    time.sleep(0.4)\n"
+        "    spin(0.4)\n"
     ),
     "test_marked.py": (
         "import time\n"
         "import pytest\n\n"
+        "def spin(seconds):\n"
+        "    start = time.process_time()\n"
+        "    while time.process_time() - start < seconds:\n"
+        "        pass\n\n"
         "@pytest.mark.slow\n"
         "def test_first():\n"
-        "    time.sleep(0.7)\n\n"
+        "    spin(0.7)\n\n"
         "@pytest.mark.slow\n"
         "def test_second():\n"
-        "    time.sleep(0.7)\n"
+        "    spin(0.7)\n"
     ),
 }
 
