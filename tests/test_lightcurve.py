@@ -224,7 +224,7 @@ def test_bad_directions_name_the_argument():
     good = np.tile([1.0, 0.0, 0.0], (3, 1))
     with pytest.raises(ValueError, match="sun must be unit"):
         brightness(body, shape, times, 2 * good, good)
-    with pytest.raises(ValueError, match="observer has non-finite"):
+    with pytest.raises(ValueError, match="observer must be finite"):
         brightness(body, shape, times, good, np.where(good > 0, np.nan, 0.0))
     with pytest.raises(ValueError, match="observer must have shape"):
         brightness(body, shape, times, good, good[:2])
