@@ -85,6 +85,8 @@ _MIN_WINDOW = 24
 _PRINCIPAL_INERTIA = (0.5, 0.75, 1.0)
 _SEARCH_SUBDIVISIONS = 1
 _WINDOW_GROWTH = 1.8
+# Further solves of a leader that stopped at max_steps before it counts as not converged (FitError).
+_CONTINUATIONS = 3
 
 
 # ------------------------------------------------------------------------------------ the model
@@ -600,7 +602,8 @@ def fit_lightcurve(
 
     ``nan_policy``: samples with a non-finite time, brightness, sun or observer direction are
     refused, naming their indices (``"raise"``, default), or left out (``"omit"``: their
-    ``residuals`` are NaN).  ``throw``: a fit whose winner did not converge raises
+    ``residuals`` are NaN).  ``throw``: a fit whose winner did not converge (after up to 3 more
+    solves of ``max_steps`` from where it stopped, on all the data) raises
     :class:`frbjax.FitError` (default), whose ``result`` is the unconverged fit; ``throw=False``
     returns it (``success`` False).
 
@@ -756,6 +759,17 @@ def fit_lightcurve(
         # All the data, no prior.
         out = _refine(as_jax(parameters0), as_jax(refs), None, data, jnp.asarray(start_masks[:, -1:], dtype),
                       None, config, **solver_settings)
+    # A leader that stopped at max_steps still moving is solved on from where every start stopped
+    # (all the data, no prior): Levenberg-Marquardt on a convex shape's hundreds of areas can take more
+    # than max_steps to meet rtol.  For the convex shape this is the program just run.
+    final_data, final_config = (data, config) if shape == "convex" else (ellipsoid_data, ellipsoid_config)
+    for _ in range(_CONTINUATIONS):
+        costs_now, oks_now = np.asarray(out[1]), np.asarray(out[2])
+        leader = int(np.argmin(np.where(np.isfinite(costs_now), costs_now, np.inf)))
+        if oks_now[leader] or not np.isfinite(costs_now[leader]):
+            break
+        out = _refine(jnp.asarray(out[0]), as_jax(refs), None, final_data, jnp.asarray(start_masks[:, -1:], dtype),
+                      None, final_config, **solver_settings)
     fitted, refine_costs, oks, residual_rows, jacobians = (np.asarray(x) for x in out)
     winner = int(np.argmin(np.where(np.isfinite(refine_costs), refine_costs, np.inf)))
     p = fitted[winner].astype(float)
