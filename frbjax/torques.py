@@ -418,7 +418,7 @@ class PDController(AbstractTorque):
         self.inertia, self.inverse_inertia = _moments(inertia)
         self.proportional = _positive_semidefinite(proportional, "proportional (the gain K_p)")
         self.derivative = _positive_semidefinite(derivative, "derivative (the gain K_d)")
-        target = jnp.asarray(target, dtype=float)
+        target = jnp.asarray(_float_array(target, "target"), dtype=float)
         if target.shape != (4,):
             raise ValueError(f"target must be a quaternion (4,), got shape {tuple(target.shape)}")
         if _is_concrete(target) and not (np.all(np.isfinite(target)) and np.linalg.norm(target) > 0):

@@ -157,7 +157,7 @@ def _log_flux_and_jacobian(parameters, reference, data, config):
 
         jac_theta, (per_facet, flux) = jax.jacfwd(log_flux, has_aux=True)(theta)
         # The flux is linear in the areas: d log m / d s_f = A_f S_f / m.
-        jac_shape = per_facet * areas / jnp.maximum(flux, jnp.finfo(flux.dtype).tiny ** 0.5)[:, None]
+        jac_shape = per_facet * areas[None, :] / jnp.maximum(flux, jnp.finfo(flux.dtype).tiny ** 0.5)[:, None]
         return _safe_log(flux), jnp.concatenate([jac_theta, jac_shape], 1)
 
     def log_flux(parameters):
@@ -217,7 +217,7 @@ def _residuals_and_jacobian(parameters, reference, data, window, config):
         areas = jnp.exp(shape_parameters)
         normals, total = data["normals"], jnp.sum(jnp.exp(shape_parameters))
         closure = areas @ normals / total
-        d_closure = (areas[:, None] * (normals - closure) / total).T  # (3, F)
+        d_closure = (areas[:, None] * (normals - closure[None, :]) / total).T  # (3, F)
         smooth = data["laplacian"] @ shape_parameters
         gauge = jnp.mean(shape_parameters, keepdims=True)
         weights_reg = data["regularisation"]
