@@ -15,8 +15,10 @@
 
 import jax
 from _time_budget import (  # noqa: F401  (pytest finds the hooks among this module's names)
+    pytest_runtest_call,
     pytest_runtest_logreport,
     pytest_runtest_makereport,
+    pytest_runtest_setup,
     pytest_sessionfinish,
     pytest_terminal_summary,
 )
