@@ -311,7 +311,16 @@ class RigidBodyTerm(diffrax.AbstractTerm):
         """Omega = I^-1 L, the body angular velocity of a body angular momentum L (..., 3)."""
         if isinstance(self.inertia, InertiaTensor):
             return self.inertia.angular_velocity(momentum)
-        return momentum / self.inertia
+        # A batch of momenta against the moments (or the reverse), with the ranks made equal
+        # explicitly (no numpy rank promotion).
+        momentum = jnp.asarray(momentum)
+        inertia = self.inertia
+        extra = momentum.ndim - inertia.ndim
+        if extra > 0:
+            inertia = inertia.reshape((1,) * extra + inertia.shape)
+        elif extra < 0:
+            momentum = momentum.reshape((1,) * -extra + momentum.shape)
+        return momentum / inertia
 
     def free_motion(self, momentum, attitude, time):
         """The exact torque-free motion of the state (L, q) over ``time``: (L(time), q(time))."""
