@@ -19,7 +19,19 @@ def matrix_times(matrix, vector):
     The value is one fused product and sum over the last axis (the fastest form for a per-body matrix
     at many times).  Its derivative is written by ``_by_rows`` (see ``_matrix_times_jvp``).
     """
-    return sum_last(matrix * vector[..., None, :])
+    matrix, rows = _equal_ranks(matrix, vector[..., None, :])
+    return sum_last(matrix * rows)
+
+
+def _equal_ranks(first, second):
+    """``first`` and ``second`` with leading unit axes added to the one of lower rank: their leading
+    dimensions then broadcast without numpy's rank promotion."""
+    extra = second.ndim - first.ndim
+    if extra > 0:
+        first = first.reshape((1,) * extra + first.shape)
+    elif extra < 0:
+        second = second.reshape((1,) * -extra + second.shape)
+    return first, second
 
 
 def dot(first, second):
@@ -28,6 +40,7 @@ def dot(first, second):
     Unlike a reduction over a trailing axis (or a product with a broadcast), its transpose in reverse
     mode is again products and additions of (...)-shaped arrays, never a reduction.
     """
+    first, second = _equal_ranks(first, second)
     total = first[..., 0] * second[..., 0]
     for j in range(1, second.shape[-1]):
         total = total + first[..., j] * second[..., j]

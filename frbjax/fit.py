@@ -622,10 +622,10 @@ def fit_attitude(
     All starts share one compilation for a given (N, n_starts), dtype, solver settings and compiler
     options (module docstring, "Compilation").
     """
-    times_np, q_np, gyro_np, omitted, dtype = _checked_data(times, quaternions, angular_velocity_data, nan_policy)
     _check_options(loss=loss, loss_scale=loss_scale, attitude_sigma=attitude_sigma,
                    angular_velocity_sigma=angular_velocity_sigma, inertia=inertia, n_starts=n_starts,
                    seed=seed if key is None else 0, rtol=rtol, atol=atol, max_steps=max_steps)
+    times_np, q_np, gyro_np, omitted, dtype = _checked_data(times, quaternions, angular_velocity_data, nan_policy)
     tensor = inertia == "tensor"
     n_parameters = _TENSOR_PARAMETERS if tensor else _PRINCIPAL_PARAMETERS
     n = len(times_np)

@@ -13,6 +13,8 @@
   the slow tests together must stay under 180 s.
 """
 
+import os
+
 import jax
 from _time_budget import (  # noqa: F401  (pytest finds the hooks among this module's names)
     pytest_runtest_call,
@@ -22,6 +24,11 @@ from _time_budget import (  # noqa: F401  (pytest finds the hooks among this mod
     pytest_sessionfinish,
     pytest_terminal_summary,
 )
+
+# The CLI (called in process by test_cli.py, and by the subprocesses that inherit this environment)
+# turns on the persistent compilation cache unless FRBJAX_CACHE_DIR is empty: a worker whose later
+# compilations wrote to it died in executable.serialize() (see above).
+os.environ["FRBJAX_CACHE_DIR"] = ""
 
 jax.config.update("jax_enable_x64", True)
 jax.config.update("jax_numpy_rank_promotion", "raise")

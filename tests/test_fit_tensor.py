@@ -77,7 +77,7 @@ def tilted_problem(seed, n=CI_SAMPLES, noise=NOISE, periods=5.0, tilt_degrees=20
     principal_attitude = quaternion.multiply(jnp.asarray(attitude), jnp.asarray(frame))
     q_principal, l_principal = principal_motion(moments, axes.T @ momentum, principal_attitude, times)
     q = np.asarray(quaternion.multiply(q_principal, quaternion.conjugate(jnp.asarray(frame))))
-    rates = np.asarray(l_principal / moments) @ axes.T
+    rates = np.asarray(l_principal) / moments @ axes.T
     perturbation = np.asarray(quaternion.exp_pure(jnp.asarray(rng.normal(scale=noise, size=(n, 3)))))
     q = np.asarray(quaternion.multiply(jnp.asarray(q), jnp.asarray(perturbation)))
     q = q * rng.choice([-1.0, 1.0], size=(n, 1))
