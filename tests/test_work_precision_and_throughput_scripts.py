@@ -12,6 +12,7 @@ import sys
 
 import jax
 import numpy as np
+import pytest
 
 from _benchmark_runs import ROOT, finite_positive, run_quick  # noqa: E402
 sys.path.insert(0, str(ROOT / "benchmarks"))
