@@ -24,11 +24,12 @@ demo: $(STAMP)
 # not group under pytest 9: it renames items through an attribute pytest 9 no longer reads.)
 # The time budget (tests/_time_budget.py, in CPU seconds): a test whose setup and call take over 60 s
 # fails unless marked slow, and the slow tests must stay under SLOW_TOTAL together (the run prints
-# their total).  The target is 180 s; SLOW_TOTAL holds today's total (compiling the light-curve
-# inversions and the tensor derivatives) from growing until the compiled kernels cut it.  A test that
+# their total).  The target is 180 s; SLOW_TOTAL holds today's total (about 1,500 s from the slow
+# tests' own figures: compiling the light-curve inversions and the tensor derivatives) from growing
+# much, with room for a slower machine, until the compiled kernels cut it.  A test that
 # runs past 20 minutes, hung, fails with every thread's stack printed, instead of holding the run
 # until CI's limit.
-SLOW_TOTAL ?= 3600
+SLOW_TOTAL ?= 2400
 test: $(STAMP)
 	OPENBLAS_NUM_THREADS=1 FRBJAX_SLOW_TOTAL_LIMIT=$(SLOW_TOTAL) $(BIN)/python -m pytest -n 2 --dist loadfile \
 		-q --durations=15 --timeout 1200 --timeout-method thread tests; rc=$$?; \
