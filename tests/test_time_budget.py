@@ -14,13 +14,17 @@ _LIMIT = 0.5
 
 _FILES = {
     "pytest.ini": "[pytest]\nmarkers =\n    slow: over the per-test limit\n",
-    "test_unmarked.py": (
-        "import time\n"
-        "import pytest\n\n"
+    # CPU time, spent in a busy loop (the budget counts the lesser of CPU and wall time).
+    "spin.py": (
+        "import time\n\n"
         "def spin(seconds):\n"
         "    start = time.process_time()\n"
         "    while time.process_time() - start < seconds:\n"
-        "        pass\n\n"
+        "        pass\n"
+    ),
+    "test_unmarked.py": (
+        "import pytest\n"
+        "from spin import spin\n\n"
         "@pytest.fixture(scope='module')\n"
         "def shared():\n"
         "    spin(0.4)\n\n"
@@ -30,12 +34,8 @@ _FILES = {
         "    spin(0.4)\n"
     ),
     "test_marked.py": (
-        "import time\n"
-        "import pytest\n\n"
-        "def spin(seconds):\n"
-        "    start = time.process_time()\n"
-        "    while time.process_time() - start < seconds:\n"
-        "        pass\n\n"
+        "import pytest\n"
+        "from spin import spin\n\n"
         "@pytest.mark.slow\n"
         "def test_first():\n"
         "    spin(0.7)\n\n"
