@@ -5,7 +5,7 @@ VENV := .venv
 BIN := $(VENV)/bin
 STAMP := $(VENV)/.frbjax-installed
 
-.PHONY: demo test test-floor docs bench clean
+.PHONY: demo test test-slow test-all test-floor docs bench clean
 
 $(STAMP): pyproject.toml
 	test -x $(BIN)/python || $(PYTHON) -m venv $(VENV)
@@ -19,20 +19,29 @@ demo: $(STAMP)
 # pytest exits 5 when it collects no test; that is reported, not hidden.  OpenBLAS (scipy's, which
 # jaxlib's LAPACK calls use) gets one thread: its threads gain nothing in these tests and, spinning
 # beside the other worker, made two light-curve inversions take over 300 s each instead of 136 s.
-# Each test file runs on one worker (--dist loadfile), so that a module's fixtures (the tensor
-# derivatives' diffrax stencil: 4 minutes) are computed once.  (pytest-xdist 3.8's loadgroup does
-# not group under pytest 9: it renames items through an attribute pytest 9 no longer reads.)
-# The time budget (tests/_time_budget.py, in CPU seconds): a test whose setup and call take over 60 s
-# fails unless marked slow, and the slow tests must stay under SLOW_TOTAL together (the run prints
-# their total).  The target is 180 s; SLOW_TOTAL holds today's total (about 1,500 s from the slow
-# tests' own figures: compiling the light-curve inversions and the tensor derivatives) from growing
-# much, with room for a slower machine, until the compiled kernels cut it.  A test that
-# runs past 20 minutes, hung, fails with every thread's stack printed, instead of holding the run
-# until CI's limit.
+# Each test file runs on one worker (--dist loadfile), so that a module's fixtures are computed once.
+# (pytest-xdist 3.8's loadgroup does not group under pytest 9: it renames items through an attribute
+# pytest 9 no longer reads.)
+# Two tiers, as scipy's `-m full` and diffrax's slow tests: `make test` (what CI runs) leaves out the
+# tests marked slow, the ones that compile a whole light-curve inversion, the tensor derivatives'
+# programs, a notebook or a benchmark end to end (each over a minute); `make test-slow` runs those,
+# and `make test-all` both.  The time budget (tests/_time_budget.py, the lesser of CPU and wall
+# seconds): a test whose setup and call take over 60 s fails unless marked slow, and the slow tests
+# must stay under SLOW_TOTAL together (the run prints their total).  A test that runs past 10 minutes,
+# hung, fails with every thread's stack printed, instead of holding the run until CI's limit.
+PYTEST := OPENBLAS_NUM_THREADS=1 $(BIN)/python -m pytest -n 2 --dist loadfile -q --durations=15 \
+	--timeout 600 --timeout-method thread
 SLOW_TOTAL ?= 2400
 test: $(STAMP)
-	OPENBLAS_NUM_THREADS=1 FRBJAX_SLOW_TOTAL_LIMIT=$(SLOW_TOTAL) $(BIN)/python -m pytest -n 2 --dist loadfile \
-		-q --durations=15 --timeout 1200 --timeout-method thread tests; rc=$$?; \
+	$(PYTEST) -m "not slow" tests; rc=$$?; \
+	if [ $$rc -eq 5 ]; then echo "pytest collected no tests"; fi; exit $$rc
+
+test-slow: $(STAMP)
+	FRBJAX_SLOW_TOTAL_LIMIT=$(SLOW_TOTAL) $(PYTEST) -m slow tests; rc=$$?; \
+	if [ $$rc -eq 5 ]; then echo "pytest collected no tests"; fi; exit $$rc
+
+test-all: $(STAMP)
+	FRBJAX_SLOW_TOTAL_LIMIT=$(SLOW_TOTAL) $(PYTEST) tests; rc=$$?; \
 	if [ $$rc -eq 5 ]; then echo "pytest collected no tests"; fi; exit $$rc
 
 # The oldest versions the project declares (pyproject.toml's floors, each `name>=version` pinned to
