@@ -5,7 +5,7 @@ VENV := .venv
 BIN := $(VENV)/bin
 STAMP := $(VENV)/.frbjax-installed
 
-.PHONY: demo test test-slow test-all test-floor docs bench clean
+.PHONY: demo lint test test-slow test-all test-floor docs bench clean
 
 $(STAMP): pyproject.toml
 	test -x $(BIN)/python || $(PYTHON) -m venv $(VENV)
@@ -22,6 +22,11 @@ demo: $(STAMP)
 # Each test file runs on one worker (--dist loadfile), so that a module's fixtures are computed once.
 # (pytest-xdist 3.8's loadgroup does not group under pytest 9: it renames items through an attribute
 # pytest 9 no longer reads.)
+# `make lint` (seconds; `make test` runs it first): ruff's rules and format, as pyproject.toml sets
+# them.  `ruff format .` and `ruff check --fix .` repair most of what it reports.
+lint: $(STAMP)
+	$(BIN)/ruff check . && $(BIN)/ruff format --check .
+
 # Two tiers, as scipy's `-m full` and diffrax's slow tests: `make test` (what CI runs) leaves out the
 # tests marked slow, the ones that compile a whole light-curve inversion, the tensor derivatives'
 # programs, a notebook or a benchmark end to end (each over a minute); `make test-slow` runs those,
@@ -32,7 +37,7 @@ demo: $(STAMP)
 PYTEST := OPENBLAS_NUM_THREADS=1 $(BIN)/python -m pytest -n 2 --dist loadfile -q --durations=15 \
 	--timeout 600 --timeout-method thread
 SLOW_TOTAL ?= 2400
-test: $(STAMP)
+test: $(STAMP) lint
 	$(PYTEST) -m "not slow" tests; rc=$$?; \
 	if [ $$rc -eq 5 ]; then echo "pytest collected no tests"; fi; exit $$rc
 

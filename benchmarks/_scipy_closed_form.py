@@ -66,14 +66,42 @@ def quaternion_of_matrix(r):
     f = 1 / (4 * big)
     candidates = np.stack(
         [
-            np.stack([big, (r[..., 2, 1] - r[..., 1, 2]) * f, (r[..., 0, 2] - r[..., 2, 0]) * f,
-                      (r[..., 1, 0] - r[..., 0, 1]) * f], -1),
-            np.stack([(r[..., 2, 1] - r[..., 1, 2]) * f, big, (r[..., 0, 1] + r[..., 1, 0]) * f,
-                      (r[..., 0, 2] + r[..., 2, 0]) * f], -1),
-            np.stack([(r[..., 0, 2] - r[..., 2, 0]) * f, (r[..., 0, 1] + r[..., 1, 0]) * f, big,
-                      (r[..., 1, 2] + r[..., 2, 1]) * f], -1),
-            np.stack([(r[..., 1, 0] - r[..., 0, 1]) * f, (r[..., 0, 2] + r[..., 2, 0]) * f,
-                      (r[..., 1, 2] + r[..., 2, 1]) * f, big], -1),
+            np.stack(
+                [
+                    big,
+                    (r[..., 2, 1] - r[..., 1, 2]) * f,
+                    (r[..., 0, 2] - r[..., 2, 0]) * f,
+                    (r[..., 1, 0] - r[..., 0, 1]) * f,
+                ],
+                -1,
+            ),
+            np.stack(
+                [
+                    (r[..., 2, 1] - r[..., 1, 2]) * f,
+                    big,
+                    (r[..., 0, 1] + r[..., 1, 0]) * f,
+                    (r[..., 0, 2] + r[..., 2, 0]) * f,
+                ],
+                -1,
+            ),
+            np.stack(
+                [
+                    (r[..., 0, 2] - r[..., 2, 0]) * f,
+                    (r[..., 0, 1] + r[..., 1, 0]) * f,
+                    big,
+                    (r[..., 1, 2] + r[..., 2, 1]) * f,
+                ],
+                -1,
+            ),
+            np.stack(
+                [
+                    (r[..., 1, 0] - r[..., 0, 1]) * f,
+                    (r[..., 0, 2] + r[..., 2, 0]) * f,
+                    (r[..., 1, 2] + r[..., 2, 1]) * f,
+                    big,
+                ],
+                -1,
+            ),
         ],
         -2,
     )
@@ -148,8 +176,13 @@ class ScipyFreeRigidBody:
         # Both regimes at once (np.where); the other regime's values may be nan and are discarded.
         with np.errstate(divide="ignore", invalid="ignore"):
             self.amplitude = np.stack(
-                [np.sqrt(j1 * g3 / c), np.where(minor, np.sqrt(j2 * g1 / a), np.sqrt(j2 * g3 / b)),
-                 np.sqrt(j3 * g1 / c)], -1)
+                [
+                    np.sqrt(j1 * g3 / c),
+                    np.where(minor, np.sqrt(j2 * g1 / a), np.sqrt(j2 * g3 / b)),
+                    np.sqrt(j3 * g1 / c),
+                ],
+                -1,
+            )
             self.rate = np.where(minor, np.sqrt(g3 * a / (j1 * j2 * j3)), np.sqrt(g1 * b / (j1 * j2 * j3)))
             self.m = np.where(minor, g1 * b / (g3 * a), g3 * a / (g1 * b))
             self.alpha = np.where(minor, c / np.sqrt(j1 * g3 * a * j3 / j2), c / np.sqrt(j1 * g1 * b * j3 / j2))
@@ -188,10 +221,12 @@ class ScipyFreeRigidBody:
         k = np.round(am / np.pi)
         sign = 1 - 2 * np.mod(k, 2)  # (-1)^k
         third_kind = 2 * (k + 2 * periods) * self.complete_pi + _legendre_pi_reduced(
-            self.nu, sign * sn, cn * cn, dn * dn)
+            self.nu, sign * sn, cn * cn, dn * dn
+        )
         minor = self.minor
         psi = self.precession * tau + np.where(
-            minor, -np.arctan2(l2, l1) + self.alpha * third_kind, np.arctan2(l2, l3) - self.alpha * third_kind)
+            minor, -np.arctan2(l2, l1) + self.alpha * third_kind, np.arctan2(l2, l3) - self.alpha * third_kind
+        )
         hc, hs = np.cos(psi / 2), np.sin(psi / 2)
         base = 1 + np.where(minor, l3, l1)
         root, inverse = np.sqrt(base / 2), 1 / np.sqrt(2 * base)

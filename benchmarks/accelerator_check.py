@@ -25,6 +25,7 @@ from pathlib import Path
 
 import jax
 
+
 jax.config.update("jax_enable_x64", True)
 
 import jax.numpy as jnp  # noqa: E402
@@ -32,9 +33,13 @@ import numpy as np  # noqa: E402
 
 from frbjax import FreeRigidBody  # noqa: E402
 
+
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from throughput import best_time as throughput_best_time  # noqa: E402
-from throughput import bodies as random_bodies  # noqa: E402
+from throughput import (
+    best_time as throughput_best_time,  # noqa: E402
+    bodies as random_bodies,  # noqa: E402
+)
+
 
 OUTPUT = Path(__file__).resolve().parent / "results" / "accelerator_check.json"
 
@@ -42,19 +47,35 @@ OUTPUT = Path(__file__).resolve().parent / "results" / "accelerator_check.json"
 def bodies(rng, n):
     """The throughput benchmark's n random bodies, then the hard ones below."""
     inertia, momentum, attitude = random_bodies(rng, n)
-    hard_inertia = np.array([[1.0, 2.0, 3.0]] * 4 + [[1.0, 1.0 + 1e-12, 3.0], [1.0, 2.0, 3.0], [2.0, 2.0, 2.0],
-                                                     [1.0, 2.0, 3.0], [1.2, 1.2, 2.1], [0.7, 1.9, 1.9]])
+    hard_inertia = np.array(
+        [[1.0, 2.0, 3.0]] * 4
+        + [[1.0, 1.0 + 1e-12, 3.0], [1.0, 2.0, 3.0], [2.0, 2.0, 2.0], [1.0, 2.0, 3.0], [1.2, 1.2, 2.1], [0.7, 1.9, 1.9]]
+    )
     # For I = (1, 2, 3) the separatrix is L3 = sqrt(3) L1: relative 1e-10 off it on both sides, on it
     # (within rounding), then spin near the major axis, a nearly symmetric body, uniform rotation
     # about an axis, a sphere, L = 0, and two symmetric bodies next to the plane of their equal
     # moments (their derivatives are the precession's, frbjax._precession).
     on = 0.5 * np.sqrt(3.0)
-    hard_momentum = np.array([[0.5, 1.0, on * (1 + 1e-10)], [0.5, 1.0, on * (1 - 1e-10)], [0.5, 1.0, on],
-                              [1.0, 1e-9, 1e-9], [0.3, 0.4, 0.5], [0.0, 1.0, 0.0], [0.3, 0.4, 0.5], [0.0, 0.0, 0.0],
-                              [0.6, 0.8, 1e-3], [-2e-3, 0.5, 0.9]])
+    hard_momentum = np.array(
+        [
+            [0.5, 1.0, on * (1 + 1e-10)],
+            [0.5, 1.0, on * (1 - 1e-10)],
+            [0.5, 1.0, on],
+            [1.0, 1e-9, 1e-9],
+            [0.3, 0.4, 0.5],
+            [0.0, 1.0, 0.0],
+            [0.3, 0.4, 0.5],
+            [0.0, 0.0, 0.0],
+            [0.6, 0.8, 1e-3],
+            [-2e-3, 0.5, 0.9],
+        ]
+    )
     hard_attitude = np.tile([1.0, 0.0, 0.0, 0.0], (len(hard_inertia), 1))
-    return (np.concatenate([inertia, hard_inertia]), np.concatenate([momentum, hard_momentum]),
-            np.concatenate([attitude, hard_attitude]))
+    return (
+        np.concatenate([inertia, hard_inertia]),
+        np.concatenate([momentum, hard_momentum]),
+        np.concatenate([attitude, hard_attitude]),
+    )
 
 
 def outputs(inertia, momentum, attitude, t):
@@ -92,12 +113,17 @@ def main():
     agreement = {}
     for label, on_device, on_cpu in zip(labels, results["device"], results["cpu"]):
         scale = max(np.max(np.abs(on_cpu)), 1e-300)
-        agreement[label] = dict(max_abs_difference=float(np.max(np.abs(on_device - on_cpu))),
-                                max_relative_to_largest=float(np.max(np.abs(on_device - on_cpu)) / scale),
-                                finite=bool(np.all(np.isfinite(on_device))))
-        print(f"  {label}: device - cpu max |difference| {agreement[label]['max_abs_difference']:.2e} "
-              f"(relative to the largest value {agreement[label]['max_relative_to_largest']:.2e}), "
-              f"finite {agreement[label]['finite']}", flush=True)
+        agreement[label] = dict(
+            max_abs_difference=float(np.max(np.abs(on_device - on_cpu))),
+            max_relative_to_largest=float(np.max(np.abs(on_device - on_cpu)) / scale),
+            finite=bool(np.all(np.isfinite(on_device))),
+        )
+        print(
+            f"  {label}: device - cpu max |difference| {agreement[label]['max_abs_difference']:.2e} "
+            f"(relative to the largest value {agreement[label]['max_relative_to_largest']:.2e}), "
+            f"finite {agreement[label]['finite']}",
+            flush=True,
+        )
 
     body_args = [jnp.asarray(a[:1000]) for a in (inertia, momentum, attitude)]
     construct = jax.jit(lambda i, l, q: FreeRigidBody(i, l, q))
@@ -111,12 +137,23 @@ def main():
             program = jax.jit(lambda b, t, method=method: getattr(b, method)(t))
             row[f"{method}_ns_per_eval"] = best_time(lambda: program(body, times)) / row["evaluations"] * 1e9
         throughput.append(row)
-        print(f"  {row['evaluations']:>10d} evaluations: quaternion {row['quaternion_ns_per_eval']:.3f} ns/eval, "
-              f"angular momentum {row['angular_momentum_ns_per_eval']:.3f} ns/eval", flush=True)
+        print(
+            f"  {row['evaluations']:>10d} evaluations: quaternion {row['quaternion_ns_per_eval']:.3f} ns/eval, "
+            f"angular momentum {row['angular_momentum_ns_per_eval']:.3f} ns/eval",
+            flush=True,
+        )
     print(f"  construction: {construction:.0f} ns per body (1000 bodies)", flush=True)
-    summary = dict(device=str(device), platform=device.platform, jax=jax.__version__, host=platform.machine(),
-                   bodies=len(inertia), times=t.shape[0], agreement=agreement, throughput=throughput,
-                   construction_ns_per_body=construction)
+    summary = dict(
+        device=str(device),
+        platform=device.platform,
+        jax=jax.__version__,
+        host=platform.machine(),
+        bodies=len(inertia),
+        times=t.shape[0],
+        agreement=agreement,
+        throughput=throughput,
+        construction_ns_per_body=construction,
+    )
     options.output.parent.mkdir(parents=True, exist_ok=True)
     options.output.write_text(json.dumps(summary, indent=1) + "\n")
     print(f"wrote {options.output}")

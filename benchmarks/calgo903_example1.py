@@ -33,11 +33,13 @@ import time
 
 import jax
 
+
 jax.config.update("jax_enable_x64", True)
 
 import numpy as np  # noqa: E402
 
 from frbjax import _calgo903 as calgo  # noqa: E402
+
 
 REPOSITORY = pathlib.Path(__file__).resolve().parents[1]
 DATA = REPOSITORY / "tests" / "data" / "calgo903"
@@ -51,8 +53,11 @@ def main(argv=None):
     parser.add_argument("--steps", type=int, default=None, help="steps to run (default: all 10,000)")
     parser.add_argument("--quick", action="store_true", help=f"smoke test: {QUICK_STEPS} steps, one run")
     parser.add_argument("--output-dir", type=pathlib.Path, default=RESULTS)
-    parser.add_argument("--no-one-kernel", action="store_true",
-                        help="XLA's ordinary kernels only (FRBJAX_ONE_KERNEL=0; no second process)")
+    parser.add_argument(
+        "--no-one-kernel",
+        action="store_true",
+        help="XLA's ordinary kernels only (FRBJAX_ONE_KERNEL=0; no second process)",
+    )
     args = parser.parse_args(argv)
     if args.no_one_kernel:
         os.environ["FRBJAX_ONE_KERNEL"] = "0"
@@ -80,8 +85,12 @@ def main(argv=None):
     trajectory = calgo.solve(problem, steps=steps)
 
     def error(records):
-        return float(max(np.abs(trajectory.momentum[:records] - expected.momentum[:records]).max(),
-                         np.abs(trajectory.attitude[:records] - expected.attitude[:records]).max()))
+        return float(
+            max(
+                np.abs(trajectory.momentum[:records] - expected.momentum[:records]).max(),
+                np.abs(trajectory.attitude[:records] - expected.attitude[:records]).max(),
+            )
+        )
 
     results = {
         "steps": steps,
@@ -113,11 +122,14 @@ def _argv_steps(args):
 def _ordinary_kernels(extra, environment):
     """This script in a second process without one-kernel regions (read once per process)."""
     with tempfile.TemporaryDirectory() as folder:
-        subprocess.run([sys.executable, __file__, "--no-one-kernel", "--output-dir", folder, *extra],
-                       check=True, stdout=subprocess.DEVNULL, env=environment)
+        subprocess.run(
+            [sys.executable, __file__, "--no-one-kernel", "--output-dir", folder, *extra],
+            check=True,
+            stdout=subprocess.DEVNULL,
+            env=environment,
+        )
         other = json.loads((pathlib.Path(folder) / "calgo903_example1.json").read_text())
-    keys = ("compile_seconds", "run_seconds", "microseconds_per_free_flow", "ratio_to_fortran",
-            "max_error_all_steps")
+    keys = ("compile_seconds", "run_seconds", "microseconds_per_free_flow", "ratio_to_fortran", "max_error_all_steps")
     return {key: other[key] for key in keys}
 
 

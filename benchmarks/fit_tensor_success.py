@@ -25,11 +25,13 @@ import time
 
 import jax
 
+
 jax.config.update("jax_enable_x64", True)
 
 import numpy as np  # noqa: E402
 
 from frbjax import fit_attitude  # noqa: E402
+
 
 ROOT = pathlib.Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "tests"))
@@ -68,19 +70,34 @@ def axisymmetric_records(problem, arguments):
         retried = not bool(result.success)
         if retried:
             result, error, _ = _fit(data, arguments.starts, seed, max_steps=1000)
-        records.append(dict(seed=seed, moments=moments.tolist(), tensor_error=error, success=bool(result.success),
-                            rerun_with_max_steps_1000=retried, axes_identifiable=bool(result.axes_identifiable)))
-        print(f"axisymmetric {seed}: flagged {not result.axes_identifiable}, tensor error {error:.2e}, "
-              f"converged {bool(result.success)}{' (max_steps=1000)' if retried else ''}", flush=True)
+        records.append(
+            dict(
+                seed=seed,
+                moments=moments.tolist(),
+                tensor_error=error,
+                success=bool(result.success),
+                rerun_with_max_steps_1000=retried,
+                axes_identifiable=bool(result.axes_identifiable),
+            )
+        )
+        print(
+            f"axisymmetric {seed}: flagged {not result.axes_identifiable}, tensor error {error:.2e}, "
+            f"converged {bool(result.success)}{' (max_steps=1000)' if retried else ''}",
+            flush=True,
+        )
     return records
 
 
 def axisymmetric_summary(records):
     converged = [r for r in records if r["success"]]
-    return dict(problems=len(records), converged=len(converged),
-                rerun_with_max_steps_1000=int(sum(r["rerun_with_max_steps_1000"] for r in records)),
-                flagged=int(sum(not r["axes_identifiable"] for r in converged)),
-                max_tensor_error=max((r["tensor_error"] for r in converged), default=None), records=records)
+    return dict(
+        problems=len(records),
+        converged=len(converged),
+        rerun_with_max_steps_1000=int(sum(r["rerun_with_max_steps_1000"] for r in records)),
+        flagged=int(sum(not r["axes_identifiable"] for r in converged)),
+        max_tensor_error=max((r["tensor_error"] for r in converged), default=None),
+        records=records,
+    )
 
 
 def main_axisymmetric(problem, arguments):
@@ -98,8 +115,11 @@ def main():
     parser.add_argument("--samples", type=int, default=SAMPLES)
     parser.add_argument("--axisymmetric", type=int, default=10)
     parser.add_argument("--output", default=str(ROOT / "benchmarks" / "results" / "fit_tensor_success.json"))
-    parser.add_argument("--axisymmetric-only", action="store_true",
-                        help="run the axisymmetric problems alone and replace their part of the existing JSON")
+    parser.add_argument(
+        "--axisymmetric-only",
+        action="store_true",
+        help="run the axisymmetric problems alone and replace their part of the existing JSON",
+    )
     arguments = parser.parse_args()
 
     def problem(seed, **options):
@@ -116,9 +136,17 @@ def main():
     for seed in range(arguments.problems):
         for gyro in (False, True):
             result, error, seconds = _fit(problem(seed, gyro_noise=NOISE if gyro else None), arguments.starts, seed)
-            records.append(dict(seed=seed, gyro=gyro, tensor_error=error, success=bool(error < TOLERANCE),
-                                solver_success=bool(result.success),
-                                axes_identifiable=bool(result.axes_identifiable), seconds=seconds))
+            records.append(
+                dict(
+                    seed=seed,
+                    gyro=gyro,
+                    tensor_error=error,
+                    success=bool(error < TOLERANCE),
+                    solver_success=bool(result.success),
+                    axes_identifiable=bool(result.axes_identifiable),
+                    seconds=seconds,
+                )
+            )
             print(f"seed {seed:3d} gyro {gyro!s:5}: tensor error {error:.2e} ({seconds:.2f} s)", flush=True)
 
     flagged = axisymmetric_records(problem, arguments)
@@ -127,15 +155,27 @@ def main():
         subset = [r for r in records if r["gyro"] == gyro]
         errors = np.array([r["tensor_error"] for r in subset])
         key = "with_gyro" if gyro else "attitudes_only"
-        summary[key] = dict(problems=len(subset), successes=int(sum(r["success"] for r in subset)),
-                            median_tensor_error=float(np.median(errors)) if len(errors) else None,
-                            max_tensor_error=float(np.max(errors)) if len(errors) else None,
-                            median_seconds_per_fit=float(np.median([r["seconds"] for r in subset]))
-                            if subset else None)
-    out = dict(samples=arguments.samples, n_starts=arguments.starts, noise_rad=NOISE, tolerance=TOLERANCE,
-               max_tilt_degrees=20.0, first_call_seconds_with_compilation=compile_seconds, **summary,
-               axisymmetric=axisymmetric_summary(flagged),
-               machine=platform.machine(), jax=jax.__version__, backend=jax.default_backend(), records=records)
+        summary[key] = dict(
+            problems=len(subset),
+            successes=int(sum(r["success"] for r in subset)),
+            median_tensor_error=float(np.median(errors)) if len(errors) else None,
+            max_tensor_error=float(np.max(errors)) if len(errors) else None,
+            median_seconds_per_fit=float(np.median([r["seconds"] for r in subset])) if subset else None,
+        )
+    out = dict(
+        samples=arguments.samples,
+        n_starts=arguments.starts,
+        noise_rad=NOISE,
+        tolerance=TOLERANCE,
+        max_tilt_degrees=20.0,
+        first_call_seconds_with_compilation=compile_seconds,
+        **summary,
+        axisymmetric=axisymmetric_summary(flagged),
+        machine=platform.machine(),
+        jax=jax.__version__,
+        backend=jax.default_backend(),
+        records=records,
+    )
     pathlib.Path(arguments.output).write_text(json.dumps(out, indent=1) + "\n")
     print(json.dumps({k: v for k, v in out.items() if k not in ("records", "axisymmetric")}, indent=1))
     print(json.dumps({k: v for k, v in out["axisymmetric"].items() if k != "records"}, indent=1))

@@ -22,10 +22,19 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+
 DEFAULT_OUTPUT = Path(__file__).resolve().parent / "results" / "fuzz.json"
 TIMES = 4
-FAMILIES = ("generic", "symmetric", "sphere", "near_symmetric", "near_sphere", "principal_axis",
-            "near_middle_axis", "near_separatrix")
+FAMILIES = (
+    "generic",
+    "symmetric",
+    "sphere",
+    "near_symmetric",
+    "near_sphere",
+    "principal_axis",
+    "near_middle_axis",
+    "near_separatrix",
+)
 
 
 def _unit(v):
@@ -36,7 +45,7 @@ def random_bodies(rng, n):
     """(inertia, momentum, attitude, times, family index) for n bodies (numpy float64)."""
     family = np.where(rng.random(n) < 2 / 3, 0, rng.integers(1, len(FAMILIES), n))
     inertia = np.sort(rng.uniform(0.3, 3.0, (n, 3)), axis=-1)
-    a, b, c = inertia[:, 0].copy(), inertia[:, 1].copy(), inertia[:, 2].copy()
+    a, c = inertia[:, 0].copy(), inertia[:, 2].copy()
     gap = rng.choice([np.finfo(float).eps, 4e-16, 1e-12, 1e-9, 1e-6, 1e-3], n)
     lower = rng.random(n) < 0.5
     direction = _unit(rng.normal(size=(n, 3)))
@@ -46,8 +55,9 @@ def random_bodies(rng, n):
     inertia[sym] = np.where(lower[sym, None], np.stack([a, a, c], -1)[sym], np.stack([a, c, c], -1)[sym])
     inertia[family == 2] = a[family == 2, None]
     near = family == 3
-    inertia[near] = np.where(lower[near, None], np.stack([a, a * (1 + gap), c], -1)[near],
-                             np.stack([a, c, c * (1 + gap)], -1)[near])
+    inertia[near] = np.where(
+        lower[near, None], np.stack([a, a * (1 + gap), c], -1)[near], np.stack([a, c, c * (1 + gap)], -1)[near]
+    )
     sph = family == 4
     inertia[sph] = np.stack([a, a * (1 + gap), a * (1 + 2 * gap)], -1)[sph]
     axis = family == 5
@@ -89,8 +99,9 @@ def _evaluate(inertia, momentum, attitude, times):
     energy = 0.5 * jnp.sum(momentum**2 / inertia, -1)[:, None]
     initial = FreeRigidBody(inertia, momentum, attitude).rotation_matrix(0.0)
     spatial0 = jnp.einsum("nij,nj->ni", initial, momentum)
-    finite = jnp.all(jnp.isfinite(L), (-1, -2)) & jnp.all(jnp.isfinite(q), (-1, -2)) & jnp.all(
-        jnp.isfinite(R), (-1, -2, -3))
+    finite = (
+        jnp.all(jnp.isfinite(L), (-1, -2)) & jnp.all(jnp.isfinite(q), (-1, -2)) & jnp.all(jnp.isfinite(R), (-1, -2, -3))
+    )
     errors = dict(
         quaternion_norm=jnp.abs(jnp.linalg.norm(q, axis=-1) - 1),
         momentum_norm=jnp.abs(jnp.linalg.norm(L, axis=-1) - norm) / norm,
@@ -123,21 +134,39 @@ def main(n=200_000, seed=0, chunk=8192, output=DEFAULT_OUTPUT, verbose=True):
     for name, values in errors.items():
         values = np.where(np.isfinite(values), values, np.inf)
         i = int(np.argmax(values))
-        worst[name] = dict(value=float(values[i]), family=FAMILIES[family[i]],
-                           inertia=inertia[i].tolist(), momentum=momentum[i].tolist(),
-                           times=times[i].tolist())
+        worst[name] = dict(
+            value=float(values[i]),
+            family=FAMILIES[family[i]],
+            inertia=inertia[i].tolist(),
+            momentum=momentum[i].tolist(),
+            times=times[i].tolist(),
+        )
     per_family = {
-        f: {name: float(np.max(np.where(np.isfinite(v[family == k]), v[family == k], np.inf), initial=0.0))
-            for name, v in errors.items()}
+        f: {
+            name: float(np.max(np.where(np.isfinite(v[family == k]), v[family == k], np.inf), initial=0.0))
+            for name, v in errors.items()
+        }
         for k, f in enumerate(FAMILIES)
     }
     bad = np.flatnonzero(~finite)
     result = dict(
-        n=n, seed=seed, chunk=chunk, times_per_body=TIMES, seconds_including_compile=elapsed,
+        n=n,
+        seed=seed,
+        chunk=chunk,
+        times_per_body=TIMES,
+        seconds_including_compile=elapsed,
         non_finite=int(bad.size),
-        non_finite_examples=[dict(family=FAMILIES[family[i]], inertia=inertia[i].tolist(),
-                                  momentum=momentum[i].tolist(), times=times[i].tolist()) for i in bad[:10]],
-        worst=worst, worst_per_family=per_family,
+        non_finite_examples=[
+            dict(
+                family=FAMILIES[family[i]],
+                inertia=inertia[i].tolist(),
+                momentum=momentum[i].tolist(),
+                times=times[i].tolist(),
+            )
+            for i in bad[:10]
+        ],
+        worst=worst,
+        worst_per_family=per_family,
     )
     if verbose:
         print(f"{n} bodies x {TIMES} times in {elapsed:.1f} s (with compilation); non-finite: {bad.size}")

@@ -15,6 +15,7 @@ import subprocess
 import sys
 from pathlib import Path
 
+
 ROOT = Path(__file__).resolve().parents[1]
 
 
@@ -23,8 +24,16 @@ def main(argv=None) -> int:
     parser.add_argument("--examples", type=int, default=500, help="hypothesis examples per entry point")
     args = parser.parse_args(argv)
     environment = dict(os.environ, FRBJAX_HARNESS_EXAMPLES=str(args.examples))
-    command = [sys.executable, "-m", "pytest", "-q", "-p", "no:cacheprovider", "--durations=10",
-               str(ROOT / "tests" / "test_public_inputs.py")]
+    command = [
+        sys.executable,
+        "-m",
+        "pytest",
+        "-q",
+        "-p",
+        "no:cacheprovider",
+        "--durations=10",
+        str(ROOT / "tests" / "test_public_inputs.py"),
+    ]
     return subprocess.call(command, cwd=ROOT, env=environment)
 
 

@@ -42,12 +42,14 @@ import time
 
 import jax
 
+
 jax.config.update("jax_enable_x64", True)
 
 import jax.numpy as jnp  # noqa: E402
 import numpy as np  # noqa: E402
 
 from frbjax import FreeRigidBody  # noqa: E402
+
 
 ROOT = pathlib.Path(__file__).resolve().parents[1]
 OUTPUT = ROOT / "benchmarks" / "results" / "gradients.json"
@@ -61,8 +63,9 @@ INPUTS = ["I1", "I2", "I3", "L1", "L2", "L3", "qw", "qx", "qy", "qz", "t"]
 def outputs(x):
     body = FreeRigidBody(x[:3], x[3:6], x[6:10])
     t = x[10]
-    return jnp.concatenate([body.angular_momentum(t), body.angular_velocity(t), body.quaternion(t),
-                            body.rotation_matrix(t).reshape(-1)])
+    return jnp.concatenate(
+        [body.angular_momentum(t), body.angular_velocity(t), body.quaternion(t), body.rotation_matrix(t).reshape(-1)]
+    )
 
 
 def scalar(x):
@@ -82,8 +85,9 @@ def _peak_rss_gib():
 def compiled(function, *args):
     start_wall, start_cpu = time.perf_counter(), _cpu()
     program = jax.jit(function).lower(*args).compile()
-    return program, dict(wall_s=time.perf_counter() - start_wall, cpu_s=_cpu() - start_cpu,
-                         peak_rss_gib_after=_peak_rss_gib())
+    return program, dict(
+        wall_s=time.perf_counter() - start_wall, cpu_s=_cpu() - start_cpu, peak_rss_gib_after=_peak_rss_gib()
+    )
 
 
 def load():
@@ -109,24 +113,40 @@ def first_derivatives():
             partial = kinds[k] == "branch" and name in _tests.ONE_SIDED_BRANCH_POINTS
             row = np.where(np.arange(11) >= 6, errors[k], 0) if partial else errors[k]
             worst = int(np.argmax(row))
-            per_point.append(dict(name=name, kind=kinds[k], finite=bool(finite[k]),
-                                  worst_relative_error=float(row[worst]), input=INPUTS[worst]))
+            per_point.append(
+                dict(
+                    name=name,
+                    kind=kinds[k],
+                    finite=bool(finite[k]),
+                    worst_relative_error=float(row[worst]),
+                    input=INPUTS[worst],
+                )
+            )
         near = [p for p in per_point if p["name"].startswith("separatrix ")]
         away = [p for p in per_point if p["kind"] in ("generic", "smooth") and not p["name"].startswith("separatrix ")]
         summary[mode] = dict(
-            compile=timing, all_finite=bool(finite.all()),
+            compile=timing,
+            all_finite=bool(finite.all()),
             worst_generic_and_smooth=max(p["worst_relative_error"] for p in away),
             worst_near_separatrix=max(p["worst_relative_error"] for p in near),
-            worst_uniform_rotation=max(p["worst_relative_error"] for p in per_point if p["kind"] == "branch"
-                                       and p["name"] not in _tests.ONE_SIDED_BRANCH_POINTS),
-            worst_separatrix_q0_t_columns=max(p["worst_relative_error"] for p in per_point
-                                              if p["name"] in _tests.ONE_SIDED_BRANCH_POINTS),
-            points=per_point)
-        print(f"{mode}: compile {timing['wall_s']:.0f} s; finite everywhere {finite.all()}; worst relative "
-              f"error: generic/smooth {summary[mode]['worst_generic_and_smooth']:.1e}, near the separatrix "
-              f"{summary[mode]['worst_near_separatrix']:.1e}, uniform rotations (every column) "
-              f"{summary[mode]['worst_uniform_rotation']:.1e}, on the separatrix (q0, t) "
-              f"{summary[mode]['worst_separatrix_q0_t_columns']:.1e}", flush=True)
+            worst_uniform_rotation=max(
+                p["worst_relative_error"]
+                for p in per_point
+                if p["kind"] == "branch" and p["name"] not in _tests.ONE_SIDED_BRANCH_POINTS
+            ),
+            worst_separatrix_q0_t_columns=max(
+                p["worst_relative_error"] for p in per_point if p["name"] in _tests.ONE_SIDED_BRANCH_POINTS
+            ),
+            points=per_point,
+        )
+        print(
+            f"{mode}: compile {timing['wall_s']:.0f} s; finite everywhere {finite.all()}; worst relative "
+            f"error: generic/smooth {summary[mode]['worst_generic_and_smooth']:.1e}, near the separatrix "
+            f"{summary[mode]['worst_near_separatrix']:.1e}, uniform rotations (every column) "
+            f"{summary[mode]['worst_uniform_rotation']:.1e}, on the separatrix (q0, t) "
+            f"{summary[mode]['worst_separatrix_q0_t_columns']:.1e}",
+            flush=True,
+        )
     return summary
 
 
@@ -138,8 +158,11 @@ def hessian():
     n = x.shape[1]
     rss_before = _peak_rss_gib()
     program, timing = compiled(jax.vmap(jax.hessian(scalar)), x)
-    print(f"jax.hessian: compile {timing['wall_s']:.0f} s wall, {timing['cpu_s']:.0f} s CPU, peak RSS "
-          f"{timing['peak_rss_gib_after']:.1f} GiB (before: {rss_before:.1f} GiB)", flush=True)
+    print(
+        f"jax.hessian: compile {timing['wall_s']:.0f} s wall, {timing['cpu_s']:.0f} s CPU, peak RSS "
+        f"{timing['peak_rss_gib_after']:.1f} GiB (before: {rss_before:.1f} GiB)",
+        flush=True,
+    )
     start = time.perf_counter()
     h = np.asarray(program(x))
     run_seconds = time.perf_counter() - start
@@ -162,13 +185,25 @@ def hessian():
         finite = bool(np.all(np.isfinite(h[k])))
         error = float(np.max(np.abs(h[k] - reference[k])) / np.max(np.abs(reference[k]))) if finite else None
         asymmetry = float(np.max(np.abs(h[k] - h[k].T)) / np.max(np.abs(h[k]))) if finite else None
-        records.append(dict(name=name, finite=finite, relative_error=error, asymmetry=asymmetry,
-                            non_finite_entries=int(np.sum(~np.isfinite(h[k])))))
+        records.append(
+            dict(
+                name=name,
+                finite=finite,
+                relative_error=error,
+                asymmetry=asymmetry,
+                non_finite_entries=int(np.sum(~np.isfinite(h[k]))),
+            )
+        )
         print(f"  {name:22s} finite {finite}  |H - H_fd| / |H| = {error}  asymmetry {asymmetry}")
     errors = [r["relative_error"] for r in records if r["relative_error"] is not None]
-    return dict(compile=timing, run_s=run_seconds, grad_compile=gradient_time, points=records,
-                all_finite=all(r["finite"] for r in records),
-                worst_relative_error=max(errors) if errors else None)
+    return dict(
+        compile=timing,
+        run_s=run_seconds,
+        grad_compile=gradient_time,
+        points=records,
+        all_finite=all(r["finite"] for r in records),
+        worst_relative_error=max(errors) if errors else None,
+    )
 
 
 def main():
@@ -176,8 +211,11 @@ def main():
     parser.add_argument("--parts", default="first,hessian")
     parts = parser.parse_args().parts.split(",")
     summary = json.loads(OUTPUT.read_text()) if OUTPUT.exists() else {}
-    summary.update(machine=f"{platform.machine()} {platform.processor()}".strip(), jax=jax.__version__,
-                   cpu_count=__import__("os").cpu_count())
+    summary.update(
+        machine=f"{platform.machine()} {platform.processor()}".strip(),
+        jax=jax.__version__,
+        cpu_count=__import__("os").cpu_count(),
+    )
     if "first" in parts:
         summary["first_derivatives"] = first_derivatives()
         OUTPUT.parent.mkdir(parents=True, exist_ok=True)

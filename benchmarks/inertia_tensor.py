@@ -35,6 +35,7 @@ import sys
 import time
 from pathlib import Path
 
+
 # One core: the first allowed CPU (``taskset -c N python benchmarks/inertia_tensor.py`` picks N).
 if hasattr(os, "sched_setaffinity"):
     os.sched_setaffinity(0, {sorted(os.sched_getaffinity(0))[0]})
@@ -42,11 +43,13 @@ os.environ.setdefault("XLA_FLAGS", "--xla_cpu_multi_thread_eigen=false")
 
 import jax  # noqa: E402
 
+
 jax.config.update("jax_enable_x64", True)
 
 import jax.numpy as jnp  # noqa: E402
 import numpy as np  # noqa: E402
 from scipy.spatial.transform import Rotation  # noqa: E402
+
 
 HERE = Path(__file__).resolve().parent
 ROOT = HERE.parent
@@ -54,7 +57,8 @@ sys.path.insert(0, str(ROOT / "tests"))
 import _reference as ref  # noqa: E402
 from test_inertia_tensor import integrate  # noqa: E402  (the diffrax full-tensor reference)
 
-from frbjax import FreeRigidBody, InertiaTensor, free_flow  # noqa: E402
+from frbjax import free_flow, FreeRigidBody, InertiaTensor  # noqa: E402
+
 
 SEED = 22
 TARGET_RATIO = 1.05
@@ -117,9 +121,12 @@ def cost_row(bodies, times_count, repeats, calls):
                 moments_times.append(b)
                 ratios.append(a / b)
             row[f"{label}_{method}"] = dict(
-                ratio_median=statistics.median(ratios), ratio_min=min(ratios), ratio_max=max(ratios),
+                ratio_median=statistics.median(ratios),
+                ratio_min=min(ratios),
+                ratio_max=max(ratios),
                 tensor_seconds_median=statistics.median(tensor_times),
-                moments_seconds_median=statistics.median(moments_times))
+                moments_seconds_median=statistics.median(moments_times),
+            )
     # The same motion: outputs agree after the change of frame (a check that the comparison is fair).
     q_t, q_m = np.asarray(from_tensor.quaternion(times)), np.asarray(from_moments.quaternion(times))
     x, y, z, w = Rotation.from_matrix(rotation).as_quat().T
@@ -152,29 +159,44 @@ def accuracy_row(bodies, times_count):
     gaps = np.minimum(moments[:, 1] - moments[:, 0], moments[:, 2] - moments[:, 1]) / moments[:, 2]
     worst = int(np.argmax(np.maximum(error_L, error_q)))
     return dict(
-        bodies=bodies, times_per_body=times_count, max_abs_tau=20.0, reference="diffrax Dopri8 rtol=atol=1e-13",
+        bodies=bodies,
+        times_per_body=times_count,
+        max_abs_tau=20.0,
+        reference="diffrax Dopri8 rtol=atol=1e-13",
         reference_seconds=reference_seconds,
         axisymmetric_or_sphere=int(np.sum(gaps < 1e-5)),
-        FreeRigidBody=dict(max_L=float(error_L.max()), max_q=float(error_q.max()),
-                           median_L=float(np.median(error_L)), median_q=float(np.median(error_q))),
-        free_flow=dict(max_L=float(flow_L.max()), max_q=float(flow_q.max()),
-                       median_L=float(np.median(flow_L)), median_q=float(np.median(flow_q))),
-        worst_body=dict(tensor=tensor[worst].tolist(), angular_momentum=momentum[worst].tolist(),
-                        attitude=attitude[worst].tolist(), moments=moments[worst].tolist()),
+        FreeRigidBody=dict(
+            max_L=float(error_L.max()),
+            max_q=float(error_q.max()),
+            median_L=float(np.median(error_L)),
+            median_q=float(np.median(error_q)),
+        ),
+        free_flow=dict(
+            max_L=float(flow_L.max()),
+            max_q=float(flow_q.max()),
+            median_L=float(np.median(flow_L)),
+            median_q=float(np.median(flow_q)),
+        ),
+        worst_body=dict(
+            tensor=tensor[worst].tolist(),
+            angular_momentum=momentum[worst].tolist(),
+            attitude=attitude[worst].tolist(),
+            moments=moments[worst].tolist(),
+        ),
     )
 
 
 def orekit_row(quick):
     """Orekit TorqueFree on one tilted body: error against diffrax and time per getAttitude."""
-    how = ("pip install orekit-jpype (with a JDK: apt-get install -y default-jdk-headless), "
-           "then rerun without --no-orekit")
+    how = (
+        "pip install orekit-jpype (with a JDK: apt-get install -y default-jdk-headless), then rerun without --no-orekit"
+    )
     try:
         import orekit_jpype
     except ImportError as error:
         return dict(skipped=True, reason=f"import orekit_jpype failed: {error}", how=how)
     orekit_jpype.initVM()  # TAI and GCRF need no orekit-data
-    from org.hipparchus.geometry.euclidean.threed import Rotation as JRotation
-    from org.hipparchus.geometry.euclidean.threed import Vector3D
+    from org.hipparchus.geometry.euclidean.threed import Rotation as JRotation, Vector3D
     from org.orekit.attitudes import Attitude, Inertia, InertiaAxis, TorqueFree
     from org.orekit.frames import FramesFactory
     from org.orekit.time import AbsoluteDate, TimeScalesFactory
@@ -217,8 +239,12 @@ def orekit_row(quick):
     frbjax_seconds = _best(lambda: one(*args), 200)
     L_f, q_f = (np.asarray(v) for v in one(*args))
     return dict(
-        skipped=False, orekit_version=getattr(orekit_jpype, "__version__", "unknown"), evaluations=count,
-        max_abs_tau=20.0, orekit_max_error_q=float(max(errors_q)), orekit_max_error_L=float(max(errors_L)),
+        skipped=False,
+        orekit_version=getattr(orekit_jpype, "__version__", "unknown"),
+        evaluations=count,
+        max_abs_tau=20.0,
+        orekit_max_error_q=float(max(errors_q)),
+        orekit_max_error_L=float(max(errors_L)),
         orekit_seconds_per_evaluation=seconds,
         frbjax_free_flow_seconds_one_body_one_time=frbjax_seconds,
         frbjax_free_flow_error_q_at_last_time=float(np.abs(q_f - q_ref[-1]).max()),
@@ -231,8 +257,11 @@ def main():
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--quick", action="store_true", help="tiny sizes (a smoke run)")
     parser.add_argument("--no-orekit", action="store_true")
-    parser.add_argument("--cost-only", action="store_true",
-                        help="measure the cost row again and keep the other rows of the existing JSON")
+    parser.add_argument(
+        "--cost-only",
+        action="store_true",
+        help="measure the cost row again and keep the other rows of the existing JSON",
+    )
     parser.add_argument("--output-dir", type=Path, default=HERE / "results")
     args = parser.parse_args()
     if args.quick:
@@ -240,9 +269,13 @@ def main():
     else:
         sizes = dict(bodies=4096, times=256, repeats=15, calls=3, sweep=1024, sweep_times=16)
     result = dict(
-        machine=dict(platform=platform.platform(), processor=platform.processor(), jax=jax.__version__,
-                     backend=jax.default_backend(), cpus=sorted(os.sched_getaffinity(0))
-                     if hasattr(os, "sched_getaffinity") else None),
+        machine=dict(
+            platform=platform.platform(),
+            processor=platform.processor(),
+            jax=jax.__version__,
+            backend=jax.default_backend(),
+            cpus=sorted(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else None,
+        ),
         quick=args.quick,
     )
     start = time.perf_counter()
@@ -258,8 +291,11 @@ def main():
     result["accuracy"] = accuracy_row(sizes["sweep"], sizes["sweep_times"])
     print("accuracy", json.dumps(result["accuracy"], indent=1), flush=True)
     if args.no_orekit:
-        result["orekit"] = dict(skipped=True, reason="--no-orekit",
-                                how="pip install orekit-jpype and a JDK (apt-get install -y default-jdk-headless)")
+        result["orekit"] = dict(
+            skipped=True,
+            reason="--no-orekit",
+            how="pip install orekit-jpype and a JDK (apt-get install -y default-jdk-headless)",
+        )
     else:
         result["orekit"] = orekit_row(args.quick)
     print("orekit", json.dumps(result["orekit"], indent=1), flush=True)

@@ -38,18 +38,23 @@ import time
 
 import jax
 
+
 jax.config.update("jax_enable_x64", True)
 
 import jax.numpy as jnp  # noqa: E402
 import matplotlib  # noqa: E402
 
+
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
-from frbjax import FreeRigidBody  # noqa: E402
-from frbjax import _quaternion as quaternion  # noqa: E402
-from frbjax.lightcurve import ConvexShape, brightness, facet_brightness, fit_lightcurve, tumbler_periods  # noqa: E402
+from frbjax import (
+    _quaternion as quaternion,  # noqa: E402
+    FreeRigidBody,  # noqa: E402
+)
+from frbjax.lightcurve import brightness, ConvexShape, facet_brightness, fit_lightcurve, tumbler_periods  # noqa: E402
+
 
 ROOT = pathlib.Path(__file__).resolve().parents[1]
 _spec = importlib.util.spec_from_file_location("_lightcurve_problems", ROOT / "tests" / "test_lightcurve_fit.py")
@@ -68,8 +73,9 @@ def _rk4_attitudes(inertia, momentum, attitude, times, steps_per_day):
     def derivative(state):
         momentum, q = state[:3], state[3:]
         omega = momentum / inertia
-        return jnp.concatenate([jnp.cross(momentum, omega),
-                                0.5 * quaternion.multiply(q, jnp.concatenate([jnp.zeros(1), omega]))])
+        return jnp.concatenate(
+            [jnp.cross(momentum, omega), 0.5 * quaternion.multiply(q, jnp.concatenate([jnp.zeros(1), omega]))]
+        )
 
     def rk4(state, h):
         k1 = derivative(state)
@@ -122,8 +128,10 @@ def forward_throughput(n_bodies, repeats, single_precision=False):
     @jax.jit
     def rk4(inertia, momentum, attitude, times, sun, observer, steps_per_day):
         def one(i, m, q):
-            return _flux_from_attitudes(_rk4_attitudes(i, m, q, times, steps_per_day), shape.normals,
-                                        shape.areas, sun, observer)
+            return _flux_from_attitudes(
+                _rk4_attitudes(i, m, q, times, steps_per_day), shape.normals, shape.areas, sun, observer
+            )
+
         return jax.vmap(one)(inertia, momentum, attitude)
 
     def rk4_program(steps_per_day):
@@ -165,16 +173,26 @@ def forward_throughput(n_bodies, repeats, single_precision=False):
 
         flux = np.asarray(exact_single(*single_args), np.float64)
         best = timed(exact_single, single_args)
-        single = {"float32_seconds": best, "float32_samples_per_second": samples / best,
-                  "float32_max_relative_flux_difference": float(np.max(np.abs(flux / reference - 1))),
-                  "float32_median_relative_flux_difference": float(np.median(np.abs(flux / reference - 1)))}
+        single = {
+            "float32_seconds": best,
+            "float32_samples_per_second": samples / best,
+            "float32_max_relative_flux_difference": float(np.max(np.abs(flux / reference - 1))),
+            "float32_median_relative_flux_difference": float(np.median(np.abs(flux / reference - 1))),
+        }
     return {
-        "bodies": n_bodies, "times": len(times), "facets": int(shape.areas.shape[0]), "span_days": float(times[-1]),
-        "frbjax_seconds": exact_seconds, "frbjax_samples_per_second": samples / exact_seconds,
-        "rk4_ladder": ladder, "rk4_steps_per_day": chosen[0] if chosen else None,
+        "bodies": n_bodies,
+        "times": len(times),
+        "facets": int(shape.areas.shape[0]),
+        "span_days": float(times[-1]),
+        "frbjax_seconds": exact_seconds,
+        "frbjax_samples_per_second": samples / exact_seconds,
+        "rk4_ladder": ladder,
+        "rk4_steps_per_day": chosen[0] if chosen else None,
         "rk4_max_relative_flux_error": chosen[2] if chosen else None,
-        "rk4_seconds": rk4_seconds, "rk4_samples_per_second": samples / rk4_seconds,
-        "speedup": rk4_seconds / exact_seconds, **single,
+        "rk4_seconds": rk4_seconds,
+        "rk4_samples_per_second": samples / rk4_seconds,
+        "speedup": rk4_seconds / exact_seconds,
+        **single,
     }
 
 
@@ -199,9 +217,18 @@ def inversion(case, seed, width, grid, states, refine, compiled_run, offset=0.0,
     inertia = np.asarray(body.inertia)
     data, held_out = problems.observe(body, seed=3, per_night=problems.SAMPLES_PER_NIGHT)
     times, flux, sun, observer, night = data
-    options = dict(problems.FIT_OPTIONS, lightcurve=night, mode=case, seed=seed, throw=False, shape=shape or problems.FIT_OPTIONS["shape"],
-                   periods=tuple((p * (1 + offset - width), p * (1 + offset + width)) for p in periods),
-                   period_grid=tuple(grid), starts_per_period=states, n_refine=refine)
+    options = dict(
+        problems.FIT_OPTIONS,
+        lightcurve=night,
+        mode=case,
+        seed=seed,
+        throw=False,
+        shape=shape or problems.FIT_OPTIONS["shape"],
+        periods=tuple((p * (1 + offset - width), p * (1 + offset + width)) for p in periods),
+        period_grid=tuple(grid),
+        starts_per_period=states,
+        n_refine=refine,
+    )
     start = time.perf_counter()
     result = fit_lightcurve(times, flux, sun, observer, **options)
     first_seconds = time.perf_counter() - start
@@ -214,17 +241,29 @@ def inversion(case, seed, width, grid, states, refine, compiled_run, offset=0.0,
     period_error = np.abs(recovered / periods - 1)
     held_out_rms = problems.held_out_rms(result, held_out)
     summary = {
-        "case": case, "seed": seed, "samples": len(times), "nights": 24, "starts": int(np.prod(grid)) * states,
-        "refined": refine, "search_width": width, "search_offset": offset, "period_grid": list(grid),
-        "first_call_seconds": first_seconds, "compiled_seconds": seconds,
-        "true_periods": periods.tolist(), "periods": recovered.tolist(),
+        "case": case,
+        "seed": seed,
+        "samples": len(times),
+        "nights": 24,
+        "starts": int(np.prod(grid)) * states,
+        "refined": refine,
+        "search_width": width,
+        "search_offset": offset,
+        "period_grid": list(grid),
+        "first_call_seconds": first_seconds,
+        "compiled_seconds": seconds,
+        "true_periods": periods.tolist(),
+        "periods": recovered.tolist(),
         "period_relative_error": period_error.tolist(),
         "period_sigma": (np.asarray(result.period_sigma) / periods).tolist(),
-        "true_inertia": inertia.tolist(), "inertia": np.asarray(result.inertia).tolist(),
+        "true_inertia": inertia.tolist(),
+        "inertia": np.asarray(result.inertia).tolist(),
         "inertia_relative_error": np.abs(np.sort(np.asarray(result.inertia)) / inertia - 1).tolist(),
-        "energy_ratio": result.energy_ratio, "long_axis_mode": result.long_axis_mode,
+        "energy_ratio": result.energy_ratio,
+        "long_axis_mode": result.long_axis_mode,
         "fit_rms": float(np.sqrt(np.mean(np.asarray(result.residuals) ** 2))),
-        "held_out_rms": held_out_rms, "noise": problems.NOISE,
+        "held_out_rms": held_out_rms,
+        "noise": problems.NOISE,
         "refine_costs": sorted(float(c) for c in np.asarray(result.refine_costs)),
         # Recovered: both periods to 1e-4 and the held-out nights within 1.2 times the noise.
         "recovered": bool(np.all(period_error < 1e-4) and held_out_rms < 1.2 * problems.NOISE),
@@ -253,11 +292,13 @@ def plot(path, result, data, periods):
         key = (round(p_psi, 9), round(p_phi, 9))
         keys[key] = min(keys.get(key, math.inf), cost)
     points = np.array([(a, b, c) for (a, b), c in keys.items()])
-    scatter = landscape_axis.scatter(points[:, 0] * 24, points[:, 1] * 24, c=np.log10(points[:, 2]),
-                                     cmap="viridis", s=60)
+    scatter = landscape_axis.scatter(
+        points[:, 0] * 24, points[:, 1] * 24, c=np.log10(points[:, 2]), cmap="viridis", s=60
+    )
     landscape_axis.plot(periods[0] * 24, periods[1] * 24, "r+", ms=14, label="truth")
-    landscape_axis.plot(np.asarray(result.periods)[0] * 24, np.asarray(result.periods)[1] * 24, "kx", ms=10,
-                        label="fit")
+    landscape_axis.plot(
+        np.asarray(result.periods)[0] * 24, np.asarray(result.periods)[1] * 24, "kx", ms=10, label="fit"
+    )
     landscape_axis.set_xlabel("P_psi (h)")
     landscape_axis.set_ylabel("P_phi (h)")
     landscape_axis.set_title("search: best start cost per period pair")
@@ -278,13 +319,22 @@ def main():
     parser.add_argument("--states", type=int, default=128)
     parser.add_argument("--refine", type=int, default=32)
     parser.add_argument("--width", type=float, default=0.01)
-    parser.add_argument("--offset", type=float, default=0.0023,
-                        help="the ranges' centre relative to the true periods (the truth off the grid)")
+    parser.add_argument(
+        "--offset",
+        type=float,
+        default=0.0023,
+        help="the ranges' centre relative to the true periods (the truth off the grid)",
+    )
     parser.add_argument("--forward-only", action="store_true", help="part 1 alone, float32 too (module docstring)")
     arguments = parser.parse_args()
-    machine = {"backend": jax.default_backend(), "device": str(jax.devices()[0]),
-               "device_kind": jax.devices()[0].device_kind, "cpus": os.cpu_count(),
-               "platform": platform.platform(), "jax": jax.__version__}
+    machine = {
+        "backend": jax.default_backend(),
+        "device": str(jax.devices()[0]),
+        "device_kind": jax.devices()[0].device_kind,
+        "cpus": os.cpu_count(),
+        "platform": platform.platform(),
+        "jax": jax.__version__,
+    }
     if arguments.quick:
         # The SAM case of tests/test_lightcurve_fit.py with a small search and the ellipsoid model:
         # the script runs, not the inversion's quality (the tests measure that).
@@ -303,15 +353,28 @@ def main():
     for case in arguments.cases:
         for seed in arguments.seeds:
             compiled_run = not arguments.quick and seed == arguments.seeds[0]
-            summary, result, data, periods = inversion(case, seed, arguments.width, arguments.grid,
-                                                       arguments.states, arguments.refine, compiled_run,
-                                                       arguments.offset, "ellipsoid" if arguments.quick else None)
+            summary, result, data, periods = inversion(
+                case,
+                seed,
+                arguments.width,
+                arguments.grid,
+                arguments.states,
+                arguments.refine,
+                compiled_run,
+                arguments.offset,
+                "ellipsoid" if arguments.quick else None,
+            )
             print(json.dumps(summary), flush=True)
             runs.append(summary)
             if case == arguments.cases[0] and seed == arguments.seeds[0]:
                 plot(arguments.output_dir / "lightcurve.png", result, data, periods)
-    output = {"machine": machine, "quick": arguments.quick, "forward": throughput, "inversions": runs,
-              "recovered": f"{sum(run['recovered'] for run in runs)} of {len(runs)}"}
+    output = {
+        "machine": machine,
+        "quick": arguments.quick,
+        "forward": throughput,
+        "inversions": runs,
+        "recovered": f"{sum(run['recovered'] for run in runs)} of {len(runs)}",
+    }
     (arguments.output_dir / "lightcurve.json").write_text(json.dumps(output, indent=1) + "\n")
 
 

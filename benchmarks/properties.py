@@ -18,8 +18,8 @@ from pathlib import Path
 
 import jax
 import numpy as np
-from hypothesis import HealthCheck, given, settings
-from hypothesis import strategies as st
+from hypothesis import given, HealthCheck, settings, strategies as st
+
 
 ROOT = Path(__file__).resolve().parent.parent
 DEFAULT_OUTPUT = ROOT / "benchmarks" / "results" / "properties.json"
@@ -43,16 +43,18 @@ def main():
                 worst[name] = {"ratio": float(value), "case": [np.asarray(a).tolist() for a in case]}
 
     @settings(max_examples=args.n, deadline=None, database=None, suppress_health_check=list(HealthCheck))
-    @given(properties.cases(), st.lists(st.integers(0, 23), min_size=properties.BATCH, max_size=properties.BATCH),
-           st.lists(st.integers(-10, 10), min_size=properties.BATCH, max_size=properties.BATCH))
+    @given(
+        properties.cases(),
+        st.lists(st.integers(0, 23), min_size=properties.BATCH, max_size=properties.BATCH),
+        st.lists(st.integers(-10, 10), min_size=properties.BATCH, max_size=properties.BATCH),
+    )
     def explore(case, permutations, exponents):
         record(properties.invariant_errors(case), case)
         record(properties.group_errors(case), case)
         record(properties.permutation_errors(case, permutations, 2.0 ** np.array(exponents)), case)
 
     explore()
-    tolerances = {**properties.INVARIANT_TOLERANCE, **properties.GROUP_TOLERANCE,
-                  **properties.PERMUTATION_TOLERANCE}
+    tolerances = {**properties.INVARIANT_TOLERANCE, **properties.GROUP_TOLERANCE, **properties.PERMUTATION_TOLERANCE}
     print(f"{'property':<18} {'worst':>10} {'tolerance':>10}   ({args.n} examples of {properties.BATCH} bodies)")
     for name, entry in worst.items():
         print(f"{name:<18} {entry['ratio']:10.3g} {tolerances[name]:10.3g}")

@@ -51,6 +51,7 @@ import sys
 import time
 from pathlib import Path
 
+
 # SETUP_COST_ALL_CORES=1: the subprocess that measures the one-body latency on every core.
 if hasattr(os, "sched_setaffinity"):
     if os.environ.get("SETUP_COST_ALL_CORES") == "1":
@@ -61,19 +62,25 @@ os.environ.setdefault("XLA_FLAGS", "--xla_cpu_multi_thread_eigen=false")
 
 import jax  # noqa: E402
 
+
 jax.config.update("jax_enable_x64", True)
 
 import jax.numpy as jnp  # noqa: E402
 import numpy as np  # noqa: E402
 
+
 HERE = Path(__file__).resolve().parent
 sys.path.insert(0, str(HERE))
-from throughput import best_time as _best_time  # noqa: E402
-from throughput import bodies, compile_time  # noqa: E402
 from _scipy_closed_form import ScipyFreeRigidBody  # noqa: E402
+from throughput import (  # noqa: E402
+    best_time as _best_time,  # noqa: E402
+    bodies,
+    compile_time,
+)
 from work_precision import diffrax_function  # noqa: E402
 
-from frbjax import FreeRigidBody, fit_attitude, free_flow  # noqa: E402
+from frbjax import fit_attitude, free_flow, FreeRigidBody  # noqa: E402
+
 
 # The figures of frbjax 0.1.0, before the constructor work (one core, same machine class).
 BEFORE = {
@@ -116,8 +123,11 @@ def kernels(compiled):
     this machine class, whatever its size) and launches each one per call, so that the count, rather
     than the arithmetic, sets compile time and one-body latency."""
     text = compiled.as_text()
-    return {"fusions": text.count(" fusion("), "conditionals": text.count(" conditional("),
-            "while_loops": text.count(" while(")}
+    return {
+        "fusions": text.count(" fusion("),
+        "conditionals": text.count(" conditional("),
+        "while_loops": text.count(" while("),
+    }
 
 
 def best_time(call, repeats, min_total=0.2):
@@ -148,11 +158,19 @@ def prebuilt(options, rng):
     times_np = np.asarray(times)
     scipy_s = _best_time(lambda: peer.quaternion(times_np), options.repeats)
     evaluations = rows * few
-    return {"bodies": n, "series_ns": floor_s / n * 1e9, "scalar_time_ns": scalar_s / n * 1e9,
-            "ratio_scalar_time": scalar_s / floor_s, "vmap_rows": rows, "vmap_bodies": few,
-            "vmap_ns": mapped_s / evaluations * 1e9, "array_ns": array_s / evaluations * 1e9,
-            "scipy_ns": scipy_s / evaluations * 1e9, "ratio_vmap_rows": mapped_s / array_s,
-            "scipy_over_vmap_rows": scipy_s / mapped_s}
+    return {
+        "bodies": n,
+        "series_ns": floor_s / n * 1e9,
+        "scalar_time_ns": scalar_s / n * 1e9,
+        "ratio_scalar_time": scalar_s / floor_s,
+        "vmap_rows": rows,
+        "vmap_bodies": few,
+        "vmap_ns": mapped_s / evaluations * 1e9,
+        "array_ns": array_s / evaluations * 1e9,
+        "scipy_ns": scipy_s / evaluations * 1e9,
+        "ratio_vmap_rows": mapped_s / array_s,
+        "scipy_over_vmap_rows": scipy_s / mapped_s,
+    }
 
 
 def construction(options, rng):
@@ -166,8 +184,12 @@ def construction(options, rng):
     both = jax.jit(lambda i, m, a, t: free_flow(i, m, a, t)[1])
     evaluation_s = best_time(lambda: evaluate(built, t), options.repeats)
     both_s = best_time(lambda: both(inertia, momentum, attitude, t), options.repeats)
-    return {"bodies": n, "evaluation_ns": evaluation_s / n * 1e9, "construction_and_evaluation_ns": both_s / n * 1e9,
-            "ratio": both_s / evaluation_s}
+    return {
+        "bodies": n,
+        "evaluation_ns": evaluation_s / n * 1e9,
+        "construction_and_evaluation_ns": both_s / n * 1e9,
+        "ratio": both_s / evaluation_s,
+    }
 
 
 def state_at_final_time(options, rng):
@@ -181,10 +203,19 @@ def state_at_final_time(options, rng):
     momentum_frbjax, attitude_frbjax = frbjax_state(inertia, momentum, attitude, final)
     momentum_diffrax, attitude_diffrax, _, ok = dopri8(inertia, momentum, attitude, final, 1e-12)
     # Attitude difference up to the sign of q (diffrax integrates q directly: the same sign).
-    difference = max(float(jnp.max(jnp.abs(momentum_frbjax - momentum_diffrax[:, 0]))),
-                     float(jnp.max(jnp.abs(attitude_frbjax - attitude_diffrax[:, 0]))))
-    return {"bodies": n, "T": 10.0, "frbjax_s": frbjax_s, "diffrax_dopri8_1e-12_s": diffrax_s,
-            "ratio": diffrax_s / frbjax_s, "max_difference": difference, "diffrax_ok": bool(jnp.all(ok))}
+    difference = max(
+        float(jnp.max(jnp.abs(momentum_frbjax - momentum_diffrax[:, 0]))),
+        float(jnp.max(jnp.abs(attitude_frbjax - attitude_diffrax[:, 0]))),
+    )
+    return {
+        "bodies": n,
+        "T": 10.0,
+        "frbjax_s": frbjax_s,
+        "diffrax_dopri8_1e-12_s": diffrax_s,
+        "ratio": diffrax_s / frbjax_s,
+        "max_difference": difference,
+        "diffrax_ok": bool(jnp.all(ok)),
+    }
 
 
 def one_body_case(rng):
@@ -204,20 +235,27 @@ def one_body(options, rng):
     from frbjax import _kernel
 
     row = {"trivial_jit_us": trivial_s * 1e6, "one_kernel_regions": _kernel.available()}
-    programs = {"free_flow": lambda i, m, a, t: free_flow(i, m, a, t)[1],
-                "FreeRigidBody": lambda i, m, a, t: FreeRigidBody(i, m, a).quaternion(t)}
+    programs = {
+        "free_flow": lambda i, m, a, t: free_flow(i, m, a, t)[1],
+        "FreeRigidBody": lambda i, m, a, t: FreeRigidBody(i, m, a).quaternion(t),
+    }
     for name, function in programs.items():
         # Compile times first (a later compile of the same program is a cache hit), and the kernels
         # from that compile: jit does not expose the executable it runs, and timing a
         # jax.stages.Compiled instead adds about 3 us of Python dispatch.
         compiled, compile_s = compile_time(function, inertia, momentum, attitude, t)
         _, gradient_s = compile_time(
-            jax.grad(lambda i, m, a, t: jnp.sum(function(i, m, a, t)), argnums=(0, 1)), inertia, momentum, attitude, t)
+            jax.grad(lambda i, m, a, t: jnp.sum(function(i, m, a, t)), argnums=(0, 1)), inertia, momentum, attitude, t
+        )
         motion = jax.jit(function)
         motion_s = best_time(lambda: motion(inertia, momentum, attitude, t), max(options.repeats, 200), min_total=0.5)
-        row[name] = {"us": motion_s * 1e6, "ratio": motion_s / trivial_s, "compile_s": compile_s,
-                     "gradient_compile_s": gradient_s,
-                     "kernels": kernels(compiled)}
+        row[name] = {
+            "us": motion_s * 1e6,
+            "ratio": motion_s / trivial_s,
+            "compile_s": compile_s,
+            "gradient_compile_s": gradient_s,
+            "kernels": kernels(compiled),
+        }
     row["ratio"] = row["free_flow"]["ratio"]
     return row
 
@@ -226,10 +264,15 @@ def latency(repeats=2000):
     """``one_body``'s latency pair alone (best single call: dispatch, execution, wait), in us."""
     arguments, trivial = one_body_case(np.random.default_rng(0))
     motion = jax.jit(lambda i, m, a, t: free_flow(i, m, a, t)[1])
-    times = {name: best_time(lambda function=function: function(*arguments), repeats) * 1e6
-             for name, function in (("trivial_jit_us", trivial), ("free_flow_us", motion))}
-    return {**times, "ratio": times["free_flow_us"] / times["trivial_jit_us"],
-            "cores": len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count()}
+    times = {
+        name: best_time(lambda function=function: function(*arguments), repeats) * 1e6
+        for name, function in (("trivial_jit_us", trivial), ("free_flow_us", motion))
+    }
+    return {
+        **times,
+        "ratio": times["free_flow_us"] / times["trivial_jit_us"],
+        "cores": len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count(),
+    }
 
 
 def latency_elsewhere(arguments, all_cores):
@@ -237,8 +280,13 @@ def latency_elsewhere(arguments, all_cores):
     import subprocess
 
     environment = dict(os.environ, SETUP_COST_ALL_CORES="1" if all_cores else "0")
-    output = subprocess.run([sys.executable, __file__, "--latency-only", *arguments], env=environment,
-                            capture_output=True, text=True, check=True).stdout
+    output = subprocess.run(
+        [sys.executable, __file__, "--latency-only", *arguments],
+        env=environment,
+        capture_output=True,
+        text=True,
+        check=True,
+    ).stdout
     return json.loads(output.strip().splitlines()[-1])
 
 
@@ -253,9 +301,13 @@ def calgo903_example1(options, rng):
     program = calgo.example1_program(problem, steps)
     momentum, attitude = problem.initial_state()
     seconds = best_time(lambda: program(momentum, attitude), 3, min_total=0.0)
-    return {"steps": steps, "seconds": seconds, "fortran_seconds": FORTRAN_SECONDS * steps / problem.steps,
-            "ratio": seconds / (FORTRAN_SECONDS * steps / problem.steps),
-            "xla_flags": os.environ.get("XLA_FLAGS", "")}
+    return {
+        "steps": steps,
+        "seconds": seconds,
+        "fortran_seconds": FORTRAN_SECONDS * steps / problem.steps,
+        "ratio": seconds / (FORTRAN_SECONDS * steps / problem.steps),
+        "xla_flags": os.environ.get("XLA_FLAGS", ""),
+    }
 
 
 def eager(options, rng):
@@ -267,8 +319,13 @@ def eager(options, rng):
     eager_s = _best_time(lambda: FreeRigidBody(inertia, momentum, attitude).quaternion(t), options.repeats)
     jitted = jax.jit(lambda i, m, a, t: FreeRigidBody(i, m, a).quaternion(t))
     jitted_s = best_time(lambda: jitted(inertia, momentum, attitude, t), options.repeats)
-    return {"times": 1000, "first_call_s": first_s, "eager_ms": eager_s * 1e3, "jitted_ms": jitted_s * 1e3,
-            "ratio": eager_s / jitted_s}
+    return {
+        "times": 1000,
+        "first_call_s": first_s,
+        "eager_ms": eager_s * 1e3,
+        "jitted_ms": jitted_s * 1e3,
+        "ratio": eager_s / jitted_s,
+    }
 
 
 def compile_times(options, rng):
@@ -305,8 +362,12 @@ def fit_first_call(options, rng, diffrax_value_and_grad_s):
     start = time.perf_counter()
     jax.block_until_ready(fit_attitude(times, observed).inertia)
     first_s = time.perf_counter() - start
-    return {"samples": samples, "first_call_s": first_s, "diffrax_value_and_grad_compile_s": diffrax_value_and_grad_s,
-            "ratio": first_s / diffrax_value_and_grad_s}
+    return {
+        "samples": samples,
+        "first_call_s": first_s,
+        "diffrax_value_and_grad_compile_s": diffrax_value_and_grad_s,
+        "ratio": first_s / diffrax_value_and_grad_s,
+    }
 
 
 def gpu_construction(options, rng):
@@ -326,8 +387,11 @@ def main(argv=None):
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument("--output-dir", default=str(HERE / "results"))
     parser.add_argument("--latency-only", action="store_true", help="print latency() as one JSON line")
-    parser.add_argument("--no-async-dispatch", action="store_true",
-                        help="with --latency-only: jax_cpu_enable_async_dispatch off (programs run inline)")
+    parser.add_argument(
+        "--no-async-dispatch",
+        action="store_true",
+        help="with --latency-only: jax_cpu_enable_async_dispatch off (programs run inline)",
+    )
     options = parser.parse_args(argv)
     if options.latency_only:
         if options.no_async_dispatch:
@@ -336,13 +400,20 @@ def main(argv=None):
         return
     rng = np.random.default_rng(options.seed)
     # First, while this process has started no XLA thread that could share the other cores.
-    elsewhere = {"all_cores": latency_elsewhere([], all_cores=True),
-                 "one_core_async_dispatch_off": latency_elsewhere(["--no-async-dispatch"], all_cores=False)}
+    elsewhere = {
+        "all_cores": latency_elsewhere([], all_cores=True),
+        "one_core_async_dispatch_off": latency_elsewhere(["--no-async-dispatch"], all_cores=False),
+    }
     rows = {}
-    for name, measure in (("prebuilt", prebuilt), ("construction", construction),
-                          ("state_at_T", state_at_final_time), ("one_body", one_body),
-                          ("calgo903_example1", calgo903_example1), ("eager", eager),
-                          ("compile", compile_times)):
+    for name, measure in (
+        ("prebuilt", prebuilt),
+        ("construction", construction),
+        ("state_at_T", state_at_final_time),
+        ("one_body", one_body),
+        ("calgo903_example1", calgo903_example1),
+        ("eager", eager),
+        ("compile", compile_times),
+    ):
         rows[name] = measure(options, rng)
         if name == "one_body":
             rows[name]["elsewhere"] = elsewhere
@@ -365,16 +436,24 @@ def main(argv=None):
         "compile_value_and_grad": rows["compile"]["ratio_value_and_grad"],
         "fit_first_call": rows["fit_first_call"]["ratio"],
     }
-    met = {name: (ratios[name] >= TARGETS[name]) if name in AT_LEAST else (ratios[name] <= TARGETS[name])
-           for name in ratios}
+    met = {
+        name: (ratios[name] >= TARGETS[name]) if name in AT_LEAST else (ratios[name] <= TARGETS[name])
+        for name in ratios
+    }
     for name in ratios:
-        print(f"{name:24s} before {BEFORE[name]:9.3g}  now {ratios[name]:9.3g}  target "
-              f"{'>=' if name in AT_LEAST else '<='} {TARGETS[name]:g}  {'met' if met[name] else 'MISSED'}")
+        print(
+            f"{name:24s} before {BEFORE[name]:9.3g}  now {ratios[name]:9.3g}  target "
+            f"{'>=' if name in AT_LEAST else '<='} {TARGETS[name]:g}  {'met' if met[name] else 'MISSED'}"
+        )
     result = {
         "script": "benchmarks/setup_cost.py",
         "quick": options.quick,
-        "machine": {"platform": platform.platform(), "cpus_used": 1, "jax": jax.__version__,
-                    "backend": jax.default_backend()},
+        "machine": {
+            "platform": platform.platform(),
+            "cpus_used": 1,
+            "jax": jax.__version__,
+            "backend": jax.default_backend(),
+        },
         "rows": rows,
         "ratios": ratios,
         "before": BEFORE,
@@ -395,6 +474,7 @@ def plot(result, path):
     import matplotlib.pyplot as plt
 
     names = list(result["ratios"])
+
     # Every row as "how far from its target": ratio / target (>= 1 missed), state_at_T inverted.
     def distance(name, ratio):
         target = result["targets"][name]
@@ -404,7 +484,13 @@ def plot(result, path):
     now = [distance(name, result["ratios"][name]) for name in names]
     positions = np.arange(len(names))
     figure, axes = plt.subplots(figsize=(9, 4.5))
-    axes.barh(positions + 0.2, before, height=0.4, color="0.75", label="before (frbjax 0.1.0; later rows: the release before them)")
+    axes.barh(
+        positions + 0.2,
+        before,
+        height=0.4,
+        color="0.75",
+        label="before (frbjax 0.1.0; later rows: the release before them)",
+    )
     axes.barh(positions - 0.2, now, height=0.4, color="tab:blue", label="now")
     axes.axvline(1.0, color="k", lw=1)
     axes.set_xscale("log")

@@ -3,7 +3,8 @@
 For each function: ns per point for frbjax (float64, jit-compiled, after warm-up, best of a few
 repeats, ``block_until_ready``) and for scipy.special on the same points in the same run, their
 ratio, the jit compile time (lower + compile), and the largest difference between the two results
-(relative to max(1, |scipy|), a sanity check that both computed the same thing).  Also the compile time of ellippiinc together
+(relative to max(1, |scipy|), a sanity check that both computed the same thing).  Also the compile time of
+ellippiinc together
 with its gradient (jax.grad of the sum over a batch with respect to phi, m and n).
 
 scipy has no incomplete Pi; it is timed as the closed form through Carlson integrals,
@@ -26,6 +27,7 @@ from pathlib import Path
 
 import jax
 
+
 jax.config.update("jax_enable_x64", True)
 
 import jax.numpy as jnp  # noqa: E402
@@ -33,8 +35,10 @@ import numpy as np  # noqa: E402
 import scipy  # noqa: E402
 import scipy.special as sc  # noqa: E402
 
+
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 import frbjax.special as fs  # noqa: E402
+
 
 DEFAULT_OUTPUT = Path(__file__).resolve().parent / "results" / "special.json"
 
@@ -107,8 +111,7 @@ def bench_function(name, args, repeats):
     # Same function on the same points: the largest difference, relative to max(1, |scipy|).
     pairs = zip(ours_out, theirs_out) if isinstance(ours_out, tuple) else [(ours_out, theirs_out)]
     with np.errstate(all="ignore"):
-        diff = max(float(np.nanmax(np.abs(np.asarray(a) - b) / np.maximum(1.0, np.abs(b))))
-                   for a, b in pairs)
+        diff = max(float(np.nanmax(np.abs(np.asarray(a) - b) / np.maximum(1.0, np.abs(b)))) for a, b in pairs)
     size = args[0].size
     return {
         "function": name,
@@ -133,8 +136,11 @@ def bench_gradient(args, repeats):
     compile_s = time.perf_counter() - start
     jax.block_until_ready(compiled(phi, m, n))
     run = best_time(lambda: jax.block_until_ready(compiled(phi, m, n)), repeats)
-    return {"function": "ellippiinc value_and_grad (phi, m, n)", "compile_s": compile_s,
-            "frbjax_ns_per_point": run / phi.size * 1e9}
+    return {
+        "function": "ellippiinc value_and_grad (phi, m, n)",
+        "compile_s": compile_s,
+        "frbjax_ns_per_point": run / phi.size * 1e9,
+    }
 
 
 def main(argv=None):
@@ -151,23 +157,29 @@ def main(argv=None):
     grid = points(rng, size)
     names = options.only or list(grid)
     rows = []
-    header = (f"{'function':<12} {'frbjax ns/pt':>13} {'scipy ns/pt':>12} {'ratio':>7} "
-              f"{'compile s':>10} {'max diff':>9}")
-    print(f"frbjax.special vs scipy.special {scipy.__version__}, {size} float64 points, "
-          f"best of {repeats}, device {jax.devices()[0]}")
+    header = f"{'function':<12} {'frbjax ns/pt':>13} {'scipy ns/pt':>12} {'ratio':>7} {'compile s':>10} {'max diff':>9}"
+    print(
+        f"frbjax.special vs scipy.special {scipy.__version__}, {size} float64 points, "
+        f"best of {repeats}, device {jax.devices()[0]}"
+    )
     print(header)
     print("-" * len(header))
     for name in names:
         row = bench_function(name, grid[name], repeats)
         rows.append(row)
-        print(f"{name:<12} {row['frbjax_ns_per_point']:>13.1f} {row['scipy_ns_per_point']:>12.1f} "
-              f"{row['ratio_frbjax_over_scipy']:>7.2f} {row['compile_s']:>10.2f} "
-              f"{row['max_diff_vs_scipy']:>9.1e}", flush=True)
+        print(
+            f"{name:<12} {row['frbjax_ns_per_point']:>13.1f} {row['scipy_ns_per_point']:>12.1f} "
+            f"{row['ratio_frbjax_over_scipy']:>7.2f} {row['compile_s']:>10.2f} "
+            f"{row['max_diff_vs_scipy']:>9.1e}",
+            flush=True,
+        )
     gradient = None
     if not options.only or "ellippiinc" in names:
         gradient = bench_gradient(grid["ellippiinc"], repeats)
-        print(f"ellippiinc + grad w.r.t. (phi, m, n): compile {gradient['compile_s']:.2f} s, "
-              f"{gradient['frbjax_ns_per_point']:.1f} ns per point (value and gradient)")
+        print(
+            f"ellippiinc + grad w.r.t. (phi, m, n): compile {gradient['compile_s']:.2f} s, "
+            f"{gradient['frbjax_ns_per_point']:.1f} ns per point (value and gradient)"
+        )
     result = {
         "points": size,
         "repeats": repeats,

@@ -61,6 +61,7 @@ from pathlib import Path
 import mpmath
 import numpy as np
 
+
 ROOT = Path(__file__).resolve().parent.parent
 RESULTS = ROOT / "benchmarks" / "results"
 DPS = 60  # digits of the reference (sweeps lose up to ~16 digits to cancellation, ~6 to period reduction)
@@ -131,8 +132,11 @@ class Reference:
         # Uniform rotation (Omega parallel to L, L = 0 included), decided exactly in rationals.
         exact_I, exact_L = [Fraction(x) for x in inertia], [Fraction(x) for x in momentum]
         w = [a / b for a, b in zip(exact_L, exact_I)]
-        cross = [exact_L[1] * w[2] - exact_L[2] * w[1], exact_L[2] * w[0] - exact_L[0] * w[2],
-                 exact_L[0] * w[1] - exact_L[1] * w[0]]
+        cross = [
+            exact_L[1] * w[2] - exact_L[2] * w[1],
+            exact_L[2] * w[0] - exact_L[0] * w[2],
+            exact_L[0] * w[1] - exact_L[1] * w[0],
+        ]
         self._digits_lost = 0
         if all(x == 0 for x in cross):
             self.regime = "uniform"
@@ -211,8 +215,11 @@ class Reference:
             reduced = u - 2 * turns * self.K
             sn, cn, dn = (mpmath.ellipfun(kind, reduced, m=self.m) for kind in ("sn", "cn", "dn"))
             phi = mpmath.atan2(sn, cn)
-            H = (turns * self.H_half_period + mpmath.ellippi(self.n, phi, self.m) / self.alpha
-                 - self.arc * mpmath.atan2(mpmath.sqrt(self.alpha + self.beta) * sn, mpmath.sqrt(self.alpha) * cn))
+            H = (
+                turns * self.H_half_period
+                + mpmath.ellippi(self.n, phi, self.m) / self.alpha
+                - self.arc * mpmath.atan2(mpmath.sqrt(self.alpha + self.beta) * sn, mpmath.sqrt(self.alpha) * cn)
+            )
             parity = -1 if int(turns) % 2 else 1
             sn, cn = parity * sn, parity * cn
             s = self.s
@@ -320,8 +327,14 @@ def check_reference(inertia, momentum, attitude, times, dps=30):
             L_ref, q_ref = body.at(t)
             worst_L = max(worst_L, max(abs(mpmath.mpf(a) - b) for a, b in zip(L_text[k], L_ref)) / body.norm)
             worst_q = max(worst_q, max(abs(mpmath.mpf(a) - b) for a, b in zip(q_text[k], q_ref)))
-    return dict(regime=body.regime, inertia=list(map(float, inertia)), momentum=list(map(float, momentum)),
-                times=list(map(float, times)), difference_L=float(worst_L), difference_q=float(worst_q))
+    return dict(
+        regime=body.regime,
+        inertia=list(map(float, inertia)),
+        momentum=list(map(float, momentum)),
+        times=list(map(float, times)),
+        difference_L=float(worst_L),
+        difference_q=float(worst_q),
+    )
 
 
 def _check_task(args):
@@ -382,9 +395,18 @@ def build_cases(quick=False, seed=0):
         norm = float(np.linalg.norm(momentum))
         attitude = _unit(rng.normal(size=4))
         times = [float(tau / norm) for tau in taus]
-        cases.append(dict(sweep=sweep, series=series, x=float(x), inertia=[float(v) for v in inertia],
-                          momentum=momentum.tolist(), attitude=attitude.tolist(), times=times,
-                          taus=[float(tau) for tau in taus]))
+        cases.append(
+            dict(
+                sweep=sweep,
+                series=series,
+                x=float(x),
+                inertia=[float(v) for v in inertia],
+                momentum=momentum.tolist(),
+                attitude=attitude.tolist(),
+                times=times,
+                taus=[float(tau) for tau in taus],
+            )
+        )
 
     taus = (1.0, -10.0, 100.0, -1000.0)
     # (a) |d I2 - 1| from 1e-1 to 1e-16 on both sides of the separatrix, I = (1, 2, 3), L2 = 0.3.
@@ -395,8 +417,14 @@ def build_cases(quick=False, seed=0):
             signs = tuple(rng.choice([-1, 1], 3))
             momentum = near_separatrix(inertia, side * 10.0**-k, 0.3, signs)
             offset = separatrix_offset(inertia, momentum)
-            add("separatrix", "d I2 > 1 (around I1)" if side > 0 else "d I2 < 1 (around I3)", abs(offset),
-                inertia, momentum, taus)
+            add(
+                "separatrix",
+                "d I2 > 1 (around I1)" if side > 0 else "d I2 < 1 (around I3)",
+                abs(offset),
+                inertia,
+                momentum,
+                taus,
+            )
     # exactly on the separatrix: I = (1, 1.5, 3), L = (1, 0.3, 1) has d I2 - 1 = 0 exactly.
     add("separatrix", "d I2 = 1 exactly", 0.0, (1.0, 1.5, 3.0), (1.0, 0.3, 1.0), taus)
 
@@ -404,11 +432,20 @@ def build_cases(quick=False, seed=0):
     # so d I2 - 1 ~ distance^2 and the phase u0 ~ K(m) is large; short and long times.
     exponents = (1, 8, 15) if quick else range(1, 16)
     for k in exponents:
-        for direction, series in (((0.6, 0.0, 0.8), "d I2 > 1 (around I1)"), ((0.3, 0.0, 0.95), "d I2 < 1 (around I3)")):
+        for direction, series in (
+            ((0.6, 0.0, 0.8), "d I2 > 1 (around I1)"),
+            ((0.3, 0.0, 0.95), "d I2 < 1 (around I3)"),
+        ):
             signs = rng.choice([-1.0, 1.0], 3)
             momentum = signs * (np.array([0.0, 1.0, 0.0]) + 10.0**-k * _unit(direction))
-            add("saddle", series, math.hypot(momentum[0], momentum[2]) / np.linalg.norm(momentum),
-                inertia, momentum, (0.1, -1.0, 10.0, -100.0))
+            add(
+                "saddle",
+                series,
+                math.hypot(momentum[0], momentum[2]) / np.linalg.norm(momentum),
+                inertia,
+                momentum,
+                (0.1, -1.0, 10.0, -100.0),
+            )
 
     # (b) relative gaps (I2 - I1)/I1 and (I3 - I2)/I2 from 1e-1 down to one ulp.
     exponents = (1, 8, 16) if quick else range(1, 17)
@@ -483,14 +520,14 @@ def frbjax_values(cases):
     columns = [np.concatenate([a, np.repeat(a[:1], padded - total, axis=0)]) for a in columns]
     L, q = [], []
     for start in range(0, padded, CHUNK):
-        values = evaluate(*(jnp.asarray(a[start:start + CHUNK]) for a in columns))
+        values = evaluate(*(jnp.asarray(a[start : start + CHUNK]) for a in columns))
         L.append(np.asarray(values[0]))
         q.append(np.asarray(values[1]))
     L, q = np.concatenate(L)[:total], np.concatenate(q)[:total]
     out, k = [], 0
     for c in cases:
         n = len(c["times"])
-        out.append((L[k:k + n], q[k:k + n]))
+        out.append((L[k : k + n], q[k : k + n]))
         k += n
     return out
 
@@ -499,9 +536,14 @@ def frbjax_values(cases):
 # Summary, plots, main.
 
 SWEEPS = ("separatrix", "saddle", "gaps", "time", "ratios", "momentum")
-X_LABELS = dict(separatrix="|d I2 - 1| (exact, of the float64 inputs)",
-                saddle="distance of L/|L| from the middle axis", gaps="relative inertia gap",
-                time="|L| t", ratios="I3 / I1", momentum="|L|")
+X_LABELS = dict(
+    separatrix="|d I2 - 1| (exact, of the float64 inputs)",
+    saddle="distance of L/|L| from the middle axis",
+    gaps="relative inertia gap",
+    time="|L| t",
+    ratios="I3 / I1",
+    momentum="|L|",
+)
 
 
 def summarize(cases):
@@ -520,12 +562,17 @@ def summarize(cases):
                     if best is None or ratio > best[0]:
                         best = (ratio, c, k)
                 ratio, c, k = best
-                worst[name] = dict(value=ratio, series=c["series"], x=c["x"], tau=c["taus"][k],
-                                   error=c[f"error_{quantity}"][k], floor=c[f"floor_{quantity}"][k])
+                worst[name] = dict(
+                    value=ratio,
+                    series=c["series"],
+                    x=c["x"],
+                    tau=c["taus"][k],
+                    error=c[f"error_{quantity}"][k],
+                    floor=c[f"floor_{quantity}"][k],
+                )
             worst["max_error"] = max(c[f"error_{quantity}"][k] for c, k in rows)
             entry[quantity] = worst
-        entry["lift_sign_errors"] = sum(
-            1 for c, k in rows if c["error_q"][k] > 0.5 and c["error_q_flipped"][k] < 1e-6)
+        entry["lift_sign_errors"] = sum(1 for c, k in rows if c["error_q"][k] > 0.5 and c["error_q_flipped"][k] < 1e-6)
         summary[sweep] = entry
     growth = {}
     for c in cases:
@@ -535,10 +582,14 @@ def summarize(cases):
         late = taus >= 1e2
         slope = float(np.polyfit(np.log10(taus[late]), np.log10(np.maximum(errors[late], 1e-18)), 1)[0])
         periods = taus[-1] / c["period"] if c["period"] else None
-        growth[c["series"]] = dict(period=c["period"], periods_at_end=periods, error_q_at_end=float(errors[-1]),
-                                   floor_q_at_end=float(floors[-1]),
-                                   error_q_per_period=float(errors[-1] / periods) if periods else None,
-                                   loglog_slope_of_error_q_beyond_tau_100=slope)
+        growth[c["series"]] = dict(
+            period=c["period"],
+            periods_at_end=periods,
+            error_q_at_end=float(errors[-1]),
+            floor_q_at_end=float(floors[-1]),
+            error_q_per_period=float(errors[-1] / periods) if periods else None,
+            loglog_slope_of_error_q_beyond_tau_100=slope,
+        )
     summary["time"]["growth"] = growth
     return summary
 
@@ -609,13 +660,18 @@ def main(argv=None):
     cases = build_cases(args.quick, args.seed)
     values = frbjax_values(cases)
     frbjax_seconds = time.perf_counter() - start
-    print(f"{len(cases)} bodies, {sum(len(c['times']) for c in cases)} (body, time) pairs; "
-          f"frbjax {frbjax_seconds:.1f} s (with compilation)", flush=True)
+    print(
+        f"{len(cases)} bodies, {sum(len(c['times']) for c in cases)} (body, time) pairs; "
+        f"frbjax {frbjax_seconds:.1f} s (with compilation)",
+        flush=True,
+    )
 
     count = 3 if args.quick else PERTURBATIONS
     rng = np.random.default_rng(args.seed + 1)
-    tasks = [(c["inertia"], c["momentum"], c["attitude"], c["times"], L, q, perturbations(count, i))
-             for i, (c, (L, q)) in enumerate(zip(cases, values))]
+    tasks = [
+        (c["inertia"], c["momentum"], c["attitude"], c["times"], L, q, perturbations(count, i))
+        for i, (c, (L, q)) in enumerate(zip(cases, values))
+    ]
     checks = CHECKS[:2] if args.quick else CHECKS
     check_tasks = [(i, m, _unit(rng.normal(size=4)), t) for i, m, t in checks]
     import multiprocessing
@@ -630,32 +686,50 @@ def main(argv=None):
     summary = summarize(cases)
     elapsed = time.perf_counter() - start
 
-    print(f"reference checks against mpmath.odefun (30 digits): worst "
-          f"{max(max(r['difference_L'], r['difference_q']) for r in check_results):.1e}")
-    print(f"{'sweep':<11} {'q: err/floor':>12} {'err/max(floor,eps)':>19} {'max err':>9}   "
-          f"{'L: err/floor':>12} {'err/max(floor,eps)':>19} {'max err':>9}")
+    print(
+        f"reference checks against mpmath.odefun (30 digits): worst "
+        f"{max(max(r['difference_L'], r['difference_q']) for r in check_results):.1e}"
+    )
+    print(
+        f"{'sweep':<11} {'q: err/floor':>12} {'err/max(floor,eps)':>19} {'max err':>9}   "
+        f"{'L: err/floor':>12} {'err/max(floor,eps)':>19} {'max err':>9}"
+    )
     for sweep in SWEEPS:
         s = summary[sweep]
-        print(f"{sweep:<11} {s['q']['ratio']['value']:12.3g} {s['q']['ratio_eps']['value']:19.3g} "
-              f"{s['q']['max_error']:9.2g}   {s['L']['ratio']['value']:12.3g} "
-              f"{s['L']['ratio_eps']['value']:19.3g} {s['L']['max_error']:9.2g}")
+        print(
+            f"{sweep:<11} {s['q']['ratio']['value']:12.3g} {s['q']['ratio_eps']['value']:19.3g} "
+            f"{s['q']['max_error']:9.2g}   {s['L']['ratio']['value']:12.3g} "
+            f"{s['L']['ratio_eps']['value']:19.3g} {s['L']['max_error']:9.2g}"
+        )
     for name, g in summary["time"]["growth"].items():
         per = g["error_q_per_period"]
-        print(f"  time, {name}: q error {g['error_q_at_end']:.2g} (floor {g['floor_q_at_end']:.2g}) at |L| t = 1e6"
-              + (f", {g['periods_at_end']:.3g} periods, {per:.2g} per period" if per else "")
-              + f", slope {g['loglog_slope_of_error_q_beyond_tau_100']:.2f}")
+        print(
+            f"  time, {name}: q error {g['error_q_at_end']:.2g} (floor {g['floor_q_at_end']:.2g}) at |L| t = 1e6"
+            + (f", {g['periods_at_end']:.3g} periods, {per:.2g} per period" if per else "")
+            + f", slope {g['loglog_slope_of_error_q_beyond_tau_100']:.2f}"
+        )
     print(f"total {elapsed:.0f} s")
 
     stem = "stability_quick" if args.quick else "stability"
     args.output_dir.mkdir(parents=True, exist_ok=True)
     result = dict(
-        quick=args.quick, perturbations=count, reference_digits=DPS, seconds=elapsed,
-        frbjax_seconds_with_compilation=frbjax_seconds, jax_version=jax.__version__,
-        reference_checks=check_results, summary=summary, cases=cases,
+        quick=args.quick,
+        perturbations=count,
+        reference_digits=DPS,
+        seconds=elapsed,
+        frbjax_seconds_with_compilation=frbjax_seconds,
+        jax_version=jax.__version__,
+        reference_checks=check_results,
+        summary=summary,
+        cases=cases,
     )
     (args.output_dir / f"{stem}.json").write_text(json.dumps(result, indent=1))
-    plot(cases, summary, args.output_dir / f"{stem}.png",
-         f"frbjax float64: error against a {DPS}-digit reference and the 1-ulp conditioning floor")
+    plot(
+        cases,
+        summary,
+        args.output_dir / f"{stem}.png",
+        f"frbjax float64: error against a {DPS}-digit reference and the 1-ulp conditioning floor",
+    )
     return result
 
 

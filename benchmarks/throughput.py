@@ -35,11 +35,13 @@ import tempfile
 import time
 from pathlib import Path
 
+
 if __name__ == "__main__" and "--worker" in sys.argv and not shutil.which("taskset"):
     # No taskset on this system: pin the one-core worker before XLA starts its threads.
     os.sched_setaffinity(0, {sorted(os.sched_getaffinity(0))[0]})
 
 import jax  # noqa: E402
+
 
 jax.config.update("jax_enable_x64", True)
 
@@ -47,12 +49,14 @@ import jax.numpy as jnp  # noqa: E402
 import numpy as np  # noqa: E402
 import scipy  # noqa: E402
 
+
 HERE = Path(__file__).resolve().parent
 sys.path.insert(0, str(HERE))
 sys.path.append(str(HERE.parent))
 from _scipy_closed_form import ScipyFreeRigidBody  # noqa: E402
 
 from frbjax import FreeRigidBody  # noqa: E402
+
 
 DEFAULT_OUTPUT_DIR = HERE / "results"
 ONE_THREAD_FLAGS = "--xla_cpu_multi_thread_eigen=false"
@@ -106,7 +110,7 @@ def evaluation_sweep(sizes, repeats, scipy_max, rng):
         row = {"size": n * k, "bodies": n, "times_per_body": k}
         for name in FUNCTIONS:
             compiled, seconds = compile_time(lambda body, t, name=name: getattr(body, name)(t), body, t)
-            elapsed = best_time(lambda: compiled(body, t), repeats)
+            elapsed = best_time(lambda compiled=compiled: compiled(body, t), repeats)
             row[f"{name}_compile_s"] = seconds
             row[f"{name}_s"] = elapsed
             row[f"{name}_ns_per_eval"] = elapsed / (n * k) * 1e9
@@ -120,11 +124,13 @@ def evaluation_sweep(sizes, repeats, scipy_max, rng):
             row["scipy_quaternion_ns_per_eval"] = elapsed / (n * k) * 1e9
             row["scipy_quaternion_evals_per_s"] = n * k / elapsed
         rows.append(row)
-        print(f"  size {n * k:>9} ({n} x {k}): ns/eval quaternion {row['quaternion_ns_per_eval']:9.1f}  "
-              f"rotation_matrix {row['rotation_matrix_ns_per_eval']:9.1f}  angular_momentum "
-              f"{row['angular_momentum_ns_per_eval']:9.1f}"
-              + (f"  scipy quaternion {row['scipy_quaternion_ns_per_eval']:9.1f}" if "scipy_quaternion_s" in row else ""),
-              flush=True)
+        print(
+            f"  size {n * k:>9} ({n} x {k}): ns/eval quaternion {row['quaternion_ns_per_eval']:9.1f}  "
+            f"rotation_matrix {row['rotation_matrix_ns_per_eval']:9.1f}  angular_momentum "
+            f"{row['angular_momentum_ns_per_eval']:9.1f}"
+            + (f"  scipy quaternion {row['scipy_quaternion_ns_per_eval']:9.1f}" if "scipy_quaternion_s" in row else ""),
+            flush=True,
+        )
     return rows
 
 
@@ -142,8 +148,7 @@ def construction_sweep(sizes, repeats, rng):
 def measurements(options, label):
     rng = np.random.default_rng(options.seed)
     print(f"[{label}] evaluation sweep, sizes {options.sizes}", flush=True)
-    result = {"label": label, "affinity": sorted(os.sched_getaffinity(0)),
-              "xla_flags": os.environ.get("XLA_FLAGS", "")}
+    result = {"label": label, "affinity": sorted(os.sched_getaffinity(0)), "xla_flags": os.environ.get("XLA_FLAGS", "")}
     result["evaluation"] = evaluation_sweep(options.sizes, options.repeats, options.scipy_max, rng)
     result["construction"] = construction_sweep(options.construction_sizes, options.repeats, rng)
     return result
@@ -178,15 +183,19 @@ def gradient_cost(options):
         "gradient_finite": finite,
         "fusion_emitters_off": None,
     }
-    print(f"  gradient: forward {forward_s * 1e3:.2f} ms, value_and_grad {both_s * 1e3:.2f} ms "
-          f"(ratio {row['ratio_value_and_grad_over_forward']:.2f}); compile forward {forward_compile:.1f} s, "
-          f"value_and_grad {both_compile:.1f} s", flush=True)
+    print(
+        f"  gradient: forward {forward_s * 1e3:.2f} ms, value_and_grad {both_s * 1e3:.2f} ms "
+        f"(ratio {row['ratio_value_and_grad_over_forward']:.2f}); compile forward {forward_compile:.1f} s, "
+        f"value_and_grad {both_compile:.1f} s",
+        flush=True,
+    )
     if options.quick:  # two more large compilations: not in the smoke run
         return row
     # The same two programs compiled with XLA:CPU's fusion emitters off (the README's recipe).
     forward, forward_compile = compile_time(loss, inertia, momentum, attitude, t, compiler_options=FAST_COMPILE_OPTIONS)
-    both, both_compile = compile_time(jax.value_and_grad(loss, argnums=(0, 1)), inertia, momentum, attitude, t,
-                                      compiler_options=FAST_COMPILE_OPTIONS)
+    both, both_compile = compile_time(
+        jax.value_and_grad(loss, argnums=(0, 1)), inertia, momentum, attitude, t, compiler_options=FAST_COMPILE_OPTIONS
+    )
     forward_s = best_time(lambda: forward(inertia, momentum, attitude, t), options.repeats)
     both_s = best_time(lambda: both(inertia, momentum, attitude, t), options.repeats)
     row["fusion_emitters_off"] = {
@@ -197,8 +206,11 @@ def gradient_cost(options):
         "forward_compile_s": forward_compile,
         "value_and_grad_compile_s": both_compile,
     }
-    print(f"  with {FAST_COMPILE_OPTIONS}: forward {forward_s * 1e3:.2f} ms, value_and_grad {both_s * 1e3:.2f} ms; "
-          f"compile forward {forward_compile:.1f} s, value_and_grad {both_compile:.1f} s", flush=True)
+    print(
+        f"  with {FAST_COMPILE_OPTIONS}: forward {forward_s * 1e3:.2f} ms, value_and_grad {both_s * 1e3:.2f} ms; "
+        f"compile forward {forward_compile:.1f} s, value_and_grad {both_compile:.1f} s",
+        flush=True,
+    )
     return row
 
 
@@ -229,9 +241,12 @@ def parse(argv):
     parser.add_argument("--gradient-times", type=int, default=100)
     parser.add_argument("--repeats", type=int, default=5)
     parser.add_argument("--seed", type=int, default=0)
-    parser.add_argument("--quick", action="store_true",
-                        help="smoke run: one batch of 10, 10 bodies built, gradient on 10 x 10; compile times may "
-                             "come from the persistent compilation cache (JAX_COMPILATION_CACHE_DIR) if one is set")
+    parser.add_argument(
+        "--quick",
+        action="store_true",
+        help="smoke run: one batch of 10, 10 bodies built, gradient on 10 x 10; compile times may "
+        "come from the persistent compilation cache (JAX_COMPILATION_CACHE_DIR) if one is set",
+    )
     parser.add_argument("--output-dir", type=Path, default=DEFAULT_OUTPUT_DIR)
     parser.add_argument("--note", default="", help="free text stored in the JSON (e.g. which frbjax was measured)")
     parser.add_argument("--no-plot", action="store_true")
@@ -281,9 +296,9 @@ def main(argv=None):
         "quaternion_ns_per_eval_one_core_largest_batch": at(one_core, largest, "quaternion_ns_per_eval"),
         "quaternion_ns_per_eval_all_cores_largest_batch": at(all_cores, largest, "quaternion_ns_per_eval"),
         "largest_batch": largest,
-        "scipy_over_frbjax_quaternion_one_core":
-            None if largest_scipy is None else
-            at(one_core, largest_scipy, "scipy_quaternion_s") / at(one_core, largest_scipy, "quaternion_s"),
+        "scipy_over_frbjax_quaternion_one_core": None
+        if largest_scipy is None
+        else at(one_core, largest_scipy, "scipy_quaternion_s") / at(one_core, largest_scipy, "quaternion_s"),
         "scipy_comparison_batch": largest_scipy,
         "construction_ns_per_body_one_core": one_core["construction"][-1]["ns_per_body"],
         "construction_ns_per_body_all_cores": all_cores["construction"][-1]["ns_per_body"],
@@ -291,8 +306,9 @@ def main(argv=None):
         "forward_compile_s": gradient["forward_compile_s"],
         "value_and_grad_compile_s": gradient["value_and_grad_compile_s"],
         "forward_compile_s_fusion_emitters_off": (gradient["fusion_emitters_off"] or {}).get("forward_compile_s"),
-        "value_and_grad_compile_s_fusion_emitters_off":
-            (gradient["fusion_emitters_off"] or {}).get("value_and_grad_compile_s"),
+        "value_and_grad_compile_s_fusion_emitters_off": (gradient["fusion_emitters_off"] or {}).get(
+            "value_and_grad_compile_s"
+        ),
         "targets": {
             "quaternion_ns_per_eval_per_core": 300,
             "scipy_over_frbjax_quaternion_one_core": 4,
@@ -301,20 +317,28 @@ def main(argv=None):
         },
     }
     print("\nSummary")
-    print(f"  quaternion, batch {largest}: {summary['quaternion_ns_per_eval_one_core_largest_batch']:.1f} ns/eval "
-          f"on one core, {summary['quaternion_ns_per_eval_all_cores_largest_batch']:.1f} ns/eval on "
-          f"{os.cpu_count()} cores (target <= 300 ns per core)")
+    print(
+        f"  quaternion, batch {largest}: {summary['quaternion_ns_per_eval_one_core_largest_batch']:.1f} ns/eval "
+        f"on one core, {summary['quaternion_ns_per_eval_all_cores_largest_batch']:.1f} ns/eval on "
+        f"{os.cpu_count()} cores (target <= 300 ns per core)"
+    )
     if largest_scipy is not None:
-        print(f"  scipy closed form / frbjax per quaternion evaluation, one core, batch {largest_scipy}: "
-              f"{summary['scipy_over_frbjax_quaternion_one_core']:.2f} (target >= 4)")
+        print(
+            f"  scipy closed form / frbjax per quaternion evaluation, one core, batch {largest_scipy}: "
+            f"{summary['scipy_over_frbjax_quaternion_one_core']:.2f} (target >= 4)"
+        )
     print(f"  construction: {summary['construction_ns_per_body_one_core']:.0f} ns per body on one core")
-    print(f"  value_and_grad / forward: {summary['gradient_over_forward']:.2f} (target <= 4); compile forward "
-          f"{summary['forward_compile_s']:.1f} s, value_and_grad {summary['value_and_grad_compile_s']:.1f} s "
-          f"(target forward + gradient <= 5 s)")
+    print(
+        f"  value_and_grad / forward: {summary['gradient_over_forward']:.2f} (target <= 4); compile forward "
+        f"{summary['forward_compile_s']:.1f} s, value_and_grad {summary['value_and_grad_compile_s']:.1f} s "
+        f"(target forward + gradient <= 5 s)"
+    )
     if gradient["fusion_emitters_off"] is not None:
-        print(f"  compile with the fusion emitters off: forward "
-              f"{summary['forward_compile_s_fusion_emitters_off']:.1f} s, "
-              f"value_and_grad {summary['value_and_grad_compile_s_fusion_emitters_off']:.1f} s")
+        print(
+            f"  compile with the fusion emitters off: forward "
+            f"{summary['forward_compile_s_fusion_emitters_off']:.1f} s, "
+            f"value_and_grad {summary['value_and_grad_compile_s_fusion_emitters_off']:.1f} s"
+        )
 
     result = {
         "description": "see the docstring of benchmarks/throughput.py",
@@ -362,11 +386,14 @@ def _provenance():
         return info  # not this checkout's frbjax: its git state says nothing (see --note)
     try:
         root = HERE.parent
-        info["git_head"] = subprocess.run(["git", "-C", str(root), "rev-parse", "HEAD"], capture_output=True,
-                                          text=True, check=True).stdout.strip()
-        info["frbjax_modified_in_checkout"] = bool(subprocess.run(
-            ["git", "-C", str(root), "status", "--porcelain", "frbjax"], capture_output=True, text=True,
-            check=True).stdout.strip())
+        info["git_head"] = subprocess.run(
+            ["git", "-C", str(root), "rev-parse", "HEAD"], capture_output=True, text=True, check=True
+        ).stdout.strip()
+        info["frbjax_modified_in_checkout"] = bool(
+            subprocess.run(
+                ["git", "-C", str(root), "status", "--porcelain", "frbjax"], capture_output=True, text=True, check=True
+            ).stdout.strip()
+        )
     except (OSError, subprocess.CalledProcessError):
         pass
     return info
@@ -394,20 +421,37 @@ def plot(result, path):
         rows = result[key]["evaluation"]
         where = "all cores" if key == "all_cores" else "one core"
         for name, color in colors.items():
-            ax.plot([r["size"] for r in rows], [r[f"{name}_evals_per_s"] for r in rows], style, marker="o", ms=3,
-                    color=color, label=f"frbjax {name}, {where}")
+            ax.plot(
+                [r["size"] for r in rows],
+                [r[f"{name}_evals_per_s"] for r in rows],
+                style,
+                marker="o",
+                ms=3,
+                color=color,
+                label=f"frbjax {name}, {where}",
+            )
     rows = [r for r in result["one_core"]["evaluation"] if "scipy_quaternion_s" in r]
-    ax.plot([r["size"] for r in rows], [r["scipy_quaternion_evals_per_s"] for r in rows], ":", marker="D", ms=3,
-            color="k", label="scipy closed form quaternion, one core")
+    ax.plot(
+        [r["size"] for r in rows],
+        [r["scipy_quaternion_evals_per_s"] for r in rows],
+        ":",
+        marker="D",
+        ms=3,
+        color="k",
+        label="scipy closed form quaternion, one core",
+    )
     ax.axhline(1e9 / 300, color="gray", lw=1, ls="-.", label="300 ns per evaluation")
     ax.set_xscale("log")
     ax.set_yscale("log")
     ax.set_xlabel("batch size (evaluations per call)")
     ax.set_ylabel("evaluations per second (float64)")
     s = result["summary"]
-    ax.set_title(f"frbjax throughput ({result['cpu_count']} cores); construction "
-                 f"{s['construction_ns_per_body_one_core']:.0f} ns/body, grad/forward {s['gradient_over_forward']:.1f}, "
-                 f"compile fwd {s['forward_compile_s']:.0f} s + grad {s['value_and_grad_compile_s']:.0f} s", fontsize=8)
+    ax.set_title(
+        f"frbjax throughput ({result['cpu_count']} cores); construction "
+        f"{s['construction_ns_per_body_one_core']:.0f} ns/body, grad/forward {s['gradient_over_forward']:.1f}, "
+        f"compile fwd {s['forward_compile_s']:.0f} s + grad {s['value_and_grad_compile_s']:.0f} s",
+        fontsize=8,
+    )
     ax.grid(True, which="major", alpha=0.3)
     ax.legend(fontsize=7)
     fig.tight_layout()

@@ -44,10 +44,12 @@ import platform
 import time
 from pathlib import Path
 
+
 os.environ.setdefault("EQX_ON_ERROR", "nan")
 
 import diffrax  # noqa: E402
 import jax  # noqa: E402
+
 
 jax.config.update("jax_enable_x64", True)
 
@@ -55,6 +57,7 @@ import jax.numpy as jnp  # noqa: E402
 import numpy as np  # noqa: E402
 
 import frbjax  # noqa: E402
+
 
 RESULTS = Path(__file__).resolve().parent / "results"
 TARGET_ERROR = 1e-8
@@ -81,11 +84,13 @@ def problems():
         "heavy_top": dict(
             term=frbjax.RigidBodyTerm(heavy_inertia, potential=heavy_top_potential),
             args={"weight": jnp.asarray(1.0), "chi": jnp.array([0.05, 0.1, 0.4])},
-            y0=(jnp.array([0.3, 0.8, 10.0]), jnp.asarray(q0 / np.linalg.norm(q0)))),
+            y0=(jnp.array([0.3, 0.8, 10.0]), jnp.asarray(q0 / np.linalg.norm(q0))),
+        ),
         "gravity_gradient": dict(
             term=frbjax.RigidBodyTerm(satellite_inertia, potential=gravity_gradient_potential),
             args=satellite_inertia,
-            y0=(satellite_inertia * jnp.array([0.05, -0.03, 1.1]), jnp.array([1.0, 0.0, 0.0, 0.0]))),
+            y0=(satellite_inertia * jnp.array([0.05, -0.03, 1.1]), jnp.array([1.0, 0.0, 0.0, 0.0])),
+        ),
     }
 
 
@@ -143,9 +148,19 @@ def work_precision(quick, repeats):
             @jax.jit
             def run(tolerance):
                 solution = diffrax.diffeqsolve(
-                    term, solver, 0.0, final_time, 0.01, y0, args=args, max_steps=10_000_000,
-                    stepsize_controller=diffrax.PIDController(rtol=tolerance, atol=tolerance), throw=False)
+                    term,
+                    solver,
+                    0.0,
+                    final_time,
+                    0.01,
+                    y0,
+                    args=args,
+                    max_steps=10_000_000,
+                    stepsize_controller=diffrax.PIDController(rtol=tolerance, atol=tolerance),
+                    throw=False,
+                )
                 return solution.ys[0][-1], solution.ys[1][-1], solution.stats["num_steps"]
+
             return run
 
         dopri8 = rk_program(diffrax.Dopri8())
@@ -154,40 +169,68 @@ def work_precision(quick, repeats):
         entry = {"reference": "Dopri8 rtol=atol=1e-14", "reference_floor": floor, "methods": {}}
         print(f"{name}: reference floor {floor:.1e}", flush=True)
         for method, steps in methods.items():
+
             @jax.jit
             def run(step, method=method):
-                solution = diffrax.diffeqsolve(term, frbjax.RigidBodySplitting(method), 0.0, final_time, step,
-                                               y0, args=args, max_steps=2_000_000)
+                solution = diffrax.diffeqsolve(
+                    term, frbjax.RigidBodySplitting(method), 0.0, final_time, step, y0, args=args, max_steps=2_000_000
+                )
                 return solution.ys[0][-1], solution.ys[1][-1]
+
             points = []
             for step in steps:
                 state = jax.block_until_ready(run(jnp.asarray(step)))
                 seconds = best_time(lambda: run(jnp.asarray(step)), repeats)
                 points.append({"step": step, "error": state_error(state, reference), "seconds": seconds})
-                print(f"  {method:13s} h={step:<8g} error {points[-1]['error']:.2e}  {seconds:.4f} s",
-                      flush=True)
-            entry["methods"][method] = {"kind": "splitting", "points": points,
-                                        "seconds_at_target": _time_at_target(points)}
+                print(f"  {method:13s} h={step:<8g} error {points[-1]['error']:.2e}  {seconds:.4f} s", flush=True)
+            entry["methods"][method] = {
+                "kind": "splitting",
+                "points": points,
+                "seconds_at_target": _time_at_target(points),
+            }
         for solver_name, solver in runge_kutta.items():
             run = dopri8 if solver_name == "Dopri8" else rk_program(solver)
             points = []
             for tolerance in tolerances:
                 *state, count = jax.block_until_ready(run(jnp.asarray(tolerance)))
                 seconds = best_time(lambda: run(jnp.asarray(tolerance)), repeats)
-                points.append({"tolerance": tolerance, "steps": int(count),
-                               "error": state_error(state, reference), "seconds": seconds})
-                print(f"  {solver_name:13s} tol={tolerance:<8g} error {points[-1]['error']:.2e}  {seconds:.4f} s",
-                      flush=True)
-            entry["methods"][solver_name] = {"kind": "diffrax", "points": points,
-                                             "seconds_at_target": _time_at_target(points)}
-        fastest = {kind: min((m["seconds_at_target"] for m in entry["methods"].values()
-                              if m["kind"] == kind and m["seconds_at_target"]), default=None)
-                   for kind in ("splitting", "diffrax")}
+                points.append(
+                    {
+                        "tolerance": tolerance,
+                        "steps": int(count),
+                        "error": state_error(state, reference),
+                        "seconds": seconds,
+                    }
+                )
+                print(
+                    f"  {solver_name:13s} tol={tolerance:<8g} error {points[-1]['error']:.2e}  {seconds:.4f} s",
+                    flush=True,
+                )
+            entry["methods"][solver_name] = {
+                "kind": "diffrax",
+                "points": points,
+                "seconds_at_target": _time_at_target(points),
+            }
+        fastest = {
+            kind: min(
+                (
+                    m["seconds_at_target"]
+                    for m in entry["methods"].values()
+                    if m["kind"] == kind and m["seconds_at_target"]
+                ),
+                default=None,
+            )
+            for kind in ("splitting", "diffrax")
+        }
         entry["fastest_seconds_at_target"] = fastest
-        entry["speedup_at_target"] = (fastest["diffrax"] / fastest["splitting"]
-                                      if fastest["diffrax"] and fastest["splitting"] else None)
-        print(f"  at error {TARGET_ERROR:g}: fastest splitting {fastest['splitting']}, fastest diffrax "
-              f"{fastest['diffrax']}, ratio {entry['speedup_at_target']}", flush=True)
+        entry["speedup_at_target"] = (
+            fastest["diffrax"] / fastest["splitting"] if fastest["diffrax"] and fastest["splitting"] else None
+        )
+        print(
+            f"  at error {TARGET_ERROR:g}: fastest splitting {fastest['splitting']}, fastest diffrax "
+            f"{fastest['diffrax']}, ratio {entry['speedup_at_target']}",
+            flush=True,
+        )
         results["problems"][name] = entry
     return results
 
@@ -232,25 +275,46 @@ def energy(quick, repeats):
     def program(solver, dt):
         @jax.jit
         def run():
-            solution = diffrax.diffeqsolve(term, solver, 0.0, final_time, dt, y0, args=args,
-                                           saveat=diffrax.SaveAt(ts=samples), max_steps=steps * 20 + 10)
+            solution = diffrax.diffeqsolve(
+                term,
+                solver,
+                0.0,
+                final_time,
+                dt,
+                y0,
+                args=args,
+                saveat=diffrax.SaveAt(ts=samples),
+                max_steps=steps * 20 + 10,
+            )
             return solution.ys
+
         return run
 
     splitting = program(frbjax.RigidBodySplitting("blanes_moan4"), step)
     states = jax.block_until_ready(splitting())
     splitting_seconds = best_time(splitting, 1 if not quick else repeats)
     splitting_error = np.abs(np.asarray(term.energy(0.0, states, args)) - energy0)
-    results = {"steps": steps, "step": step, "final_time": final_time, "times": np.asarray(samples).tolist(),
-               "runs": {"blanes_moan4": {"step": step, "seconds": splitting_seconds,
-                                         "energy_error": splitting_error.tolist()}}}
+    results = {
+        "steps": steps,
+        "step": step,
+        "final_time": final_time,
+        "times": np.asarray(samples).tolist(),
+        "runs": {
+            "blanes_moan4": {"step": step, "seconds": splitting_seconds, "energy_error": splitting_error.tolist()}
+        },
+    }
     print(f"energy: blanes_moan4 {steps} steps in {splitting_seconds:.2f} s", flush=True)
     solvers = [("Tsit5", diffrax.Tsit5())] + ([] if quick else [("Dopri8", diffrax.Dopri8())])
     for name, solver in solvers:
         # The cost of a step of this solver, measured on a short run, sets its step for equal wall time.
         probe_steps = 2000
-        probe = jax.jit(lambda solver=solver: diffrax.diffeqsolve(
-            term, solver, 0.0, probe_steps * 0.01, 0.01, y0, args=args, max_steps=probe_steps + 10).ys)
+        probe = jax.jit(
+            lambda solver=solver: (
+                diffrax.diffeqsolve(
+                    term, solver, 0.0, probe_steps * 0.01, 0.01, y0, args=args, max_steps=probe_steps + 10
+                ).ys
+            )
+        )
         jax.block_until_ready(probe())
         per_step = best_time(probe, repeats) / probe_steps
         count = max(int(splitting_seconds / per_step), 100)
@@ -259,8 +323,12 @@ def energy(quick, repeats):
         states = jax.block_until_ready(run())
         seconds = best_time(run, 1)
         error = np.abs(np.asarray(term.energy(0.0, states, args)) - energy0)
-        results["runs"][name] = {"step": final_time / count, "steps": count, "seconds": seconds,
-                                 "energy_error": error.tolist()}
+        results["runs"][name] = {
+            "step": final_time / count,
+            "steps": count,
+            "seconds": seconds,
+            "energy_error": error.tolist(),
+        }
         print(f"energy: {name} {count} steps of {final_time / count:.3g} in {seconds:.2f} s", flush=True)
     for name, run in results["runs"].items():
         error = np.asarray(run["energy_error"][1:])
@@ -268,8 +336,11 @@ def energy(quick, repeats):
         run["max_first_tenth"] = float(error[:tenth].max())
         run["max_last_tenth"] = float(error[-tenth:].max())
         run["ratio_last_to_first_tenth"] = run["max_last_tenth"] / run["max_first_tenth"]
-        print(f"  {name:13s} max |dE| first tenth {run['max_first_tenth']:.2e}, last tenth "
-              f"{run['max_last_tenth']:.2e} (x{run['ratio_last_to_first_tenth']:.3g})", flush=True)
+        print(
+            f"  {name:13s} max |dE| first tenth {run['max_first_tenth']:.2e}, last tenth "
+            f"{run['max_last_tenth']:.2e} (x{run['ratio_last_to_first_tenth']:.3g})",
+            flush=True,
+        )
     return results
 
 
@@ -284,9 +355,12 @@ def plot_energy(results, path):
     for name, run in results["runs"].items():
         label = f"{name}: {run.get('steps', results['steps'])} steps, {run['seconds']:.1f} s"
         axis.loglog(times[1:], np.maximum(np.asarray(run["energy_error"])[1:], 1e-17), label=label)
-    axis.set(xlabel="t", ylabel="|E(t) - E(0)|",
-             title=f"heavy top, energy error: {results['steps']} splitting steps; Runge-Kutta steps\n"
-                   "set for the same wall time (at most 20x as many)")
+    axis.set(
+        xlabel="t",
+        ylabel="|E(t) - E(0)|",
+        title=f"heavy top, energy error: {results['steps']} splitting steps; Runge-Kutta steps\n"
+        "set for the same wall time (at most 20x as many)",
+    )
     axis.legend(fontsize=8)
     figure.tight_layout()
     figure.savefig(path, dpi=120)
@@ -305,20 +379,29 @@ def batch(quick, repeats):
     attitudes = rng.normal(size=(bodies, 4))
     attitudes /= np.linalg.norm(attitudes, axis=-1, keepdims=True)
     solver = frbjax.RigidBodySplitting("blanes_moan6")
-    run = jax.jit(lambda y: diffrax.diffeqsolve(term, solver, 0.0, steps * 0.1, 0.1, y, args=args,
-                                                max_steps=steps + 10).ys)
+    run = jax.jit(
+        lambda y: diffrax.diffeqsolve(term, solver, 0.0, steps * 0.1, 0.1, y, args=args, max_steps=steps + 10).ys
+    )
     results = {"steps": steps, "method": "blanes_moan6", "free_flows_per_step": 15}
-    for label, y0 in (("one_body", (jnp.asarray(momenta[:1]), jnp.asarray(attitudes[:1]))),
-                      ("batch", (jnp.asarray(momenta), jnp.asarray(attitudes)))):
+    for label, y0 in (
+        ("one_body", (jnp.asarray(momenta[:1]), jnp.asarray(attitudes[:1]))),
+        ("batch", (jnp.asarray(momenta), jnp.asarray(attitudes))),
+    ):
         jax.block_until_ready(run(y0))
         seconds = best_time(lambda: run(y0), repeats)
         count = y0[0].shape[0]
-        results[label] = {"bodies": count, "seconds": seconds,
-                          "microseconds_per_free_flow_per_body": 1e6 * seconds / (15 * steps * count)}
-        print(f"batch: {count} bodies, {1e6 * seconds / (15 * steps * count):.3f} us per free flow per body",
-              flush=True)
-    results["one_body_over_batch_per_body"] = (results["one_body"]["microseconds_per_free_flow_per_body"]
-                                               / results["batch"]["microseconds_per_free_flow_per_body"])
+        results[label] = {
+            "bodies": count,
+            "seconds": seconds,
+            "microseconds_per_free_flow_per_body": 1e6 * seconds / (15 * steps * count),
+        }
+        print(
+            f"batch: {count} bodies, {1e6 * seconds / (15 * steps * count):.3f} us per free flow per body", flush=True
+        )
+    results["one_body_over_batch_per_body"] = (
+        results["one_body"]["microseconds_per_free_flow_per_body"]
+        / results["batch"]["microseconds_per_free_flow_per_body"]
+    )
     return results
 
 
@@ -328,13 +411,20 @@ def batch(quick, repeats):
 def main(argv=None):
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--quick", action="store_true", help="smoke test: small sizes")
-    parser.add_argument("--parts", nargs="+", default=["work_precision", "energy", "batch"],
-                        choices=["work_precision", "energy", "batch"])
+    parser.add_argument(
+        "--parts",
+        nargs="+",
+        default=["work_precision", "energy", "batch"],
+        choices=["work_precision", "energy", "batch"],
+    )
     parser.add_argument("--repeats", type=int, default=3)
     parser.add_argument("--output-dir", type=Path, default=RESULTS)
-    parser.add_argument("--single-kernel-loops", action="store_true",
-                        help="compile small loops as one kernel for the whole process (every "
-                             "method, diffrax's too); results go to torqued_*_single_kernel_loops.*")
+    parser.add_argument(
+        "--single-kernel-loops",
+        action="store_true",
+        help="compile small loops as one kernel for the whole process (every "
+        "method, diffrax's too); results go to torqued_*_single_kernel_loops.*",
+    )
     args = parser.parse_args(argv)
     args.output_dir.mkdir(parents=True, exist_ok=True)
     suffix = ""
@@ -347,9 +437,15 @@ def main(argv=None):
         option = f"--xla_backend_extra_options=xla_cpu_small_while_loop_byte_threshold={1 << 26}"
         os.environ["XLA_FLAGS"] = f"{flags} {option}".strip()
         suffix = "_single_kernel_loops"
-    machine = {"device": str(jax.devices()[0]), "platform": platform.platform(), "jax": jax.__version__,
-               "diffrax": diffrax.__version__, "cpus_visible": len(os.sched_getaffinity(0)),
-               "quick": args.quick, "xla_flags": os.environ.get("XLA_FLAGS", "")}
+    machine = {
+        "device": str(jax.devices()[0]),
+        "platform": platform.platform(),
+        "jax": jax.__version__,
+        "diffrax": diffrax.__version__,
+        "cpus_visible": len(os.sched_getaffinity(0)),
+        "quick": args.quick,
+        "xla_flags": os.environ.get("XLA_FLAGS", ""),
+    }
     if "work_precision" in args.parts:
         results = dict(work_precision(args.quick, args.repeats), machine=machine)
         path = args.output_dir / f"torqued_work_precision{suffix}.json"

@@ -61,11 +61,13 @@ import platform
 import time
 from pathlib import Path
 
+
 os.environ.setdefault("EQX_ON_ERROR", "nan")
 
 import diffrax  # noqa: E402
 import equinox as eqx  # noqa: E402
 import jax  # noqa: E402
+
 
 jax.config.update("jax_enable_x64", True)
 
@@ -74,6 +76,7 @@ import numpy as np  # noqa: E402
 
 import frbjax  # noqa: E402
 from frbjax import torques  # noqa: E402
+
 
 RESULTS = Path(__file__).resolve().parent / "results"
 TARGET_ERROR = 1e-8
@@ -113,8 +116,10 @@ def relative_error(y, reference):
     momentum, attitude = (np.asarray(x) for x in y)
     momentum_ref, attitude_ref = (np.asarray(x) for x in reference)
     sign = np.sign(np.sum(attitude * attitude_ref, axis=-1, keepdims=True))
-    return np.maximum(np.abs(momentum - momentum_ref).max(axis=-1) / np.linalg.norm(momentum_ref, axis=-1),
-                      np.abs(sign * attitude - attitude_ref).max(axis=-1))
+    return np.maximum(
+        np.abs(momentum - momentum_ref).max(axis=-1) / np.linalg.norm(momentum_ref, axis=-1),
+        np.abs(sign * attitude - attitude_ref).max(axis=-1),
+    )
 
 
 # ------------------------------------------------------------------------------ the satellite
@@ -161,17 +166,28 @@ def frbjax_programs(term, final_time):
         @jax.jit
         def run(y0, tolerance):
             solution = diffrax.diffeqsolve(
-                term, solver, 0.0, final_time, 1.0, y0, max_steps=10_000_000, throw=False,
-                stepsize_controller=diffrax.PIDController(rtol=tolerance, atol=tolerance))
+                term,
+                solver,
+                0.0,
+                final_time,
+                1.0,
+                y0,
+                max_steps=10_000_000,
+                throw=False,
+                stepsize_controller=diffrax.PIDController(rtol=tolerance, atol=tolerance),
+            )
             return solution.ys[0][-1], solution.ys[1][-1]
+
         return run
 
     def splitting(method):
         @jax.jit
         def run(y0, step):
-            solution = diffrax.diffeqsolve(term, frbjax.RigidBodySplitting(method), 0.0, final_time, step, y0,
-                                           max_steps=10_000_000)
+            solution = diffrax.diffeqsolve(
+                term, frbjax.RigidBodySplitting(method), 0.0, final_time, step, y0, max_steps=10_000_000
+            )
             return solution.ys[0][-1], solution.ys[1][-1]
+
         return run
 
     def final_state(method, step):
@@ -183,9 +199,11 @@ def frbjax_programs(term, final_time):
 
         @jax.jit
         def run(y0):
-            _, (momenta, attitudes) = frbjax.splitting_trajectory(term, y0, dt=step, steps=steps, method=method,
-                                                                  save_every=steps)
+            _, (momenta, attitudes) = frbjax.splitting_trajectory(
+                term, y0, dt=step, steps=steps, method=method, save_every=steps
+            )
             return momenta[-1], attitudes[-1]
+
         return run
 
     return rk, splitting, final_state
@@ -194,8 +212,8 @@ def frbjax_programs(term, final_time):
 def basilisk_run(final_time, step, integrator, damped, tolerance=None):
     """(seconds, (L, q)) of Basilisk's spacecraft hub at ``final_time`` (task step ``step``)."""
     from Basilisk.architecture import sysModel
-    from Basilisk.simulation import GravityGradientEffector, extForceTorque, spacecraft, svIntegrators
-    from Basilisk.utilities import SimulationBaseClass, macros, simIncludeGravBody
+    from Basilisk.simulation import extForceTorque, GravityGradientEffector, spacecraft, svIntegrators
+    from Basilisk.utilities import macros, simIncludeGravBody, SimulationBaseClass
 
     simulation = SimulationBaseClass.SimBaseClass()
     process = simulation.CreateNewProcess("dynamics")
@@ -260,9 +278,14 @@ def basilisk_available():
     return True
 
 
-SPLITTING_STEPS = {"leapfrog": [10.0, 5.0, 2.5, 1.25], "yoshida4": [40.0, 20.0, 10.0, 5.0],
-                   "blanes_moan4": [80.0, 40.0, 20.0, 10.0], "blanes_moan6": [80.0, 40.0, 20.0, 10.0],
-                   "aba864": [80.0, 40.0, 20.0, 10.0], "aba1064": [80.0, 40.0, 20.0, 10.0]}
+SPLITTING_STEPS = {
+    "leapfrog": [10.0, 5.0, 2.5, 1.25],
+    "yoshida4": [40.0, 20.0, 10.0, 5.0],
+    "blanes_moan4": [80.0, 40.0, 20.0, 10.0],
+    "blanes_moan6": [80.0, 40.0, 20.0, 10.0],
+    "aba864": [80.0, 40.0, 20.0, 10.0],
+    "aba1064": [80.0, 40.0, 20.0, 10.0],
+}
 TOLERANCES = [1e-7, 1e-8, 1e-9, 1e-10, 1e-11, 1e-12, 1e-13]
 BASILISK_STEPS = [8.0, 4.0, 2.0, 1.0, 0.5]
 BASILISK_TOLERANCES = [1e-6, 1e-8, 1e-10, 1e-12]
@@ -274,11 +297,17 @@ def basilisk_part(quick, repeats, with_basilisk):
     tolerances = [1e-7, 1e-9] if quick else TOLERANCES
     rk_solvers = {"Dopri8": diffrax.Dopri8()} if quick else {"Tsit5": diffrax.Tsit5(), "Dopri8": diffrax.Dopri8()}
     bodies = 8 if quick else 1024
-    results = {"final_time": final_time, "target_error": TARGET_ERROR, "bodies_in_batch": bodies,
-               "error": "max(|L - L_ref|_inf / |L_ref|, |q - q_ref|_inf) at T", "problems": {}}
+    results = {
+        "final_time": final_time,
+        "target_error": TARGET_ERROR,
+        "bodies_in_batch": bodies,
+        "error": "max(|L - L_ref|_inf / |L_ref|, |q - q_ref|_inf) at T",
+        "problems": {},
+    }
     if not with_basilisk:
-        results["basilisk"] = ("left out: Basilisk is not installed (.venv/bin/pip install bsk) or "
-                               "--without-basilisk was given")
+        results["basilisk"] = (
+            "left out: Basilisk is not installed (.venv/bin/pip install bsk) or --without-basilisk was given"
+        )
         print(f"basilisk: {results['basilisk']}", flush=True)
     for name, damped in (("damped", True), ("undamped", False)):
         term = satellite_term(damped)
@@ -287,8 +316,7 @@ def basilisk_part(quick, repeats, with_basilisk):
         dopri8 = rk(diffrax.Dopri8())
         reference = dopri8(y0, jnp.asarray(1e-14))
         floor = float(relative_error(dopri8(y0, jnp.asarray(1e-13)), reference))
-        entry = {"reference": "diffrax Dopri8 rtol=atol=1e-14", "reference_distance_to_1e-13": floor,
-                 "methods": {}}
+        entry = {"reference": "diffrax Dopri8 rtol=atol=1e-14", "reference_distance_to_1e-13": floor, "methods": {}}
         print(f"{name}: reference's distance to Dopri8 at 1e-13: {floor:.1e}", flush=True)
         programs = {}
         for method, steps in splitting_steps.items():
@@ -300,8 +328,11 @@ def basilisk_part(quick, repeats, with_basilisk):
                 seconds = best_time(lambda: run(y0, jnp.asarray(step)), repeats)
                 points.append({"step": step, "error": float(relative_error(state, reference)), "seconds": seconds})
                 print(f"  {method:13s} h={step:<8g} error {points[-1]['error']:.2e}  {seconds:.4f} s", flush=True)
-            entry["methods"][method] = {"kind": "frbjax splitting", "points": points,
-                                        "seconds_at_target": time_at_target(points)}
+            entry["methods"][method] = {
+                "kind": "frbjax splitting",
+                "points": points,
+                "seconds_at_target": time_at_target(points),
+            }
         smallest = min(entry["methods"].items(), key=lambda item: item[1]["points"][-1]["error"])
         entry["reference_distance_to_best_splitting"] = smallest[1]["points"][-1]["error"]
         for solver_name, solver in rk_solvers.items():
@@ -311,41 +342,63 @@ def basilisk_part(quick, repeats, with_basilisk):
             for tolerance in tolerances:
                 state = jax.block_until_ready(run(y0, jnp.asarray(tolerance)))
                 seconds = best_time(lambda: run(y0, jnp.asarray(tolerance)), repeats)
-                points.append({"tolerance": tolerance, "error": float(relative_error(state, reference)),
-                               "seconds": seconds})
-                print(f"  {solver_name:13s} tol={tolerance:<8g} error {points[-1]['error']:.2e}  {seconds:.4f} s",
-                      flush=True)
-            entry["methods"][solver_name] = {"kind": "frbjax diffrax", "points": points,
-                                             "seconds_at_target": time_at_target(points)}
+                points.append(
+                    {"tolerance": tolerance, "error": float(relative_error(state, reference)), "seconds": seconds}
+                )
+                print(
+                    f"  {solver_name:13s} tol={tolerance:<8g} error {points[-1]['error']:.2e}  {seconds:.4f} s",
+                    flush=True,
+                )
+            entry["methods"][solver_name] = {
+                "kind": "frbjax diffrax",
+                "points": points,
+                "seconds_at_target": time_at_target(points),
+            }
         if with_basilisk:
-            for integrator, settings in (("RK4", BASILISK_STEPS[:2] if quick else BASILISK_STEPS),
-                                         ("RKF78", BASILISK_TOLERANCES[:2] if quick else BASILISK_TOLERANCES)):
+            for integrator, settings in (
+                ("RK4", BASILISK_STEPS[:2] if quick else BASILISK_STEPS),
+                ("RKF78", BASILISK_TOLERANCES[:2] if quick else BASILISK_TOLERANCES),
+            ):
                 points = []
                 for setting in settings:
                     step, tolerance = (setting, None) if integrator == "RK4" else (60.0, setting)
-                    runs = [basilisk_run(final_time, step, integrator, damped, tolerance)
-                            for _ in range(1 if quick else repeats)]
+                    runs = [
+                        basilisk_run(final_time, step, integrator, damped, tolerance)
+                        for _ in range(1 if quick else repeats)
+                    ]
                     seconds = min(r[0] for r in runs)
                     point = {"error": float(relative_error(runs[0][1], reference)), "seconds": seconds}
                     point.update({"step": step} if integrator == "RK4" else {"tolerance": tolerance, "task_step": step})
                     points.append(point)
-                    print(f"  Basilisk {integrator:5s} {setting:<8g} error {point['error']:.2e}  {seconds:.4f} s",
-                          flush=True)
-                entry["methods"][f"Basilisk {integrator}"] = {"kind": "Basilisk", "points": points,
-                                                              "seconds_at_target": time_at_target(points)}
+                    print(
+                        f"  Basilisk {integrator:5s} {setting:<8g} error {point['error']:.2e}  {seconds:.4f} s",
+                        flush=True,
+                    )
+                entry["methods"][f"Basilisk {integrator}"] = {
+                    "kind": "Basilisk",
+                    "points": points,
+                    "seconds_at_target": time_at_target(points),
+                }
         fastest = {}
         for kind in ("frbjax splitting", "frbjax diffrax", "Basilisk"):
-            timed = [(m["seconds_at_target"], label) for label, m in entry["methods"].items()
-                     if m["kind"] == kind and m["seconds_at_target"]]
+            timed = [
+                (m["seconds_at_target"], label)
+                for label, m in entry["methods"].items()
+                if m["kind"] == kind and m["seconds_at_target"]
+            ]
             fastest[kind] = min(timed) if timed else None
         entry["fastest_at_target"] = fastest
         frbjax_best = min((f for k, f in fastest.items() if k.startswith("frbjax") and f), default=None)
-        entry["basilisk_over_frbjax_one_body"] = (fastest["Basilisk"][0] / frbjax_best[0]
-                                                  if frbjax_best and fastest["Basilisk"] else None)
+        entry["basilisk_over_frbjax_one_body"] = (
+            fastest["Basilisk"][0] / frbjax_best[0] if frbjax_best and fastest["Basilisk"] else None
+        )
         entry.update(batch_rows(term, rk, splitting, final_state, entry, damped, quick, bodies, repeats))
-        print(f"  {name}: fastest at {TARGET_ERROR:g}: {fastest}; Basilisk / frbjax one body "
-              f"{entry['basilisk_over_frbjax_one_body']}, per body in a batch "
-              f"{entry.get('basilisk_over_frbjax_per_body_batch')}", flush=True)
+        print(
+            f"  {name}: fastest at {TARGET_ERROR:g}: {fastest}; Basilisk / frbjax one body "
+            f"{entry['basilisk_over_frbjax_one_body']}, per body in a batch "
+            f"{entry.get('basilisk_over_frbjax_per_body_batch')}",
+            flush=True,
+        )
         results["problems"][name] = entry
     return results
 
@@ -362,13 +415,13 @@ def batch_rows(term, rk, splitting, final_state, entry, damped, quick, bodies, r
             rows["batch_splitting"] = "left out: the exact damping kicks cost as much per body in a batch"
             continue
         if fastest[kind]:
-            rows["batch"][fastest[kind][1]] = batch(term, rk, splitting, final_state, entry, fastest[kind][1], bodies,
-                                                    repeats)
+            rows["batch"][fastest[kind][1]] = batch(
+                term, rk, splitting, final_state, entry, fastest[kind][1], bodies, repeats
+            )
     if rows["batch"]:
         per_body = min(run["seconds_per_body"] for run in rows["batch"].values())
         rows["fastest_seconds_per_body_in_batch"] = per_body
-        rows["basilisk_over_frbjax_per_body_batch"] = (fastest["Basilisk"][0] / per_body
-                                                       if fastest["Basilisk"] else None)
+        rows["basilisk_over_frbjax_per_body_batch"] = fastest["Basilisk"][0] / per_body if fastest["Basilisk"] else None
     return rows
 
 
@@ -408,14 +461,25 @@ def batch(term, rk, splitting, final_state, entry, method, bodies, repeats):
     # state at T amplifies rounding errors this much is ill-conditioned for every method.
     uncertainty = relative_error(references(y0, jnp.asarray(1e-13)), reference)
     through = f" (diffeqsolve {1e6 * extra['seconds_diffeqsolve'] / bodies:.1f} us)" if extra else ""
-    print(f"  batch of {bodies}: {method} {kind}={setting:g}: {seconds:.3f} s, {1e6 * seconds / bodies:.1f} us "
-          f"per body{through}; error median {np.median(errors):.1e}, 90% {np.quantile(errors, 0.9):.1e}, max "
-          f"{errors.max():.1e}; reference's own uncertainty max {uncertainty.max():.1e}", flush=True)
-    return {"method": method, kind: setting, "bodies": bodies, "seconds": seconds,
-            "seconds_per_body": seconds / bodies, **extra, "max_error": float(errors.max()),
-            "median_error": float(np.median(errors)), "p90_error": float(np.quantile(errors, 0.9)),
-            "fraction_within_target": float(np.mean(errors <= TARGET_ERROR)),
-            "max_reference_uncertainty": float(uncertainty.max())}
+    print(
+        f"  batch of {bodies}: {method} {kind}={setting:g}: {seconds:.3f} s, {1e6 * seconds / bodies:.1f} us "
+        f"per body{through}; error median {np.median(errors):.1e}, 90% {np.quantile(errors, 0.9):.1e}, max "
+        f"{errors.max():.1e}; reference's own uncertainty max {uncertainty.max():.1e}",
+        flush=True,
+    )
+    return {
+        "method": method,
+        kind: setting,
+        "bodies": bodies,
+        "seconds": seconds,
+        "seconds_per_body": seconds / bodies,
+        **extra,
+        "max_error": float(errors.max()),
+        "median_error": float(np.median(errors)),
+        "p90_error": float(np.quantile(errors, 0.9)),
+        "fraction_within_target": float(np.mean(errors <= TARGET_ERROR)),
+        "max_reference_uncertainty": float(uncertainty.max()),
+    }
 
 
 def plot_basilisk(results, path):
@@ -429,8 +493,9 @@ def plot_basilisk(results, path):
     for axis, (name, entry) in zip(np.atleast_1d(axes), results["problems"].items()):
         for method, data in entry["methods"].items():
             points = [p for p in data["points"] if math.isfinite(p["error"])]
-            axis.loglog([p["error"] for p in points], [p["seconds"] for p in points], styles[data["kind"]],
-                        label=method)
+            axis.loglog(
+                [p["error"] for p in points], [p["seconds"] for p in points], styles[data["kind"]], label=method
+            )
         axis.axvline(TARGET_ERROR, color="grey", lw=0.8)
         title = f"gravity-gradient satellite, {name}, T = {results['final_time'] / 3600:g} h"
         ratio = entry.get("basilisk_over_frbjax_one_body")
@@ -462,9 +527,11 @@ def energy_part(quick, repeats):
         def program(solver, dt, final_time=final_time, samples=samples):
             @jax.jit
             def run():
-                solution = diffrax.diffeqsolve(term, solver, 0.0, final_time, dt, y0, saveat=diffrax.SaveAt(ts=samples),
-                                               max_steps=steps * 20 + 10)
+                solution = diffrax.diffeqsolve(
+                    term, solver, 0.0, final_time, dt, y0, saveat=diffrax.SaveAt(ts=samples), max_steps=steps * 20 + 10
+                )
                 return solution.ys
+
             return run
 
         splitting = program(frbjax.RigidBodySplitting("blanes_moan4"), step)
@@ -472,8 +539,10 @@ def energy_part(quick, repeats):
         seconds = best_time(splitting, 1)
         error = np.abs(np.asarray(term.energy(0.0, states, None)) - energy0)
         runs = {"blanes_moan4": {"step": step, "steps": steps, "seconds": seconds, "energy_error": error.tolist()}}
-        print(f"energy {case}: blanes_moan4 {steps} steps of {step} in {seconds:.2f} s, max |dE| {error.max():.2e}",
-              flush=True)
+        print(
+            f"energy {case}: blanes_moan4 {steps} steps of {step} in {seconds:.2f} s, max |dE| {error.max():.2e}",
+            flush=True,
+        )
         for name, solver in (("Tsit5", diffrax.Tsit5()), ("Dopri8", diffrax.Dopri8())):
             # The cost of a step, measured with the very program that runs (its max_steps, its SaveAt)
             # over a fiftieth of the run, sets the step for the same wall time.
@@ -486,10 +555,17 @@ def energy_part(quick, repeats):
             states = jax.block_until_ready(run())
             rk_seconds = best_time(run, 1)
             rk_error = np.abs(np.asarray(term.energy(0.0, states, None)) - energy0)
-            runs[name] = {"step": final_time / count, "steps": count, "seconds": rk_seconds,
-                          "energy_error": rk_error.tolist()}
-            print(f"energy {case}: {name} {count} steps of {final_time / count:.3g} in {rk_seconds:.2f} s, "
-                  f"max |dE| {np.nanmax(rk_error):.2e}", flush=True)
+            runs[name] = {
+                "step": final_time / count,
+                "steps": count,
+                "seconds": rk_seconds,
+                "energy_error": rk_error.tolist(),
+            }
+            print(
+                f"energy {case}: {name} {count} steps of {final_time / count:.3g} in {rk_seconds:.2f} s, "
+                f"max |dE| {np.nanmax(rk_error):.2e}",
+                flush=True,
+            )
         for run in runs.values():
             error = np.asarray(run["energy_error"][1:])
             tenth = max(len(error) // 10, 1)
@@ -549,23 +625,44 @@ def debris_part(quick, days, step):
     final_time = 2 * DAY if quick else days * DAY
     inertia = jnp.asarray(DEBRIS_INERTIA)
     orbit = torques.CircularOrbit(7.178e6, MU_EARTH, inclination=math.radians(82.0))
-    torque = (torques.EddyCurrent(inertia, MAGNETIC_TENSOR, DipoleField(orbit))
-              + torques.GravityGradient(inertia, orbit))
+    torque = torques.EddyCurrent(inertia, MAGNETIC_TENSOR, DipoleField(orbit)) + torques.GravityGradient(inertia, orbit)
     term = frbjax.RigidBodyTerm(inertia, momentum_torque=torque)
     y0 = (inertia * jnp.array([0.02, -0.01, 0.05]), jnp.array([1.0, 0.0, 0.0, 0.0]))
     samples = jnp.linspace(0.0, final_time, 366 if not quick else 49)
 
     def run_splitting():
-        return diffrax.diffeqsolve(term, frbjax.RigidBodySplitting("blanes_moan4"), 0.0, final_time, step, y0,
-                                   saveat=diffrax.SaveAt(ts=samples), max_steps=int(final_time / step) + 10).ys
+        return diffrax.diffeqsolve(
+            term,
+            frbjax.RigidBodySplitting("blanes_moan4"),
+            0.0,
+            final_time,
+            step,
+            y0,
+            saveat=diffrax.SaveAt(ts=samples),
+            max_steps=int(final_time / step) + 10,
+        ).ys
 
     def run_dopri8():
-        return diffrax.diffeqsolve(term, diffrax.Dopri8(), 0.0, final_time, 1.0, y0, saveat=diffrax.SaveAt(ts=samples),
-                                   max_steps=100_000_000, throw=False,
-                                   stepsize_controller=diffrax.PIDController(rtol=1e-10, atol=1e-10))
+        return diffrax.diffeqsolve(
+            term,
+            diffrax.Dopri8(),
+            0.0,
+            final_time,
+            1.0,
+            y0,
+            saveat=diffrax.SaveAt(ts=samples),
+            max_steps=100_000_000,
+            throw=False,
+            stepsize_controller=diffrax.PIDController(rtol=1e-10, atol=1e-10),
+        )
 
-    results = {"final_time": final_time, "step": step, "method": "blanes_moan4",
-               "reference": "Dopri8 rtol=atol=1e-10", "times": np.asarray(samples).tolist()}
+    results = {
+        "final_time": final_time,
+        "step": step,
+        "method": "blanes_moan4",
+        "reference": "Dopri8 rtol=atol=1e-10",
+        "times": np.asarray(samples).tolist(),
+    }
     for name, function in (("blanes_moan4", run_splitting), ("Dopri8", run_dopri8)):
         compiled = jax.jit(function).lower().compile()
         start = time.perf_counter()
@@ -573,12 +670,18 @@ def debris_part(quick, days, step):
         seconds = time.perf_counter() - start
         ys = output if name == "blanes_moan4" else output.ys
         rates = np.linalg.norm(np.asarray(ys[0]) / DEBRIS_INERTIA, axis=-1)
-        results[name] = {"seconds": seconds, "spin_rate": rates.tolist(),
-                         "states": [np.asarray(y).tolist() for y in ys]}
+        results[name] = {
+            "seconds": seconds,
+            "spin_rate": rates.tolist(),
+            "states": [np.asarray(y).tolist() for y in ys],
+        }
         if name == "Dopri8":
             results[name]["steps"] = int(output.stats["num_steps"])
-        print(f"debris: {name} to T = {final_time / DAY:g} days in {seconds:.1f} s; spin rate "
-              f"{rates[0]:.4f} -> {rates[-1]:.4f} rad/s", flush=True)
+        print(
+            f"debris: {name} to T = {final_time / DAY:g} days in {seconds:.1f} s; spin rate "
+            f"{rates[0]:.4f} -> {rates[-1]:.4f} rad/s",
+            flush=True,
+        )
     splitting_states = [np.asarray(y) for y in results["blanes_moan4"]["states"]]
     reference_states = [np.asarray(y) for y in results["Dopri8"]["states"]]
     agreement = relative_error(splitting_states, reference_states)
@@ -588,8 +691,11 @@ def debris_part(quick, days, step):
     results["max_spin_rate_relative_difference"] = float(np.max(np.abs(rates[0] - rates[1]) / rates[1]))
     for run in ("blanes_moan4", "Dopri8"):
         del results[run]["states"]
-    print(f"debris: splitting and Dopri8 differ by at most {results['max_relative_difference']:.1e} "
-          f"(state), {results['max_spin_rate_relative_difference']:.1e} (spin rate)", flush=True)
+    print(
+        f"debris: splitting and Dopri8 differ by at most {results['max_relative_difference']:.1e} "
+        f"(state), {results['max_spin_rate_relative_difference']:.1e} (spin rate)",
+        flush=True,
+    )
     return results
 
 
@@ -604,9 +710,12 @@ def plot_debris(results, path):
     for name, style in (("blanes_moan4", "-"), ("Dopri8", "--")):
         run = results[name]
         axis.plot(days, run["spin_rate"], style, label=f"{name}: {run['seconds']:.1f} s")
-    axis.set(xlabel="days", ylabel="|Omega| (rad/s)",
-             title=f"rocket body spun down by eddy currents\nstate difference at most "
-                   f"{results['max_relative_difference']:.1e}")
+    axis.set(
+        xlabel="days",
+        ylabel="|Omega| (rad/s)",
+        title=f"rocket body spun down by eddy currents\nstate difference at most "
+        f"{results['max_relative_difference']:.1e}",
+    )
     axis.legend()
     figure.tight_layout()
     figure.savefig(path, dpi=120)
@@ -620,8 +729,14 @@ def batch_part(repeats, bodies, source):
     one-body settings of ``source`` (a torques_basilisk.json); Basilisk's one-body time is quoted from
     ``source``, which says the machine it ran on."""
     recorded = json.loads(Path(source).read_text())
-    results = {"final_time": recorded["final_time"], "target_error": TARGET_ERROR, "bodies_in_batch": bodies,
-               "source": str(source), "source_machine": recorded["machine"], "problems": {}}
+    results = {
+        "final_time": recorded["final_time"],
+        "target_error": TARGET_ERROR,
+        "bodies_in_batch": bodies,
+        "source": str(source),
+        "source_machine": recorded["machine"],
+        "problems": {},
+    }
     for name, damped in (("damped", True), ("undamped", False)):
         entry = recorded["problems"][name]
         term = satellite_term(damped)
@@ -634,8 +749,12 @@ def batch_part(repeats, bodies, source):
 def main(argv=None):
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--quick", action="store_true", help="smoke test: small sizes")
-    parser.add_argument("--parts", nargs="+", default=["basilisk", "energy", "debris"],
-                        choices=["basilisk", "energy", "debris", "batch"])
+    parser.add_argument(
+        "--parts",
+        nargs="+",
+        default=["basilisk", "energy", "debris"],
+        choices=["basilisk", "energy", "debris", "batch"],
+    )
     parser.add_argument("--batch-bodies", type=int, default=1024, help="the batch part's satellites")
     parser.add_argument("--without-basilisk", action="store_true", help="leave Basilisk's rows out")
     parser.add_argument("--repeats", type=int, default=3)
@@ -646,10 +765,19 @@ def main(argv=None):
     args.output_dir.mkdir(parents=True, exist_ok=True)
     with_basilisk = not args.without_basilisk and basilisk_available()
     if not args.without_basilisk and not with_basilisk:
-        print("Basilisk is not installed: its rows are left out (install it for this script only: "
-              ".venv/bin/pip install bsk)", flush=True)
-    machine = {"device": str(jax.devices()[0]), "platform": platform.platform(), "jax": jax.__version__,
-               "diffrax": diffrax.__version__, "cpus_visible": len(os.sched_getaffinity(0)), "quick": args.quick}
+        print(
+            "Basilisk is not installed: its rows are left out (install it for this script only: "
+            ".venv/bin/pip install bsk)",
+            flush=True,
+        )
+    machine = {
+        "device": str(jax.devices()[0]),
+        "platform": platform.platform(),
+        "jax": jax.__version__,
+        "diffrax": diffrax.__version__,
+        "cpus_visible": len(os.sched_getaffinity(0)),
+        "quick": args.quick,
+    }
     if with_basilisk:
         from importlib.metadata import version
 
@@ -659,9 +787,13 @@ def main(argv=None):
         (args.output_dir / "torques_basilisk.json").write_text(json.dumps(results, indent=1) + "\n")
         plot_basilisk(results, args.output_dir / "torques_basilisk.png")
     if "batch" in args.parts:
-        results = dict(batch_part(args.repeats, args.batch_bodies, RESULTS / "torques_basilisk.json"),
-                       machine=dict(machine, backend=jax.default_backend(), device_kind=jax.devices()[0].device_kind))
-        (args.output_dir / f"torques_batch_{jax.default_backend()}.json").write_text(json.dumps(results, indent=1) + "\n")
+        results = dict(
+            batch_part(args.repeats, args.batch_bodies, RESULTS / "torques_basilisk.json"),
+            machine=dict(machine, backend=jax.default_backend(), device_kind=jax.devices()[0].device_kind),
+        )
+        (args.output_dir / f"torques_batch_{jax.default_backend()}.json").write_text(
+            json.dumps(results, indent=1) + "\n"
+        )
     if "energy" in args.parts:
         results = dict(energy_part(args.quick, args.repeats), machine=machine)
         (args.output_dir / "torques_energy.json").write_text(json.dumps(results) + "\n")

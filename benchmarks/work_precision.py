@@ -30,7 +30,8 @@ Error: per body, the largest over its times of max(|q - q_ref| up to the sign of
 included); the JSON also has the largest and the median over the random bodies alone.
 
 Reference: diffrax Dopri8 in float64 at rtol = atol = 1e-16 (as in tests/_reference.py), with its
-steps ending exactly on the output times (no dense interpolation), independent of both closed forms.  Its own error floor is estimated in three ways, the largest is written next to
+steps ending exactly on the output times (no dense interpolation), independent of both closed forms.  Its own
+error floor is estimated in three ways, the largest is written next to
 every result and drawn in the plot: (1) the largest difference to the same integration at 1e-15 (a
 proxy: the two share rounding behaviour); (2) the largest difference to the independent 30-digit
 mpmath closed form of benchmarks/stability.py (``Reference``: its own derivation of the attitude,
@@ -55,12 +56,14 @@ import sys
 import time
 from pathlib import Path
 
+
 # equinox's runtime checks inside diffrax (not frbjax) become NaN instead of a host callback: failures
 # are read from diffrax's result codes (throw=False) anyway, and programs without host callbacks can
 # be kept in JAX's persistent compilation cache.
 os.environ.setdefault("EQX_ON_ERROR", "nan")
 
 import jax  # noqa: E402
+
 
 jax.config.update("jax_enable_x64", True)
 
@@ -70,6 +73,7 @@ import mpmath  # noqa: E402
 import numpy as np  # noqa: E402
 import scipy  # noqa: E402
 
+
 HERE = Path(__file__).resolve().parent
 sys.path.insert(0, str(HERE))
 sys.path.append(str(HERE.parent))
@@ -77,6 +81,7 @@ from _scipy_closed_form import ScipyFreeRigidBody  # noqa: E402
 from stability import Reference as StabilityReference  # noqa: E402  (an independent mpmath closed form)
 
 from frbjax import FreeRigidBody  # noqa: E402
+
 
 DEFAULT_OUTPUT_DIR = HERE / "results"
 TOLERANCES = [10.0**-k for k in range(4, 14)]
@@ -236,9 +241,15 @@ def mpmath_solution(inertia, momentum, attitude, times, dps=30):
         def field(t, y):
             l1, l2, l3, qw, qx, qy, qz = y
             o1, o2, o3 = l1 / i1, l2 / i2, l3 / i3
-            return [l2 * o3 - l3 * o2, l3 * o1 - l1 * o3, l1 * o2 - l2 * o1,
-                    (-qx * o1 - qy * o2 - qz * o3) / 2, (qw * o1 + qy * o3 - qz * o2) / 2,
-                    (qw * o2 - qx * o3 + qz * o1) / 2, (qw * o3 + qx * o2 - qy * o1) / 2]
+            return [
+                l2 * o3 - l3 * o2,
+                l3 * o1 - l1 * o3,
+                l1 * o2 - l2 * o1,
+                (-qx * o1 - qy * o2 - qz * o3) / 2,
+                (qw * o1 + qy * o3 - qz * o2) / 2,
+                (qw * o2 - qx * o3 + qz * o1) / 2,
+                (qw * o3 + qx * o2 - qy * o1) / 2,
+            ]
 
         q0 = [mpmath.mpf(float(x)) for x in attitude]
         norm = mpmath.sqrt(sum(x * x for x in q0))
@@ -289,13 +300,20 @@ def main(argv=None):
     parser.add_argument("--tolerances", type=float, nargs="+", default=TOLERANCES)
     parser.add_argument("--repeats", type=int, default=3)
     parser.add_argument("--budget", type=float, default=60.0, help="largest predicted seconds of one diffrax run")
-    parser.add_argument("--mpmath-bodies", type=int, default=6,
-                        help="bodies (half random, half hard) checked against the mpmath closed form")
+    parser.add_argument(
+        "--mpmath-bodies",
+        type=int,
+        default=6,
+        help="bodies (half random, half hard) checked against the mpmath closed form",
+    )
     parser.add_argument("--seed", type=int, default=0)
-    parser.add_argument("--quick", action="store_true",
-                        help="smoke run: 6 + 2 bodies, 1 sample (dense = state: one compiled program per "
-                             "method), tolerances 1e-4 and 1e-8, 1 mpmath body at 20 digits; compile times may come "
-                             "from the persistent compilation cache (JAX_COMPILATION_CACHE_DIR) if one is set")
+    parser.add_argument(
+        "--quick",
+        action="store_true",
+        help="smoke run: 6 + 2 bodies, 1 sample (dense = state: one compiled program per "
+        "method), tolerances 1e-4 and 1e-8, 1 mpmath body at 20 digits; compile times may come "
+        "from the persistent compilation cache (JAX_COMPILATION_CACHE_DIR) if one is set",
+    )
     parser.add_argument("--output-dir", type=Path, default=DEFAULT_OUTPUT_DIR)
     parser.add_argument("--note", default="", help="free text stored in the JSON (e.g. which frbjax was measured)")
     parser.add_argument("--no-plot", action="store_true")
@@ -317,8 +335,11 @@ def main(argv=None):
     norms = np.linalg.norm(momentum, axis=-1)
     device_args = [jnp.asarray(a) for a in (inertia, momentum, attitude)]
     device_args32 = [jnp.asarray(a, jnp.float32) for a in (inertia, momentum, attitude)]
-    print(f"work-precision: {n_random} random + {len(hard_names)} hard bodies, T = {options.final_times}, "
-          f"{options.samples} dense samples, device {jax.devices()[0]}, {os.cpu_count()} cores", flush=True)
+    print(
+        f"work-precision: {n_random} random + {len(hard_names)} hard bodies, T = {options.final_times}, "
+        f"{options.samples} dense samples, device {jax.devices()[0]}, {os.cpu_count()} cores",
+        flush=True,
+    )
 
     compile_s = {}
 
@@ -338,7 +359,8 @@ def main(argv=None):
     n_hard = len(hard_names)
     hard_picks = min(n_hard, -(-options.mpmath_bodies // 2))
     mp_picks = list(range(min(options.mpmath_bodies - hard_picks, n_random))) + list(
-        range(n_random, n_random + hard_picks))
+        range(n_random, n_random + hard_picks)
+    )
     odefun_picks = mp_picks[:1] if options.quick else [0, n_random]
     for final_time in options.final_times:
         for kind in ("state", "dense"):
@@ -374,14 +396,19 @@ def main(argv=None):
                 if key not in mp_closed:
                     exact = StabilityReference(inertia[b], momentum[b], attitude[b], dps=30)
                     values = [exact.at(t) for t in ts]
-                    mp_closed[key] = (np.array([[float(x) for x in v[0]] for v in values]),
-                                      np.array([[float(x) for x in v[1]] for v in values]))
+                    mp_closed[key] = (
+                        np.array([[float(x) for x in v[0]] for v in values]),
+                        np.array([[float(x) for x in v[1]] for v in values]),
+                    )
             L_mp = np.stack([mp_closed[(b, tuple(ts))][0] for b in mp_picks])
             q_mp = np.stack([mp_closed[(b, tuple(ts))][1] for b in mp_picks])
             reference["floor_vs_mpmath_closed_form"] = float(
-                body_errors(L_ref[mp_picks], q_ref[mp_picks], L_mp, q_mp, norms[mp_picks])[0].max())
-            reference["mpmath_closed_form"] = (f"benchmarks/stability.py Reference at 30 digits on bodies {mp_picks} "
-                                               f"({time.perf_counter() - start:.0f} s)")
+                body_errors(L_ref[mp_picks], q_ref[mp_picks], L_mp, q_mp, norms[mp_picks])[0].max()
+            )
+            reference["mpmath_closed_form"] = (
+                f"benchmarks/stability.py Reference at 30 digits on bodies {mp_picks} "
+                f"({time.perf_counter() - start:.0f} s)"
+            )
             if final_time <= 10 and odefun_picks:
                 worst = 0.0
                 start = time.perf_counter()
@@ -390,38 +417,55 @@ def main(argv=None):
                     if key not in mp_cache:
                         mp_cache[key] = mpmath_solution(inertia[b], momentum[b], attitude[b], ts, dps=mp_dps)
                     L_o, q_o = mp_cache[key]
-                    e = body_errors(L_ref[b:b + 1], q_ref[b:b + 1], L_o[None], q_o[None], norms[b:b + 1])[0]
+                    e = body_errors(L_ref[b : b + 1], q_ref[b : b + 1], L_o[None], q_o[None], norms[b : b + 1])[0]
                     worst = max(worst, float(e.max()))
                 reference["floor_vs_mpmath_odefun"] = worst
-                reference["mpmath_odefun"] = (f"odefun at {mp_dps} digits on bodies {odefun_picks} "
-                                              f"({time.perf_counter() - start:.0f} s)")
-            floor_value = max(reference[k] for k in ("floor_estimate_vs_tol_1e-15", "floor_vs_mpmath_closed_form",
-                                                     "floor_vs_mpmath_odefun") if k in reference)
+                reference["mpmath_odefun"] = (
+                    f"odefun at {mp_dps} digits on bodies {odefun_picks} ({time.perf_counter() - start:.0f} s)"
+                )
+            floor_value = max(
+                reference[k]
+                for k in ("floor_estimate_vs_tol_1e-15", "floor_vs_mpmath_closed_form", "floor_vs_mpmath_odefun")
+                if k in reference
+            )
             reference["floor"] = floor_value
-            print(f"  reference: {reference['method']}, {reference_s:.1f} s, estimated error floor {floor_value:.1e} "
-                  f"(vs 1e-15: {reference['floor_estimate_vs_tol_1e-15']:.1e}, vs mpmath closed form "
-                  f"{reference['floor_vs_mpmath_closed_form']:.1e}"
-                  + (f", vs mpmath odefun: {reference['floor_vs_mpmath_odefun']:.1e})"
-                     if "floor_vs_mpmath_odefun" in reference else ")"),
-                  flush=True)
+            print(
+                f"  reference: {reference['method']}, {reference_s:.1f} s, estimated error floor {floor_value:.1e} "
+                f"(vs 1e-15: {reference['floor_estimate_vs_tol_1e-15']:.1e}, vs mpmath closed form "
+                f"{reference['floor_vs_mpmath_closed_form']:.1e}"
+                + (
+                    f", vs mpmath odefun: {reference['floor_vs_mpmath_odefun']:.1e})"
+                    if "floor_vs_mpmath_odefun" in reference
+                    else ")"
+                ),
+                flush=True,
+            )
 
             rows = []
-            print(f"  {'method':<22} {'tol':>8} {'time s':>9} {'max err':>9} {'rand max':>9} {'rand med':>9} "
-                  f"{'vs mpmath':>9}")
+            print(
+                f"  {'method':<22} {'tol':>8} {'time s':>9} {'max err':>9} {'rand max':>9} {'rand med':>9} "
+                f"{'vs mpmath':>9}"
+            )
 
             def record(row, L, q):
                 row.update(summarize(body_errors(L, q, L_ref, q_ref, norms), n_random))
                 row["max_error_vs_mpmath_subsample"] = float(
-                    body_errors(L[mp_picks], q[mp_picks], L_mp, q_mp, norms[mp_picks])[0].max())
+                    body_errors(L[mp_picks], q[mp_picks], L_mp, q_mp, norms[mp_picks])[0].max()
+                )
                 rows.append(row)
-                print(f"  {row['method']:<22} {_fmt(row.get('tol'))} {row['time_s']:9.3g} {row['max_error']:9.2e} "
-                      f"{row['max_error_random_bodies']:9.2e} {row['median_error_random_bodies']:9.2e} "
-                      f"{row['max_error_vs_mpmath_subsample']:9.2e}", flush=True)
+                print(
+                    f"  {row['method']:<22} {_fmt(row.get('tol'))} {row['time_s']:9.3g} {row['max_error']:9.2e} "
+                    f"{row['max_error_random_bodies']:9.2e} {row['median_error_random_bodies']:9.2e} "
+                    f"{row['max_error_vs_mpmath_subsample']:9.2e}",
+                    flush=True,
+                )
                 return row
 
             # frbjax (construction included).
-            for label, args, dtype in (("frbjax float64", device_args, jnp.float64),
-                                       ("frbjax float32", device_args32, jnp.float32)):
+            for label, args, dtype in (
+                ("frbjax float64", device_args, jnp.float64),
+                ("frbjax float32", device_args32, jnp.float32),
+            ):
                 ts_typed = jnp.asarray(ts, dtype)
                 fn = compiled((label, shape_key), frbjax_fn, *args, ts_typed)
                 seconds, (L, q) = timed(lambda: fn(*args, ts_typed), options.repeats)
@@ -445,10 +489,13 @@ def main(argv=None):
                     # Steps grow like tol^(-1/order); 1.2 for the step-size controller's overhead.
                     predicted = None if previous is None else previous * 10 ** (1 / order) * 1.2
                     if predicted is not None and predicted > options.budget:
-                        rows.append({"method": f"diffrax {name}", "tol": tol, "skipped": True,
-                                     "predicted_time_s": predicted})
-                        print(f"  {'diffrax ' + name:<22} {_fmt(tol)} skipped (predicted {predicted:.0f} s "
-                              f"> budget {options.budget:g} s)")
+                        rows.append(
+                            {"method": f"diffrax {name}", "tol": tol, "skipped": True, "predicted_time_s": predicted}
+                        )
+                        print(
+                            f"  {'diffrax ' + name:<22} {_fmt(tol)} skipped (predicted {predicted:.0f} s "
+                            f"> budget {options.budget:g} s)"
+                        )
                         continue
                     tol_dev = jnp.asarray(tol)
                     seconds, (L, q, steps, ok) = timed(lambda: fn(*device_args, ts_dev, tol_dev), options.repeats)
@@ -456,12 +503,24 @@ def main(argv=None):
                     ok = np.asarray(ok)
                     L, q = np.array(L), np.array(q)
                     L[~ok], q[~ok] = np.nan, np.nan
-                    record({"method": f"diffrax {name}", "tol": tol, "time_s": seconds,
-                            "max_steps_per_body": int(np.max(steps)), "failed_bodies": int((~ok).sum())}, L, q)
+                    record(
+                        {
+                            "method": f"diffrax {name}",
+                            "tol": tol,
+                            "time_s": seconds,
+                            "max_steps_per_body": int(np.max(steps)),
+                            "failed_bodies": int((~ok).sum()),
+                        },
+                        L,
+                        q,
+                    )
 
             # Key comparisons.
-            reached = [r for r in rows if r["method"].startswith("diffrax") and not r.get("skipped")
-                       and r["max_error"] <= TARGET_ERROR]
+            reached = [
+                r
+                for r in rows
+                if r["method"].startswith("diffrax") and not r.get("skipped") and r["max_error"] <= TARGET_ERROR
+            ]
             fastest = min(reached, key=lambda r: r["time_s"]) if reached else None
             scipy_row = next(r for r in rows if r["method"] == "scipy closed form")
             case = {
@@ -472,70 +531,101 @@ def main(argv=None):
                 "reference": reference,
                 "frbjax_vs_scipy_closed_form_max_difference": float(agreement.max()),
                 "methods": rows,
-                "fastest_diffrax_reaching_1e-12": None if fastest is None else
-                {"method": fastest["method"], "tol": fastest["tol"], "time_s": fastest["time_s"],
-                 "max_error": fastest["max_error"]},
-                "ratio_fastest_diffrax_1e-12_over_frbjax64": None if fastest is None else
-                fastest["time_s"] / frbjax64["time_s"],
+                "fastest_diffrax_reaching_1e-12": None
+                if fastest is None
+                else {
+                    "method": fastest["method"],
+                    "tol": fastest["tol"],
+                    "time_s": fastest["time_s"],
+                    "max_error": fastest["max_error"],
+                },
+                "ratio_fastest_diffrax_1e-12_over_frbjax64": None
+                if fastest is None
+                else fastest["time_s"] / frbjax64["time_s"],
                 "ratio_scipy_over_frbjax64": scipy_row["time_s"] / frbjax64["time_s"],
             }
             cases.append(case)
-            print(f"  frbjax float64 vs scipy closed form: max difference {case['frbjax_vs_scipy_closed_form_max_difference']:.1e}; "
-                  f"scipy / frbjax time {case['ratio_scipy_over_frbjax64']:.2f}")
+            print(
+                "  frbjax float64 vs scipy closed form: max difference "
+                f"{case['frbjax_vs_scipy_closed_form_max_difference']:.1e}; "
+                f"scipy / frbjax time {case['ratio_scipy_over_frbjax64']:.2f}"
+            )
             if fastest is None:
                 print("  no diffrax configuration reached error <= 1e-12")
             else:
-                print(f"  fastest diffrax <= 1e-12: {fastest['method']} tol {fastest['tol']:g}, {fastest['time_s']:.3g} s "
-                      f"= {case['ratio_fastest_diffrax_1e-12_over_frbjax64']:.0f} x frbjax float64")
+                print(
+                    f"  fastest diffrax <= 1e-12: {fastest['method']} tol {fastest['tol']:g}, "
+                    f"{fastest['time_s']:.3g} s "
+                    f"= {case['ratio_fastest_diffrax_1e-12_over_frbjax64']:.0f} x frbjax float64"
+                )
 
     def find(T, kind):
         return next((c for c in cases if c["T"] == T and c["kind"] == kind), None)
 
     key_state, key_dense = find(10.0, "state"), find(10.0, "dense")
     summary = {
-        "diffrax_over_frbjax64_T10_state_error_1e-12":
-            None if key_state is None else key_state["ratio_fastest_diffrax_1e-12_over_frbjax64"],
-        "fastest_diffrax_T10_state_error_1e-12":
-            None if key_state is None else key_state["fastest_diffrax_reaching_1e-12"],
+        "diffrax_over_frbjax64_T10_state_error_1e-12": None
+        if key_state is None
+        else key_state["ratio_fastest_diffrax_1e-12_over_frbjax64"],
+        "fastest_diffrax_T10_state_error_1e-12": None
+        if key_state is None
+        else key_state["fastest_diffrax_reaching_1e-12"],
         "frbjax64_T10_state_max_error": None if key_state is None else key_state["methods"][0]["max_error"],
-        "scipy_over_frbjax64_per_dense_sample_T10":
-            None if key_dense is None else key_dense["ratio_scipy_over_frbjax64"],
-        "frbjax64_ns_per_dense_sample_T10":
-            None if key_dense is None else key_dense["methods"][0]["time_s"] / key_dense["evaluations"] * 1e9,
-        "scipy_ns_per_dense_sample_T10":
-            None if key_dense is None else key_dense["methods"][2]["time_s"] / key_dense["evaluations"] * 1e9,
+        "scipy_over_frbjax64_per_dense_sample_T10": None
+        if key_dense is None
+        else key_dense["ratio_scipy_over_frbjax64"],
+        "frbjax64_ns_per_dense_sample_T10": None
+        if key_dense is None
+        else key_dense["methods"][0]["time_s"] / key_dense["evaluations"] * 1e9,
+        "scipy_ns_per_dense_sample_T10": None
+        if key_dense is None
+        else key_dense["methods"][2]["time_s"] / key_dense["evaluations"] * 1e9,
         "note": "dense-sample times include body construction (amortised over the samples) and both L and q; "
-                "frbjax on all cores (XLA thread pool), scipy on one; benchmarks/throughput.py measures "
-                "quaternion-only evaluation on one core.",
+        "frbjax on all cores (XLA thread pool), scipy on one; benchmarks/throughput.py measures "
+        "quaternion-only evaluation on one core.",
     }
     print("\nKey ratios")
     if key_state is not None:
         r = summary["diffrax_over_frbjax64_T10_state_error_1e-12"]
         f = summary["fastest_diffrax_T10_state_error_1e-12"]
-        print(f"  T = 10 state: frbjax float64 (construction included) max error "
-              f"{summary['frbjax64_T10_state_max_error']:.1e}; fastest diffrax reaching 1e-12: "
-              + ("none" if f is None else f"{f['method']} tol {f['tol']:g}, {f['time_s']:.3g} s -> {r:.0f} x slower than frbjax"))
+        print(
+            f"  T = 10 state: frbjax float64 (construction included) max error "
+            f"{summary['frbjax64_T10_state_max_error']:.1e}; fastest diffrax reaching 1e-12: "
+            + (
+                "none"
+                if f is None
+                else f"{f['method']} tol {f['tol']:g}, {f['time_s']:.3g} s -> {r:.0f} x slower than frbjax"
+            )
+        )
     if key_dense is not None:
-        print(f"  T = 10 dense, per (body, sample) evaluation of L and q: frbjax float64 "
-              f"{summary['frbjax64_ns_per_dense_sample_T10']:.0f} ns, scipy closed form "
-              f"{summary['scipy_ns_per_dense_sample_T10']:.0f} ns -> scipy / frbjax = "
-              f"{summary['scipy_over_frbjax64_per_dense_sample_T10']:.2f}")
+        print(
+            f"  T = 10 dense, per (body, sample) evaluation of L and q: frbjax float64 "
+            f"{summary['frbjax64_ns_per_dense_sample_T10']:.0f} ns, scipy closed form "
+            f"{summary['scipy_ns_per_dense_sample_T10']:.0f} ns -> scipy / frbjax = "
+            f"{summary['scipy_over_frbjax64_per_dense_sample_T10']:.2f}"
+        )
 
     result = {
         "description": "run time against max error; see the docstring of benchmarks/work_precision.py",
-        "bodies": {"random": n_random, "hard": hard_names, "hard_indices_start": n_random,
-                   "random_distribution": "moments log-uniform [1, 4] any order, |L| log-uniform [0.5, 2], "
-                                          "direction and attitude uniform", "seed": options.seed},
+        "bodies": {
+            "random": n_random,
+            "hard": hard_names,
+            "hard_indices_start": n_random,
+            "random_distribution": "moments log-uniform [1, 4] any order, |L| log-uniform [0.5, 2], "
+            "direction and attitude uniform",
+            "seed": options.seed,
+        },
         "error_definition": "per body max over times of max(|q - q_ref|_inf up to sign, |L - L_ref|_inf / |L|); "
-                            "max_error = max over all bodies",
-        "reference": f"diffrax Dopri8 float64 rtol=atol={REFERENCE_TOL:g} stepping onto the output times; its error floor estimated per case "
-                     f"as the largest of: the difference to rtol=atol={CHECK_TOL:g}, the error against the 30-digit "
-                     f"mpmath closed form of benchmarks/stability.py on bodies {mp_picks}, and (T <= 10) against "
-                     f"mpmath.odefun on bodies {odefun_picks}",
+        "max_error = max over all bodies",
+        "reference": f"diffrax Dopri8 float64 rtol=atol={REFERENCE_TOL:g} stepping onto the output times; "
+        "its error floor estimated per case "
+        f"as the largest of: the difference to rtol=atol={CHECK_TOL:g}, the error against the 30-digit "
+        f"mpmath closed form of benchmarks/stability.py on bodies {mp_picks}, and (T <= 10) against "
+        f"mpmath.odefun on bodies {odefun_picks}",
         "max_error_vs_mpmath_subsample": "per method: the error against the mpmath closed form on the same subsample "
-                                         "(free of the diffrax reference's floor)",
+        "(free of the diffrax reference's floor)",
         "timing": "wall time after compilation, best of repeats (runs > 2 s timed once), block_until_ready; "
-                  "frbjax and diffrax: XLA CPU (all cores); numpy/scipy: one core",
+        "frbjax and diffrax: XLA CPU (all cores); numpy/scipy: one core",
         "compile_s": {f"{k[0]} {k[1]}": v[1] for k, v in compile_s.items()},
         "cases": cases,
         "summary": summary,
@@ -580,11 +670,14 @@ def _provenance():
         return info  # not this checkout's frbjax: its git state says nothing (see --note)
     try:
         root = HERE.parent
-        info["git_head"] = subprocess.run(["git", "-C", str(root), "rev-parse", "HEAD"], capture_output=True,
-                                          text=True, check=True).stdout.strip()
-        info["frbjax_modified_in_checkout"] = bool(subprocess.run(
-            ["git", "-C", str(root), "status", "--porcelain", "frbjax"], capture_output=True, text=True,
-            check=True).stdout.strip())
+        info["git_head"] = subprocess.run(
+            ["git", "-C", str(root), "rev-parse", "HEAD"], capture_output=True, text=True, check=True
+        ).stdout.strip()
+        info["frbjax_modified_in_checkout"] = bool(
+            subprocess.run(
+                ["git", "-C", str(root), "status", "--porcelain", "frbjax"], capture_output=True, text=True, check=True
+            ).stdout.strip()
+        )
     except (OSError, subprocess.CalledProcessError):
         pass
     return info
@@ -600,21 +693,40 @@ def plot(result, path):
     columns = 2
     rows = -(-len(cases) // columns)
     fig, axes = plt.subplots(rows, columns, figsize=(6.2 * columns, 4.6 * rows), squeeze=False)
-    styles = {"diffrax Tsit5": ("tab:blue", "o-"), "diffrax Dopri5": ("tab:orange", "s-"),
-              "diffrax Dopri8": ("tab:green", "^-")}
-    singles = {"frbjax float64": ("tab:red", "*", 16), "frbjax float32": ("tab:pink", "*", 13),
-               "scipy closed form": ("k", "D", 8)}
+    styles = {
+        "diffrax Tsit5": ("tab:blue", "o-"),
+        "diffrax Dopri5": ("tab:orange", "s-"),
+        "diffrax Dopri8": ("tab:green", "^-"),
+    }
+    singles = {
+        "frbjax float64": ("tab:red", "*", 16),
+        "frbjax float32": ("tab:pink", "*", 13),
+        "scipy closed form": ("k", "D", 8),
+    }
     for ax, case in zip(axes.flat, cases):
         floor = max(case["reference"]["floor"], 1e-17)
         for method, (color, style) in styles.items():
             pts = [r for r in case["methods"] if r["method"] == method and not r.get("skipped")]
             if pts:
-                ax.plot([r["time_s"] for r in pts], [max(r["max_error"], 1e-17) for r in pts], style, color=color,
-                        label=f"{method} (tol {pts[0]['tol']:.0e}..{pts[-1]['tol']:.0e})", ms=4)
+                ax.plot(
+                    [r["time_s"] for r in pts],
+                    [max(r["max_error"], 1e-17) for r in pts],
+                    style,
+                    color=color,
+                    label=f"{method} (tol {pts[0]['tol']:.0e}..{pts[-1]['tol']:.0e})",
+                    ms=4,
+                )
         for method, (color, marker, size) in singles.items():
             r = next(r for r in case["methods"] if r["method"] == method)
-            ax.plot([r["time_s"]], [max(r["max_error"], 1e-17)], marker, color=color, ms=size, ls="none",
-                    label=method + (" (incl. construction)" if r.get("includes_construction") else ""))
+            ax.plot(
+                [r["time_s"]],
+                [max(r["max_error"], 1e-17)],
+                marker,
+                color=color,
+                ms=size,
+                ls="none",
+                label=method + (" (incl. construction)" if r.get("includes_construction") else ""),
+            )
         ax.axhline(floor, color="gray", ls="--", lw=1, label=f"reference error floor est. {floor:.0e}")
         ax.axhline(TARGET_ERROR, color="gray", ls=":", lw=1, label="1e-12")
         ax.set_xscale("log")
@@ -624,12 +736,15 @@ def plot(result, path):
         what = "state at T" if case["kind"] == "state" else f"{case['samples_per_body']} samples per body"
         ax.set_title(f"T = {case['T']:g}, {what}", fontsize=10)
         ax.grid(True, which="major", alpha=0.3)
-    for ax in list(axes.flat)[len(cases):]:
+    for ax in list(axes.flat)[len(cases) :]:
         ax.axis("off")
     axes.flat[0].legend(fontsize=7, loc="best")
     b = result["bodies"]
-    fig.suptitle(f"Work-precision, {b['random']} random + {len(b['hard'])} hard bodies; reference: "
-                 f"{result['reference'].split(';')[0]}", fontsize=10)
+    fig.suptitle(
+        f"Work-precision, {b['random']} random + {len(b['hard'])} hard bodies; reference: "
+        f"{result['reference'].split(';')[0]}",
+        fontsize=10,
+    )
     fig.tight_layout()
     fig.savefig(path, dpi=110)
     plt.close(fig)

@@ -20,19 +20,28 @@ import re
 
 from mkdocs.structure.files import File
 
+
 log = logging.getLogger("mkdocs.hooks.frbjax")
 
 ROOT = pathlib.Path(__file__).resolve().parents[1]
-FIGURES = ("stability.png", "throughput.png", "work_precision.png", "setup_cost.png", "torqued_work_precision.png",
-           "torqued_energy.png", "lightcurve.png",
-           "torques_basilisk.png", "torques_energy.png", "torques_debris.png")
+FIGURES = (
+    "stability.png",
+    "throughput.png",
+    "work_precision.png",
+    "setup_cost.png",
+    "torqued_work_precision.png",
+    "torqued_energy.png",
+    "lightcurve.png",
+    "torques_basilisk.png",
+    "torques_energy.png",
+    "torques_debris.png",
+)
 HELP_MARKER = re.compile(r"<!-- frbjax-help:(?P<arguments>[^>]*)-->")
 
 
 def on_files(files, config):
     for name in FIGURES:
-        files.append(File.generated(config, f"images/{name}",
-                                    abs_src_path=str(ROOT / "benchmarks" / "results" / name)))
+        files.append(File.generated(config, f"images/{name}", abs_src_path=str(ROOT / "benchmarks" / "results" / name)))
     files.append(File.generated(config, "changelog.md", abs_src_path=str(ROOT / "CHANGELOG.md")))
     files.append(File.generated(config, "contributing.md", abs_src_path=str(ROOT / "CONTRIBUTING.md")))
     return files
@@ -65,8 +74,7 @@ def on_page_markdown(markdown, page, config, files):
 
 
 # What a rendered page may hold a "$" in: code, preformatted blocks, typeset mathematics, scripts.
-_EXEMPT = re.compile(r"<(code|pre|script|style)\b.*?</\1>|<(span|div) class=\"arithmatex\">.*?</\2>",
-                     re.DOTALL)
+_EXEMPT = re.compile(r"<(code|pre|script|style)\b.*?</\1>|<(span|div) class=\"arithmatex\">.*?</\2>", re.DOTALL)
 _TAGS = re.compile(r"<[^>]+>")
 _REST_MATH = re.compile(r":math:|\.\. math::")
 
@@ -77,9 +85,13 @@ def on_page_content(html, page, config, files):
     text = _TAGS.sub(" ", _EXEMPT.sub(" ", html))
     for line in text.splitlines():
         if "$" in line:
-            log.warning(f"{page.file.src_uri}: mathematics not typeset (a $ outside $...$ or $$...$$; "
-                        f"see CONTRIBUTING.md, \"Writing docstrings\"): {line.strip()[:120]!r}")
+            log.warning(
+                f"{page.file.src_uri}: mathematics not typeset (a $ outside $...$ or $$...$$; "
+                f'see CONTRIBUTING.md, "Writing docstrings"): {line.strip()[:120]!r}'
+            )
     if _REST_MATH.search(text):
-        log.info(f"{page.file.src_uri}: a docstring still writes mathematics in reST (:math:, .. math::); "
-                 "CONTRIBUTING.md, \"Writing docstrings\", has the convention")
+        log.info(
+            f"{page.file.src_uri}: a docstring still writes mathematics in reST (:math:, .. math::); "
+            'CONTRIBUTING.md, "Writing docstrings", has the convention'
+        )
     return html

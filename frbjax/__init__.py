@@ -28,6 +28,7 @@ from ._inertia import InertiaTensor
 from ._quaternion import quaternion_from_matrix, quaternion_to_matrix
 from ._sharding import batch_mesh, pad_batch, shard_batch, shard_bodies
 
+
 __all__ = [
     "SPLITTING_METHODS",
     "AttitudeFit",
@@ -36,10 +37,14 @@ __all__ = [
     "InertiaTensor",
     "RigidBodySplitting",
     "RigidBodyTerm",
+    "batch_mesh",
     "fit_attitude",
     "free_flow",
+    "pad_batch",
     "quaternion_from_matrix",
     "quaternion_to_matrix",
+    "shard_batch",
+    "shard_bodies",
     "special",
     "splitting_trajectory",
 ]
@@ -71,4 +76,6 @@ def __getattr__(name):
 
         return METHODS
     raise AttributeError(f"module 'frbjax' has no attribute {name!r}")
+
+
 __version__ = "0.1.0"

@@ -17,8 +17,15 @@ from ._frame import angular_velocity, dot as _dot, matrix_product, matrix_times 
 from ._fusion import materialise, sum_last, when_any
 from ._inertia import InertiaTensor, through_principal_frame, validate_tensor
 from ._precession import precessing, with_precession_derivatives
-from ._regimes import UNIFORM, classify, constants, evaluate, evaluate_once, orbit_constants
-from ._regimes import reference as regime_reference
+from ._regimes import (
+    classify,
+    constants,
+    evaluate,
+    evaluate_once,
+    orbit_constants,
+    reference as regime_reference,
+    UNIFORM,
+)
 from ._uniform import uniform_momentum, uniform_spin
 
 
@@ -32,9 +39,14 @@ def working_frame(inertia, momentum):
     # Stable ranks (ties keep their order) by comparisons: body i's moment goes to working axis
     # rank_i.  (XLA's sort of the three moments cost 170 ns per body on CPU, these 10 ns.)
     j1, j2, j3 = inertia[..., 0], inertia[..., 1], inertia[..., 2]
-    rank = jnp.stack([(j2 < j1).astype(jnp.int32) + (j3 < j1),
-                      (j1 <= j2).astype(jnp.int32) + (j3 < j2),
-                      (j1 <= j3).astype(jnp.int32) + (j2 <= j3)], -1)
+    rank = jnp.stack(
+        [
+            (j2 < j1).astype(jnp.int32) + (j3 < j1),
+            (j1 <= j2).astype(jnp.int32) + (j3 < j2),
+            (j1 <= j3).astype(jnp.int32) + (j2 <= j3),
+        ],
+        -1,
+    )
     working_axes = jnp.broadcast_to(jnp.arange(3), (*rank.shape, 3))
     permutation = (rank[..., :, None] == working_axes).astype(inertia.dtype)
     # An odd permutation has determinant -1: flip the middle working axis to make it a rotation.
@@ -42,7 +54,8 @@ def working_frame(inertia, momentum):
     column_signs = jnp.stack([jnp.ones_like(parity), parity, jnp.ones_like(parity)], -1)
     permutation = permutation * column_signs[..., None, :]
     sorted_inertia = jnp.stack(
-        [jnp.where(rank[..., 0] == k, j1, jnp.where(rank[..., 1] == k, j2, j3)) for k in range(3)], -1)
+        [jnp.where(rank[..., 0] == k, j1, jnp.where(rank[..., 1] == k, j2, j3)) for k in range(3)], -1
+    )
     momentum = _apply(jnp.swapaxes(permutation, -1, -2), momentum)
     s1 = jnp.where(momentum[..., 0] < 0, -1.0, 1.0).astype(inertia.dtype)
     s3 = jnp.where(momentum[..., 2] < 0, -1.0, 1.0).astype(inertia.dtype)
@@ -177,9 +190,11 @@ def _prepare(inertia, angular_momentum, attitude, axes=None):
         # a principal plane or axis at first order).
         size = jnp.sqrt(sum_last(principal_momentum * principal_momentum))[..., None]
         rounding = _FRAME_ROUNDING * jnp.finfo(principal_momentum.dtype).eps * size
-        principal_momentum = jnp.where(jnp.abs(principal_momentum) <= rounding,
-                                       principal_momentum - jax.lax.stop_gradient(principal_momentum),
-                                       principal_momentum)
+        principal_momentum = jnp.where(
+            jnp.abs(principal_momentum) <= rounding,
+            principal_momentum - jax.lax.stop_gradient(principal_momentum),
+            principal_momentum,
+        )
         permutation, sorted_inertia, momentum_working = working_frame(inertia, principal_momentum)
         permutation = matrix_product(axes, permutation)
     norm_squared = sum_last(momentum_working**2)
@@ -195,8 +210,9 @@ def _prepare(inertia, angular_momentum, attitude, axes=None):
 @jax.jit
 def _construct(inertia, angular_momentum, attitude, axes=None):
     """The fields of a FreeRigidBody (see its docstring) from validated inputs, as one jitted program."""
-    (inertia, angular_momentum, attitude, valid, permutation, sorted_inertia, unit_working, norm,
-     regime) = _prepare(inertia, angular_momentum, attitude, axes)
+    (inertia, angular_momentum, attitude, valid, permutation, sorted_inertia, unit_working, norm, regime) = _prepare(
+        inertia, angular_momentum, attitude, axes
+    )
     dtype = inertia.dtype
     consts = constants(sorted_inertia, unit_working, regime)
 
@@ -204,9 +220,7 @@ def _construct(inertia, angular_momentum, attitude, axes=None):
     # initial state", with the phase folded into q̂; P is the working frame as a quaternion).
     frame_rotation = quaternion.from_matrix(permutation)
     reference = regime_reference(consts, unit_working)
-    offset = quaternion.multiply(
-        quaternion.multiply(attitude, frame_rotation), quaternion.conjugate(reference)
-    )
+    offset = quaternion.multiply(quaternion.multiply(attitude, frame_rotation), quaternion.conjugate(reference))
     # p -> offset ⊗ p ⊗ conj(P) is linear in p: one 4 x 4 matrix per body, columns the images of
     # the unit quaternions, so that each evaluation costs 16 products instead of two Hamilton
     # products.
@@ -262,14 +276,16 @@ def _motion_once(inertia, angular_momentum, attitude, t, with_attitude=True, axe
     broadcast to the bodies' batch shape without adding dimensions.  ``axes``: principal axes in the
     body frame (``_prepare``), or None.
     """
-    (inertia, angular_momentum, attitude, _, permutation, sorted_inertia, unit_working, norm,
-     regime) = _prepare(inertia, angular_momentum, attitude, axes)
+    (inertia, angular_momentum, attitude, _, permutation, sorted_inertia, unit_working, norm, regime) = _prepare(
+        inertia, angular_momentum, attitude, axes
+    )
     # Materialised (see _fusion): the working frame and the regime are cheap elementwise values, so
     # XLA would fuse them into every later loop and recompute there the sort of the moments and the
     # classification's comparisons, once per output element; over a batch that was a quarter of this
     # path's cost.  (The constructor stores them: it needs no such boundary.)
     permutation, sorted_inertia, unit_working, norm, regime = materialise(
-        (permutation, sorted_inertia, unit_working, norm, regime))
+        (permutation, sorted_inertia, unit_working, norm, regime)
+    )
     t = jnp.asarray(t, inertia.dtype)
     tau = norm * t
     orbit = orbit_constants(sorted_inertia, unit_working, regime)
@@ -307,10 +323,16 @@ def _once_precessing(inertia, angular_momentum, attitude, t, axes):
 # takes the derivatives of its regular precession's expansion (frbjax._precession).
 _state_at_one_time = with_precession_derivatives(
     lambda inertia, momentum, attitude, t, axes: _motion_once(inertia, momentum, attitude, t, True, axes),
-    "state", _once_precessing, _once_inputs)
+    "state",
+    _once_precessing,
+    _once_inputs,
+)
 _momentum_at_one_time = with_precession_derivatives(
     lambda inertia, momentum, attitude, t, axes: _motion_once(inertia, momentum, attitude, t, False, axes),
-    "momentum alone", _once_precessing, _once_inputs)
+    "momentum alone",
+    _once_precessing,
+    _once_inputs,
+)
 
 
 def motion_once(inertia, angular_momentum, attitude, t, with_attitude=True, axes=None):
@@ -321,8 +343,13 @@ def motion_once(inertia, angular_momentum, attitude, t, with_attitude=True, axes
 
 
 def _series_inputs(body, t):
-    return (body.inertia, body.principal_axes, body.initial_angular_momentum, body.initial_attitude,
-            jnp.asarray(t, body.inertia.dtype))
+    return (
+        body.inertia,
+        body.principal_axes,
+        body.initial_angular_momentum,
+        body.initial_attitude,
+        jnp.asarray(t, body.inertia.dtype),
+    )
 
 
 def _series_precessing(body, t):
@@ -421,9 +448,9 @@ class FreeRigidBody(eqx.Module):
     inertia: Float[Array, "... 3"]
     initial_angular_momentum: Float[Array, "... 3"]
     initial_attitude: Float[Array, "... 4"]
-    momentum_norm: Float[Array, "..."]
+    momentum_norm: Float[Array, ...]
     permutation: Float[Array, "... 3 3"]
-    regime: Int[Array, "..."]
+    regime: Int[Array, ...]
     principal_axes: Float[Array, "... 3 3"] | None
     inertia_tensor: Float[Array, "... 3 3"] | None
     _constants: dict
@@ -485,8 +512,7 @@ class FreeRigidBody(eqx.Module):
 
     def _momentum_from(self, t, unit_working):
         moving = self.momentum_norm[..., None] * _apply(self.permutation, unit_working)
-        fixed = _uniform_momentum(self._uniform(), self.inertia, self.principal_axes,
-                                  self.initial_angular_momentum, t)
+        fixed = _uniform_momentum(self._uniform(), self.inertia, self.principal_axes, self.initial_angular_momentum, t)
         return jnp.where(self._uniform()[..., None], jnp.broadcast_to(fixed, moving.shape), moving)
 
     def _attitude_from(self, t, tau, particular):
@@ -497,8 +523,9 @@ class FreeRigidBody(eqx.Module):
         moving = _normalised(materialise(moving))
         uniform = jnp.broadcast_to(self._uniform(), tau.shape)
         # Uniform rotation about a principal direction (or L = 0): q(t) = q0 ⊗ exp(t Omega0 / 2).
-        return _uniform_attitude(uniform, self.inertia, self.principal_axes, self.initial_angular_momentum,
-                                 self.initial_attitude, t, moving)
+        return _uniform_attitude(
+            uniform, self.inertia, self.principal_axes, self.initial_angular_momentum, self.initial_attitude, t, moving
+        )
 
     def _through_tensor(self, method, t):
         """method(self, t); for a body built from an inertia tensor, its derivatives with respect to
@@ -517,10 +544,12 @@ class FreeRigidBody(eqx.Module):
 
         # The series already built: their own derivatives are not needed (the rule rebuilds along
         # the tangent), and cutting them keeps forward mode from computing them.
-        prepared = jax.lax.stop_gradient(_body_of(dict(
-            (name, getattr(body, name)) for name in _FIELDS if name != "inertia_tensor")))
-        return through_principal_frame(motion, evaluate, body.inertia_tensor, prepared,
-                                       (body.initial_angular_momentum, body.initial_attitude, t))
+        prepared = jax.lax.stop_gradient(
+            _body_of(dict((name, getattr(body, name)) for name in _FIELDS if name != "inertia_tensor"))
+        )
+        return through_principal_frame(
+            motion, evaluate, body.inertia_tensor, prepared, (body.initial_angular_momentum, body.initial_attitude, t)
+        )
 
     @_precession_derivatives("momentum")
     def _angular_momentum(self, t):
@@ -555,7 +584,8 @@ class FreeRigidBody(eqx.Module):
     def angular_velocity(self, t) -> Float[Array, "... 3"]:
         r"""Body-frame angular velocity $\Omega(t) = I^{-1} L(t)$ ($L / I$ for principal moments)."""
         return self._through_tensor(
-            lambda body, t: angular_velocity(body.inertia, body.principal_axes, body._angular_momentum(t)), t)
+            lambda body, t: angular_velocity(body.inertia, body.principal_axes, body._angular_momentum(t)), t
+        )
 
     @_compiled
     def quaternion(self, t) -> Float[Array, "... 4"]:

@@ -46,6 +46,7 @@ import numpy as np
 from . import _quaternion as quaternion
 from ._body import FreeRigidBody
 
+
 __all__ = [
     "LAYOUTS",
     "CalgoFormatError",
@@ -241,9 +242,7 @@ def detect_layout(count):
 
 
 def _layouts_by_size():
-    return ", ".join(
-        f"{layout.size} ({layout.name})" for layout in sorted(LAYOUTS.values(), key=lambda x: x.size)
-    )
+    return ", ".join(f"{layout.size} ({layout.name})" for layout in sorted(LAYOUTS.values(), key=lambda x: x.size))
 
 
 def parse_input(text, path="<input>", layout=None):
@@ -267,27 +266,35 @@ def parse_input(text, path="<input>", layout=None):
     if len(tokens) > layout.size:
         token, line = tokens[layout.size]
         raise CalgoFormatError(
-            path, line, f"unexpected value {token!r} after the {layout.size} values of layout "
-            f"{layout.name} ({layout.summary()})")
+            path,
+            line,
+            f"unexpected value {token!r} after the {layout.size} values of layout {layout.name} ({layout.summary()})",
+        )
     numbers = []
     for index, (token, line) in enumerate(tokens):
         value = parse_number(token)
         if value is None or not math.isfinite(value):
             raise CalgoFormatError(
-                path, line, f"expected a number for {labels[index]} (value {index + 1} of "
-                f"{layout.size} of layout {layout.name}: {layout.summary()}), found {token!r}")
+                path,
+                line,
+                f"expected a number for {labels[index]} (value {index + 1} of "
+                f"{layout.size} of layout {layout.name}: {layout.summary()}), found {token!r}",
+            )
         numbers.append(value)
     if len(tokens) < layout.size:
         missing = labels[len(tokens)]
         line = tokens[-1][1] + 1 if tokens else 1
         raise CalgoFormatError(
-            path, line, f"end of file after {len(tokens)} values: expected {missing} (value "
-            f"{len(tokens) + 1} of {layout.size} of layout {layout.name}: {layout.summary()})")
+            path,
+            line,
+            f"end of file after {len(tokens)} values: expected {missing} (value "
+            f"{len(tokens) + 1} of {layout.size} of layout {layout.name}: {layout.summary()})",
+        )
 
     values, lines, start = {}, {}, 0
     for field in layout.fields:
-        values[field.name] = np.array(numbers[start:start + field.size], dtype=np.float64)
-        lines[field.name] = tuple(line for _, line in tokens[start:start + field.size])
+        values[field.name] = np.array(numbers[start : start + field.size], dtype=np.float64)
+        lines[field.name] = tuple(line for _, line in tokens[start : start + field.size])
         start += field.size
     problem = Problem(layout, values, lines, str(path))
     _check(problem)
@@ -299,16 +306,20 @@ def _raise_undetected(tokens, path):
         if parse_number(token) is None:
             raise CalgoFormatError(path, line, f"expected a number, found {token!r}")
     if not tokens:
-        raise CalgoFormatError(path, 1, f"empty file: expected a CALGO 903 input file, which holds "
-                               f"{_layouts_by_size()} values")
+        raise CalgoFormatError(
+            path, 1, f"empty file: expected a CALGO 903 input file, which holds {_layouts_by_size()} values"
+        )
     closest = min(LAYOUTS.values(), key=lambda layout: (abs(layout.size - len(tokens)), layout.size))
     difference = closest.size - len(tokens)
     plural = "s" if abs(difference) != 1 else ""
     raise CalgoFormatError(
-        path, tokens[-1][1], f"the file ends here after {len(tokens)} values, but a CALGO 903 input "
+        path,
+        tokens[-1][1],
+        f"the file ends here after {len(tokens)} values, but a CALGO 903 input "
         f"file holds {_layouts_by_size()} values; the closest layout, {closest.name} ({closest.summary()}), "
         f"has {abs(difference)} value{plural} {'more' if difference > 0 else 'fewer'}: force it "
-        f"(--layout {closest.name}) to locate the line at fault")
+        f"(--layout {closest.name}) to locate the line at fault",
+    )
 
 
 def _check(problem):
@@ -317,33 +328,41 @@ def _check(problem):
     inertia = problem["I"]
     for k in range(3):
         if inertia[k] <= 0:
-            raise CalgoFormatError(path, lines["I"][k], f"expected a positive moment of inertia for "
-                                   f"I({k + 1}), found {float(inertia[k])!r}")
+            raise CalgoFormatError(
+                path,
+                lines["I"][k],
+                f"expected a positive moment of inertia for I({k + 1}), found {float(inertia[k])!r}",
+            )
     if problem.layout.attitude == "Q":
         matrix = problem["Q"].reshape(3, 3).T
         defect = np.abs(matrix.T @ matrix - np.eye(3)).max()
         if defect > ROTATION_TOLERANCE or np.linalg.det(matrix) <= 0:
             raise CalgoFormatError(
-                path, lines["Q"][0], f"expected Q(1,1)..Q(3,3) (lines {lines['Q'][0]}-{lines['Q'][-1]}) "
+                path,
+                lines["Q"][0],
+                f"expected Q(1,1)..Q(3,3) (lines {lines['Q'][0]}-{lines['Q'][-1]}) "
                 f"to be a rotation matrix, column by column; found |Q'Q - 1| = {defect:.2e}, "
-                f"det Q = {np.linalg.det(matrix):.6g}")
+                f"det Q = {np.linalg.det(matrix):.6g}",
+            )
     else:
         norm = float(np.linalg.norm(problem["q"]))
         if abs(norm - 1) > ROTATION_TOLERANCE:
             raise CalgoFormatError(
-                path, lines["q"][0], f"expected q(1)..q(4) (lines {lines['q'][0]}-{lines['q'][-1]}) "
-                f"to be a unit quaternion, found |q| = {norm!r}")
+                path,
+                lines["q"][0],
+                f"expected q(1)..q(4) (lines {lines['q'][0]}-{lines['q'][-1]}) "
+                f"to be a unit quaternion, found |q| = {norm!r}",
+            )
     if "NP" in problem.values:
         order = problem["NP"]
         if order != int(order) or not 0 <= order <= 10:
-            raise CalgoFormatError(path, lines["NP"][0],
-                                   f"expected NP, an integer from 0 to 10, found {order!r}")
+            raise CalgoFormatError(path, lines["NP"][0], f"expected NP, an integer from 0 to 10, found {order!r}")
     if not problem.layout.single_step:
         step, final_time = problem["h"], problem["T"]
         if step == 0 or final_time / step < 1 - STEPS_TOLERANCE:
             raise CalgoFormatError(
-                path, lines["T"][0], f"expected T/h >= 1 (at least one step), found h = {step!r}, "
-                f"T = {final_time!r}")
+                path, lines["T"][0], f"expected T/h >= 1 (at least one step), found h = {step!r}, T = {final_time!r}"
+            )
 
 
 def read_input(path, layout=None):
@@ -397,10 +416,12 @@ def parse_output(text, layout, path="<output>"):
     size = layout.record_size
     count = len(numbers) + (1 if layout.single_step else 0)
     if count % size or (layout.single_step and count != 2 * size) or not count:
-        expected = (f"{layout.output_size(2)}" if layout.single_step
-                    else f"a positive multiple of {size}")
-        raise CalgoFormatError(path, tokens[-1][1] if tokens else None,
-                               f"{len(numbers)} values, expected {expected} for layout {layout.name}")
+        expected = f"{layout.output_size(2)}" if layout.single_step else f"a positive multiple of {size}"
+        raise CalgoFormatError(
+            path,
+            tokens[-1][1] if tokens else None,
+            f"{len(numbers)} values, expected {expected} for layout {layout.name}",
+        )
     if layout.single_step:
         numbers.append(math.nan)
     table = np.array(numbers, dtype=np.float64).reshape(-1, size)
@@ -421,8 +442,9 @@ def read_output(path, layout):
 
 def _require_x64():
     if not jax.config.jax_enable_x64:
-        raise RuntimeError("the CALGO 903 examples need 64-bit JAX: "
-                           'call jax.config.update("jax_enable_x64", True) first')
+        raise RuntimeError(
+            'the CALGO 903 examples need 64-bit JAX: call jax.config.update("jax_enable_x64", True) first'
+        )
 
 
 def _exact_motion(inertia, momentum, attitude, times):
@@ -475,8 +497,7 @@ def example1_program(problem, steps):
     step, u0 = problem.step, jnp.asarray(problem["u0"])
 
     def states(momentum, attitude):
-        _, states = splitting_trajectory(term, (momentum, attitude), dt=step, steps=steps, args=u0,
-                                         method=method)
+        _, states = splitting_trajectory(term, (momentum, attitude), dt=step, steps=steps, args=u0, method=method)
         return states
 
     return jax.jit(states)

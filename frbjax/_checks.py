@@ -16,6 +16,7 @@ import operator
 import jax
 import numpy as np
 
+
 # Row indices listed in a message (the count of all of them follows).
 _LISTED_ROWS = 10
 
@@ -50,8 +51,10 @@ def real_array(name: str, value) -> np.ndarray:
     except (ValueError, TypeError) as error:  # ragged nested sequences
         raise ValueError(f"{name} must be an array of real numbers: {error}") from None
     if array.dtype.kind not in "biuf":
-        raise ValueError(f"{name} must be an array of real numbers, got dtype {array.dtype}"
-                         + (f" ({type(value).__name__})" if array.dtype == object else ""))
+        raise ValueError(
+            f"{name} must be an array of real numbers, got dtype {array.dtype}"
+            + (f" ({type(value).__name__})" if array.dtype == object else "")
+        )
     return array
 
 
@@ -78,7 +81,7 @@ def check_positive(name: str, array, *, allow_zero: bool = False) -> None:
 def check_trailing_shape(name: str, array, trailing: tuple[int, ...]) -> None:
     """Raise unless ``array.shape`` ends with ``trailing`` (the leading axes are a batch)."""
     shape = tuple(np.shape(array))
-    if len(shape) < len(trailing) or shape[len(shape) - len(trailing):] != tuple(trailing):
+    if len(shape) < len(trailing) or shape[len(shape) - len(trailing) :] != tuple(trailing):
         pattern = ", ".join(["..."] + [str(size) for size in trailing])
         raise ValueError(f"{name} must have shape ({pattern}), got shape {shape}")
 
@@ -105,8 +108,7 @@ def check_unit_rows(name: str, array, *, what: str = "unit quaternions") -> None
     bad = deviation > unit_tolerance(array.dtype)
     if np.any(bad):
         position = np.argwhere(bad)[0]
-        raise ValueError(f"{name} must be {what}: |{name}{_index(position)}| - 1 is "
-                         f"{deviation[tuple(position)]:.3g}")
+        raise ValueError(f"{name} must be {what}: |{name}{_index(position)}| - 1 is {deviation[tuple(position)]:.3g}")
 
 
 def check_rotation_matrices(name: str, array) -> None:
@@ -118,8 +120,11 @@ def check_rotation_matrices(name: str, array) -> None:
     bad = (residual > unit_tolerance(array.dtype)) | (determinant <= 0)
     if np.any(bad):
         position = np.argwhere(bad)[0]
-        detail = ("its determinant is negative (a reflection)" if determinant[tuple(position)] <= 0
-                  else f"|R^T R - 1| is {residual[tuple(position)]:.3g}")
+        detail = (
+            "its determinant is negative (a reflection)"
+            if determinant[tuple(position)] <= 0
+            else f"|R^T R - 1| is {residual[tuple(position)]:.3g}"
+        )
         raise ValueError(f"{name} must be rotation matrices: at {name}{_index(position) or '[...]'} {detail}")
 
 
@@ -136,7 +141,9 @@ def describe_rows(rows) -> str:
     """'3, 17 and 40 (3 of 200)'-style list of the True rows of a mask."""
     indices = np.flatnonzero(rows)
     listed = ", ".join(str(i) for i in indices[:_LISTED_ROWS])
-    more = f", ... ({len(indices)} of {len(rows)})" if len(indices) > _LISTED_ROWS else f" ({len(indices)} of {len(rows)})"
+    more = (
+        f", ... ({len(indices)} of {len(rows)})" if len(indices) > _LISTED_ROWS else f" ({len(indices)} of {len(rows)})"
+    )
     return listed + more
 
 
@@ -148,9 +155,11 @@ def check_distinct_times(name: str, times, indices=None) -> None:
     order = np.argsort(times, kind="stable")
     repeated = np.flatnonzero(np.diff(times[order]) == 0)
     if repeated.size:
-        first, second = sorted(indices[order[repeated[0]: repeated[0] + 2]])
-        raise ValueError(f"{name} must be distinct: {name}[{first}] and {name}[{second}] are both "
-                         f"{times[order[repeated[0]]].item()!r}")
+        first, second = sorted(indices[order[repeated[0] : repeated[0] + 2]])
+        raise ValueError(
+            f"{name} must be distinct: {name}[{first}] and {name}[{second}] are both "
+            f"{times[order[repeated[0]]].item()!r}"
+        )
 
 
 def integer(name: str, value, *, minimum: int | None = None) -> int:
@@ -192,8 +201,10 @@ def interval(name: str, value, *, positive: bool = True, upper: float | None = N
         check_finite(name, array)
     low, high = (float(v) for v in array)
     if not low < high:
-        raise ValueError(f"{name} must be a range (low, high) with low < high, got ({low!r}, {high!r})"
-                         + (" (given upside down?)" if low > high else ""))
+        raise ValueError(
+            f"{name} must be a range (low, high) with low < high, got ({low!r}, {high!r})"
+            + (" (given upside down?)" if low > high else "")
+        )
     if upper is not None and high > upper:
         raise ValueError(f"{name} must lie within (0, {upper}], got ({low!r}, {high!r})")
     return low, high

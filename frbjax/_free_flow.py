@@ -11,8 +11,8 @@ import jax
 import jax.numpy as jnp
 from jaxtyping import Array, Float
 
-from ._checks import check_finite, on_host, real_array
 from ._body import _validate, _working_dtype, motion_once
+from ._checks import check_finite, on_host, real_array
 from ._inertia import InertiaTensor, through_principal_frame
 from ._kernel import one_kernel
 
@@ -33,8 +33,11 @@ def _tensor_free_flow(matrix, moments, axes, angular_momentum, attitude, t):
     moments = jnp.broadcast_to(moments, batch + (3,))
     axes = jnp.broadcast_to(axes, batch + (3, 3))
     matrix = jnp.broadcast_to(matrix, batch + (3, 3))
-    arguments = (jnp.broadcast_to(angular_momentum, batch + (3,)), jnp.broadcast_to(attitude, batch + (4,)),
-                 jnp.broadcast_to(t, batch))
+    arguments = (
+        jnp.broadcast_to(angular_momentum, batch + (3,)),
+        jnp.broadcast_to(attitude, batch + (4,)),
+        jnp.broadcast_to(t, batch),
+    )
 
     def motion(moments, axes, arguments):
         return _state_in_principal_frame(moments, *arguments, axes)
@@ -80,8 +83,14 @@ def free_flow(inertia, angular_momentum, attitude, t) -> tuple[Float[Array, "...
         _validate(inertia.principal_moments, angular_momentum, attitude)
         angular_momentum, attitude = jnp.asarray(angular_momentum), jnp.asarray(attitude)
         dtype = _working_dtype(inertia.principal_moments, angular_momentum)
-        return _tensor_free_flow(inertia.matrix, inertia.principal_moments, inertia.principal_axes,
-                                 angular_momentum, attitude, jnp.asarray(t, dtype))
+        return _tensor_free_flow(
+            inertia.matrix,
+            inertia.principal_moments,
+            inertia.principal_axes,
+            angular_momentum,
+            attitude,
+            jnp.asarray(t, dtype),
+        )
     _validate(inertia, angular_momentum, attitude)
     inertia, angular_momentum, attitude = (jnp.asarray(a) for a in (inertia, angular_momentum, attitude))
     dtype = _working_dtype(inertia, angular_momentum)

@@ -34,6 +34,7 @@ from jaxtyping import Array, Float
 from ._checks import check_finite, is_concrete, real_array
 from ._fusion import when_any
 
+
 # Pairs of principal axes (ascending moments) whose moments may meet.
 _PAIRS = ((0, 1), (1, 2), (0, 2))
 
@@ -150,11 +151,11 @@ def _through_principal_frame_jvp(motion, evaluate, primals, tangents):
 
         def between_equal_moments(direction, i=i, j=j):
             turned = _turned_in_plane(axes, i, j)
-            return jax.jvp(motion, (moments, turned, arguments),
-                           (direction, jnp.zeros_like(turned), no_arguments_change))[1]
+            return jax.jvp(
+                motion, (moments, turned, arguments), (direction, jnp.zeros_like(turned), no_arguments_change)
+            )[1]
 
-        extra = when_any(same, between_equal_moments, lambda _: jax.tree.map(jnp.zeros_like, tangent),
-                         direction)
+        extra = when_any(same, between_equal_moments, lambda _: jax.tree.map(jnp.zeros_like, tangent), direction)
         tangent = jax.tree.map(jnp.add, tangent, extra)
     return value, tangent
 
@@ -171,8 +172,10 @@ def validate_tensor(matrix, name):
     asymmetry = np.max(np.abs(value - np.swapaxes(value, -1, -2)), axis=(-2, -1))
     scale = np.max(np.abs(value), axis=(-2, -1))
     if np.any(asymmetry > _SYMMETRY_TOLERANCE * np.finfo(value.dtype).eps * scale):
-        raise ValueError(f"{name} must be symmetric (T[i, j] == T[j, i] to rounding); the largest "
-                         f"difference is {np.max(asymmetry):.3g}")
+        raise ValueError(
+            f"{name} must be symmetric (T[i, j] == T[j, i] to rounding); the largest "
+            f"difference is {np.max(asymmetry):.3g}"
+        )
     if not np.all(np.linalg.eigvalsh(0.5 * (value + np.swapaxes(value, -1, -2)))[..., 0] > 0):
         raise ValueError(f"{name} must be positive definite (all principal moments > 0)")
 
@@ -225,10 +228,14 @@ class InertiaTensor(eqx.Module):
         symmetric = _symmetric_part(matrix)
         moments, axes = principal_decomposition(symmetric)
         # Under tracing, invalid tensors cannot raise: their data become NaN (class docstring).
-        valid = (jnp.all(jnp.isfinite(matrix), axis=(-2, -1)) & (moments[..., 0] > 0)
-                 & (jnp.max(jnp.abs(matrix - jnp.swapaxes(matrix, -1, -2)), axis=(-2, -1))
-                    <= _SYMMETRY_TOLERANCE * jnp.finfo(matrix.dtype).eps
-                    * jnp.max(jnp.abs(matrix), axis=(-2, -1))))
+        valid = (
+            jnp.all(jnp.isfinite(matrix), axis=(-2, -1))
+            & (moments[..., 0] > 0)
+            & (
+                jnp.max(jnp.abs(matrix - jnp.swapaxes(matrix, -1, -2)), axis=(-2, -1))
+                <= _SYMMETRY_TOLERANCE * jnp.finfo(matrix.dtype).eps * jnp.max(jnp.abs(matrix), axis=(-2, -1))
+            )
+        )
         self.matrix = jnp.where(valid[..., None, None], symmetric, jnp.nan)
         self.principal_moments = jnp.where(valid[..., None], moments, jnp.nan)
         self.principal_axes = jnp.where(valid[..., None, None], axes, jnp.nan)

@@ -54,6 +54,7 @@ from jax.experimental.xla_metadata import set_xla_metadata
 
 from ._kernel_constants import lift_constants, sub_jaxprs
 
+
 _ATTRIBUTES = dict(xla_cpu_small_call="true", inlineable="false")
 
 # A region's inputs, each at most this many elements (one body's state is 3 + 3 + 4 + 1).
@@ -61,12 +62,34 @@ MAX_ELEMENTS = 64
 # Dot products with operands up to this size are emitted inside the kernel; larger ones are not.
 _MAX_DOT_ELEMENTS = 16
 # Operations XLA:CPU cannot emit inside a single kernel: they call its runtime (and every callback).
-_RUNTIME_PRIMITIVES = frozenset({
-    "sort", "cholesky", "eig", "eigh", "lu", "lu_pivots_to_permutation", "qr", "householder_product",
-    "svd", "schur", "hessenberg", "tridiagonal", "tridiagonal_solve", "triangular_solve", "fft",
-    "ffi_call", "custom_call", "debug_print", "rng_bit_generator", "random_bits", "all_gather", "psum",
-    "ppermute", "all_to_all",
-})
+_RUNTIME_PRIMITIVES = frozenset(
+    {
+        "sort",
+        "cholesky",
+        "eig",
+        "eigh",
+        "lu",
+        "lu_pivots_to_permutation",
+        "qr",
+        "householder_product",
+        "svd",
+        "schur",
+        "hessenberg",
+        "tridiagonal",
+        "tridiagonal_solve",
+        "triangular_solve",
+        "fft",
+        "ffi_call",
+        "custom_call",
+        "debug_print",
+        "rng_bit_generator",
+        "random_bits",
+        "all_gather",
+        "psum",
+        "ppermute",
+        "all_to_all",
+    }
+)
 
 
 def enabled() -> bool:
@@ -126,7 +149,9 @@ def _batched_everywhere(axis_size, in_batched, args):
     """``args`` with every leaf given the mapped axis in front (broadcast where it was not mapped)."""
     return jax.tree_util.tree_map(
         lambda leaf, batched: leaf if batched else jnp.broadcast_to(leaf, (axis_size,) + jnp.shape(leaf)),
-        tuple(args), tuple(in_batched))
+        tuple(args),
+        tuple(in_batched),
+    )
 
 
 def _primal_region(function, region):
@@ -172,8 +197,9 @@ def _values_and_jacobian(function, *args):
 
     def of_variables(*variables):
         given = iter(variables)
-        outputs = function(*jax.tree_util.tree_unflatten(tree, [next(given) if _inexact(leaf) else leaf
-                                                                for leaf in leaves]))
+        outputs = function(
+            *jax.tree_util.tree_unflatten(tree, [next(given) if _inexact(leaf) else leaf for leaf in leaves])
+        )
         return outputs, outputs  # the values as jacfwd's auxiliary output: one evaluation for both
 
     every_variable = tuple(range(len(variables)))
@@ -184,8 +210,7 @@ def _values_and_jacobian(function, *args):
 def _apply_jacobian(jacobian, outputs, primals, tangents):
     """The tangent of the outputs: the Jacobian (one entry per inexact input leaf) applied to the tangents."""
     leaves = jax.tree_util.tree_leaves(primals)
-    directions = [tangent for leaf, tangent in zip(leaves, jax.tree_util.tree_leaves(tangents))
-                  if _inexact(leaf)]
+    directions = [tangent for leaf, tangent in zip(leaves, jax.tree_util.tree_leaves(tangents)) if _inexact(leaf)]
 
     def tangent_of(output, rows):
         total = jnp.zeros_like(output)
@@ -204,8 +229,7 @@ def _region_call(function, tree, leaves, known, traced_leaves):
 
     def of_traced(*traced):
         given = iter(traced)
-        return function(*tree.unflatten([leaf if is_known else next(given)
-                                         for leaf, is_known in zip(leaves, known)]))
+        return function(*tree.unflatten([leaf if is_known else next(given) for leaf, is_known in zip(leaves, known)]))
 
     region = jax.jit(of_traced, inline=False)
     try:

@@ -27,6 +27,7 @@ import jax.extend.core
 import jax.numpy as jnp
 import numpy as np
 
+
 # A scan whose scanned and stacked arrays hold at most this many values runs as a while loop.
 SMALL_SCAN_ELEMENTS = 64
 
@@ -46,14 +47,28 @@ def sub_jaxprs(params):
 
 # Higher-order primitives whose values are those of one sub-jaxpr, evaluated in line (the region
 # serves values only: custom derivative and batching rules have no part in it).
-_CALLS = {"jit": "jaxpr", "pjit": "jaxpr", "closed_call": "call_jaxpr", "core_call": "call_jaxpr",
-          "remat2": "jaxpr", "checkpoint": "jaxpr", "custom_jvp_call": "call_jaxpr",
-          "custom_vjp_call": "call_jaxpr", "custom_vmap_call": "call"}
+_CALLS = {
+    "jit": "jaxpr",
+    "pjit": "jaxpr",
+    "closed_call": "call_jaxpr",
+    "core_call": "call_jaxpr",
+    "remat2": "jaxpr",
+    "checkpoint": "jaxpr",
+    "custom_jvp_call": "call_jaxpr",
+    "custom_vjp_call": "call_jaxpr",
+    "custom_vmap_call": "call",
+}
 _CONTROL_FLOW = frozenset({"cond", "while", "scan"})
 # Reductions over a few elements, written as a chain of their binary operation: the reduction's
 # initial value would be one more constant.
-_REDUCTIONS = {"reduce_sum": jax.lax.add, "reduce_prod": jax.lax.mul, "reduce_max": jax.lax.max,
-               "reduce_min": jax.lax.min, "reduce_and": jax.lax.bitwise_and, "reduce_or": jax.lax.bitwise_or}
+_REDUCTIONS = {
+    "reduce_sum": jax.lax.add,
+    "reduce_prod": jax.lax.mul,
+    "reduce_max": jax.lax.max,
+    "reduce_min": jax.lax.min,
+    "reduce_and": jax.lax.bitwise_and,
+    "reduce_or": jax.lax.bitwise_or,
+}
 
 
 class _Constants:
@@ -97,7 +112,7 @@ class _Constants:
             if name == "scan" and _small_scan(equation.params):  # its counter and zeros (_scan_as_while)
                 for value in (0, 1, equation.params["length"]):
                     self.place(value, np.int32)
-                for aval in equation.params["jaxpr"].out_avals[equation.params["num_carry"]:]:
+                for aval in equation.params["jaxpr"].out_avals[equation.params["num_carry"] :]:
                     self.place(0, aval.dtype)
             if name == "exp2":
                 self.place(math.log(2), equation.invars[0].aval.dtype)
@@ -195,7 +210,8 @@ def _cond(params, inputs, constants, packed):
 
     def branch_function(branch):
         def evaluate(*flat):
-            return _evaluate_closed(branch, flat[len(names):], constants, dict(zip(names, flat[:len(names)])))
+            return _evaluate_closed(branch, flat[len(names) :], constants, dict(zip(names, flat[: len(names)])))
+
         return evaluate
 
     flat = [packed[name] for name in names] + list(operands)
@@ -205,9 +221,9 @@ def _cond(params, inputs, constants, packed):
 
 
 def _while(params, inputs, constants, packed):
-    cond_consts = inputs[:params["cond_nconsts"]]
-    body_consts = inputs[params["cond_nconsts"]:params["cond_nconsts"] + params["body_nconsts"]]
-    initial = inputs[params["cond_nconsts"] + params["body_nconsts"]:]
+    cond_consts = inputs[: params["cond_nconsts"]]
+    body_consts = inputs[params["cond_nconsts"] : params["cond_nconsts"] + params["body_nconsts"]]
+    initial = inputs[params["cond_nconsts"] + params["body_nconsts"] :]
 
     def condition(carry):
         return _evaluate_closed(params["cond_jaxpr"], [*cond_consts, *carry], constants, packed)[0]
@@ -219,22 +235,25 @@ def _while(params, inputs, constants, packed):
 
 
 def _scan(params, inputs, constants, packed):
-    consts = inputs[:params["num_consts"]]
-    carry = inputs[params["num_consts"]:params["num_consts"] + params["num_carry"]]
-    xs = inputs[params["num_consts"] + params["num_carry"]:]
+    consts = inputs[: params["num_consts"]]
+    carry = inputs[params["num_consts"] : params["num_consts"] + params["num_carry"]]
+    xs = inputs[params["num_consts"] + params["num_carry"] :]
 
     def step(carry, x):
         outputs = _evaluate_closed(params["jaxpr"], [*consts, *carry, *x], constants, packed)
-        return outputs[:params["num_carry"]], outputs[params["num_carry"]:]
+        return outputs[: params["num_carry"]], outputs[params["num_carry"] :]
 
-    carry, ys = jax.lax.scan(step, carry, xs, length=params["length"], reverse=params["reverse"],
-                             unroll=params["unroll"])
+    carry, ys = jax.lax.scan(
+        step, carry, xs, length=params["length"], reverse=params["reverse"], unroll=params["unroll"]
+    )
     return [*carry, *ys]
 
 
 def _holds_loops(jaxpr):
-    return any(equation.primitive.name in ("while", "scan")
-               or any(_holds_loops(sub) for sub in sub_jaxprs(equation.params)) for equation in jaxpr.eqns)
+    return any(
+        equation.primitive.name in ("while", "scan") or any(_holds_loops(sub) for sub in sub_jaxprs(equation.params))
+        for equation in jaxpr.eqns
+    )
 
 
 def _small_scan(params):
@@ -243,8 +262,8 @@ def _small_scan(params):
     loop.  XLA:CPU aborted on the one-kernel emission of such a while loop with loops inside
     (jax 0.10.2: a splitting step in diffeqsolve, whose stages scan over the method's coefficients
     around the free flow's loops; "All or none of the slices should have an explicit index")."""
-    scanned = params["jaxpr"].in_avals[params["num_consts"] + params["num_carry"]:]
-    stacked = params["jaxpr"].out_avals[params["num_carry"]:]
+    scanned = params["jaxpr"].in_avals[params["num_consts"] + params["num_carry"] :]
+    stacked = params["jaxpr"].out_avals[params["num_carry"] :]
     if (scanned or stacked) and _holds_loops(params["jaxpr"].jaxpr):
         return False
     values = params["length"] * sum(math.prod(aval.shape) for aval in (*scanned, *stacked))
@@ -255,13 +274,15 @@ def _scan_as_while(params, inputs, constants, packed, read_constant):
     # A small scan as a while loop whose counter, bound and step are read like the other
     # constants (lax.scan's own loop brings three of its own).  The arrays scanned over ride in the
     # loop's state and turn by one row each step, and so do the stacked outputs (no dynamic slice).
-    consts = inputs[:params["num_consts"]]
-    carry = inputs[params["num_consts"]:params["num_consts"] + params["num_carry"]]
-    xs = inputs[params["num_consts"] + params["num_carry"]:]
+    consts = inputs[: params["num_consts"]]
+    carry = inputs[params["num_consts"] : params["num_consts"] + params["num_carry"]]
+    xs = inputs[params["num_consts"] + params["num_carry"] :]
     reverse = params["reverse"]
     zero, one, stop = (read_constant(k, np.int32) for k in (0, 1, params["length"]))
-    ys = [jax.lax.broadcast(read_constant(0, aval.dtype), (params["length"], *aval.shape))
-          for aval in params["jaxpr"].out_avals[params["num_carry"]:]]
+    ys = [
+        jax.lax.broadcast(read_constant(0, aval.dtype), (params["length"], *aval.shape))
+        for aval in params["jaxpr"].out_avals[params["num_carry"] :]
+    ]
 
     def turn(rows, row=None):
         """The next row to read, and the rows turned by one (``row`` put in where it went out)."""
@@ -275,8 +296,8 @@ def _scan_as_while(params, inputs, constants, packed, read_constant):
         count, carry, xs, ys = state
         x, xs = zip(*(turn(rows) for rows in xs)) if xs else ((), ())
         outputs = _evaluate_closed(params["jaxpr"], [*consts, *carry, *x], constants, packed)
-        ys = [turn(rows, row)[1] for rows, row in zip(ys, outputs[params["num_carry"]:])]
-        return count + one, outputs[:params["num_carry"]], list(xs), ys
+        ys = [turn(rows, row)[1] for rows, row in zip(ys, outputs[params["num_carry"] :])]
+        return count + one, outputs[: params["num_carry"]], list(xs), ys
 
     initial = (zero, list(carry), list(xs), ys)
     _, carry, _, ys = jax.lax.while_loop(lambda state: state[0] < stop, body, initial)
@@ -298,8 +319,13 @@ def lift_constants(traced):
 
     def lifted(*args):
         # The barrier keeps XLA from folding the reads back into constants of their own.
-        outputs = _evaluate(closed.jaxpr, closed.consts, jax.tree_util.tree_leaves(args), constants,
-                            jax.lax.optimization_barrier(packed))
+        outputs = _evaluate(
+            closed.jaxpr,
+            closed.consts,
+            jax.tree_util.tree_leaves(args),
+            constants,
+            jax.lax.optimization_barrier(packed),
+        )
         return jax.tree_util.tree_unflatten(traced.out_tree, outputs)
 
     return lifted

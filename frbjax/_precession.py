@@ -46,6 +46,7 @@ from ._frame import dot, to_body
 from ._fusion import sum_last, when_any
 from ._uniform import response_functions
 
+
 # Symmetric bodies whose unit L is closer than this to the plane of the equal moments take the
 # precession: there the elliptic formulas' derivative in an unequal change of those moments loses
 # about 1e-16 / (e . n)^2 relative (median over random bodies 2e-15 at 1/8, 1.2e-14 at 1/16, 6.5e-14
@@ -114,8 +115,11 @@ def precession(band, inertia, momentum, t, axes=None, attitude=True):
 
     def turned(w_u, w_v, w_e):
         """Q(t) w in the body frame from w's components along (u, v, e)."""
-        return ((cosine * w_u + sine * w_v)[..., None] * u + (cosine * w_v - sine * w_u)[..., None] * v
-                + w_e[..., None] * axis)
+        return (
+            (cosine * w_u + sine * w_v)[..., None] * u
+            + (cosine * w_v - sine * w_u)[..., None] * v
+            + w_e[..., None] * axis
+        )
 
     angular_momentum = turned(l_u + x_u, l_v + x_v, l_e + x_e)
     if not attitude:
@@ -123,8 +127,9 @@ def precession(band, inertia, momentum, t, axes=None, attitude=True):
 
     # psi = -n x x / |L0| + (n . psi) n (n . F2 = n . x = 0: f_c, f_s and L0 x e are across L0).
     n_u, n_v, n_e = l_u / size, l_v / size, l_e / size
-    parallel = gap * n_e * along_twice + unequal * (once_cosine * (l_u * l_u - l_v * l_v)
-                                                    + 2 * once_sine * l_u * l_v) / size
+    parallel = (
+        gap * n_e * along_twice + unequal * (once_cosine * (l_u * l_u - l_v * l_v) + 2 * once_sine * l_u * l_v) / size
+    )
     psi_u = -(n_v * x_e - n_e * x_v) / size + parallel * n_u
     psi_v = -(n_e * x_u - n_u * x_e) / size + parallel * n_v
     psi_e = -(n_u * x_v - n_v * x_u) / size + parallel * n_e
@@ -204,4 +209,3 @@ def with_precession_derivatives(function, outputs, band_of, inputs_of):
     wrapped.defjvp(rule, symbolic_zeros=True)
     # A plain function, not the custom_jvp object: as a class attribute it must bind as a method.
     return functools.wraps(function)(lambda *arguments: wrapped(*arguments))
-

@@ -69,17 +69,41 @@ def from_matrix(matrix: ArrayLike) -> Array:
     largest = jnp.sqrt(jnp.max(candidates, axis=-1)) / 2
     quarter = 1 / (4 * largest)
     from_w = jnp.stack(
-        [largest, (r[..., 2, 1] - r[..., 1, 2]) * quarter, (r[..., 0, 2] - r[..., 2, 0]) * quarter,
-         (r[..., 1, 0] - r[..., 0, 1]) * quarter], -1)
+        [
+            largest,
+            (r[..., 2, 1] - r[..., 1, 2]) * quarter,
+            (r[..., 0, 2] - r[..., 2, 0]) * quarter,
+            (r[..., 1, 0] - r[..., 0, 1]) * quarter,
+        ],
+        -1,
+    )
     from_x = jnp.stack(
-        [(r[..., 2, 1] - r[..., 1, 2]) * quarter, largest, (r[..., 0, 1] + r[..., 1, 0]) * quarter,
-         (r[..., 0, 2] + r[..., 2, 0]) * quarter], -1)
+        [
+            (r[..., 2, 1] - r[..., 1, 2]) * quarter,
+            largest,
+            (r[..., 0, 1] + r[..., 1, 0]) * quarter,
+            (r[..., 0, 2] + r[..., 2, 0]) * quarter,
+        ],
+        -1,
+    )
     from_y = jnp.stack(
-        [(r[..., 0, 2] - r[..., 2, 0]) * quarter, (r[..., 0, 1] + r[..., 1, 0]) * quarter, largest,
-         (r[..., 1, 2] + r[..., 2, 1]) * quarter], -1)
+        [
+            (r[..., 0, 2] - r[..., 2, 0]) * quarter,
+            (r[..., 0, 1] + r[..., 1, 0]) * quarter,
+            largest,
+            (r[..., 1, 2] + r[..., 2, 1]) * quarter,
+        ],
+        -1,
+    )
     from_z = jnp.stack(
-        [(r[..., 1, 0] - r[..., 0, 1]) * quarter, (r[..., 0, 2] + r[..., 2, 0]) * quarter,
-         (r[..., 1, 2] + r[..., 2, 1]) * quarter, largest], -1)
+        [
+            (r[..., 1, 0] - r[..., 0, 1]) * quarter,
+            (r[..., 0, 2] + r[..., 2, 0]) * quarter,
+            (r[..., 1, 2] + r[..., 2, 1]) * quarter,
+            largest,
+        ],
+        -1,
+    )
     options = jnp.stack([from_w, from_x, from_y, from_z], axis=-2)
     return jnp.take_along_axis(options, choice[..., None, None], axis=-2)[..., 0, :]
 

@@ -45,6 +45,7 @@ from .special._legendre import (
     third_kind_arguments,
 )
 
+
 MAJOR, MINOR, SEPARATRIX, UNIFORM = 0, 1, 2, 3
 
 # Harmless stand-in bodies for the branches not taken (safe-where pattern): each lies well inside the
@@ -74,7 +75,7 @@ def energy_gaps(inertia, unit_momentum):
 def classify(inertia, unit_momentum, momentum_norm):
     """Regime code per body (MAJOR, MINOR, SEPARATRIX or UNIFORM), from exact tests only."""
     j1, j2, j3 = inertia[..., 0], inertia[..., 1], inertia[..., 2]
-    l1, l2, l3 = unit_momentum[..., 0], unit_momentum[..., 1], unit_momentum[..., 2]
+    l1, l3 = unit_momentum[..., 0], unit_momentum[..., 2]
     g1, g2, g3 = energy_gaps(inertia, unit_momentum)
     # L along a principal direction (including the degenerate planes of symmetric bodies): Omega || L.
     uniform = (
@@ -116,8 +117,14 @@ def orbit_constants(inertia, unit_momentum, regime):
     amplitude_middle = jnp.sqrt(j2 * g_other / gap_pivot)
     amplitude_other = jnp.sqrt(j_other * g_pivot / c)
     elliptic = dict(
-        amplitude=jnp.stack([jnp.where(is_minor, amplitude_other, amplitude_pivot), amplitude_middle,
-                             jnp.where(is_minor, amplitude_pivot, amplitude_other)], -1),
+        amplitude=jnp.stack(
+            [
+                jnp.where(is_minor, amplitude_other, amplitude_pivot),
+                amplitude_middle,
+                jnp.where(is_minor, amplitude_pivot, amplitude_other),
+            ],
+            -1,
+        ),
         rate=jnp.sqrt(g_pivot * gap_pivot / (j1 * j2 * j3)),
         m=g_other * gap_other / (g_pivot * gap_pivot),
         mc=c * jnp.abs(g2) / (g_pivot * gap_pivot),
@@ -243,8 +250,13 @@ def constants(inertia, unit_momentum, regime):
     first_amplitude = jnp.where(is_sep, out["amplitude"][..., 0], 0.5)
     third_amplitude = jnp.where(is_sep, out["amplitude"][..., 2], 0.5)
     series = _series.at_separatrix(
-        series, is_sep, first_amplitude, third_amplitude, (1 + first_amplitude) / third_amplitude,
-        jnp.zeros_like(first_amplitude))
+        series,
+        is_sep,
+        first_amplitude,
+        third_amplitude,
+        (1 + first_amplitude) / third_amplitude,
+        jnp.zeros_like(first_amplitude),
+    )
     out["series"] = series
     # Materialised: otherwise XLA fuses the last steps of the per-body constants (the series'
     # coefficients, the tail of the complete Pi) into the evaluation's loops over
@@ -404,15 +416,20 @@ def evaluate_once(orbit, unit_momentum, tau, attitude=True):
         sech = 2 * decay / (1 + decay * decay)
         values = jnp.stack([sech, jnp.tanh(u), sech], -1)
         momentum = jnp.where(separatrix[..., None], orbit["amplitude"] * values, momentum)
-        return (jnp.where(separatrix, jnp.tanh(u), sn_w), jnp.where(separatrix, sech, cn_w),
-                jnp.where(separatrix, sech, dn_w), momentum)
+        return (
+            jnp.where(separatrix, jnp.tanh(u), sn_w),
+            jnp.where(separatrix, sech, cn_w),
+            jnp.where(separatrix, sech, dn_w),
+            momentum,
+        )
 
     # L = l + A (increments) in the elliptic regimes (minor: (A1 dn, A2 sn, A3 cn)), A (sn, cn, dn)(w)
     # itself where the direct form was taken (there the increments are not used).
     changes = jnp.stack([jnp.where(minor, dn_change, cn_change), sn_change, jnp.where(minor, cn_change, dn_change)], -1)
     values = jnp.stack([jnp.where(minor, dn_w, cn_w), sn_w, jnp.where(minor, cn_w, dn_w)], -1)
-    momentum = jnp.where(incremental[..., None], unit_momentum + orbit["amplitude"] * changes,
-                         orbit["amplitude"] * values)
+    momentum = jnp.where(
+        incremental[..., None], unit_momentum + orbit["amplitude"] * changes, orbit["amplitude"] * values
+    )
     momentum = jnp.where(elliptic[..., None], momentum, unit_momentum)
     # Batches without a body on the separatrix (almost all) skip its hyperbolic functions.
     sn_w, cn_w, dn_w, momentum = when_any(separatrix, on_separatrix, lambda u, *w: w, u, sn_w, cn_w, dn_w, momentum)
@@ -433,7 +450,8 @@ def evaluate_once(orbit, unit_momentum, tau, attitude=True):
     addition_scale = jnp.sqrt(minus_nu * (m + minus_nu) * (1 + minus_nu))
     addition_amplitude = jnp.sqrt(minus_nu) / jnp.sqrt((1 + minus_nu) * (m + minus_nu))
     addition = addition_amplitude * jnp.arctan2(
-        addition_scale * sn0 * sn_v * sn_w, 1 + minus_nu * (sn_w * sn_w) - minus_nu * sn0 * sn_v * cn_w * dn_w)
+        addition_scale * sn0 * sn_v * sn_w, 1 + minus_nu * (sn_w * sn_w) - minus_nu * sn0 * sn_v * cn_w * dn_w
+    )
     third_kind_change = periods + reduced - addition
 
     # Uniform rotation has stand-in constants of the major regime: its stand-in L too (unused), at both
@@ -482,8 +500,7 @@ def _chart(psi, l1, l2, l3, minor):
     else:
         # Materialised once: each of the four outputs below would otherwise recompute psi (and the
         # whole evaluation behind it) in its own fused loop (see _fusion).
-        half_cos, half_sin, pivot, first, second = materialise(
-            (*cos_sin(psi / 2), pivot, first, second))
+        half_cos, half_sin, pivot, first, second = materialise((*cos_sin(psi / 2), pivot, first, second))
     base = 1 + pivot
     root, inverse = jnp.sqrt(base / 2), 1 / jnp.sqrt(2 * base)
     scalar = half_cos * root

@@ -38,7 +38,8 @@ imaginary transformation (DLMF 22.6.12: sn(u|m) = -i sc(iu|mc), cn(u|m) = nc(iu|
 quotients of parameter mc at the imaginary argument i w give
 
     sn : cn = S(w) : (mc/q')^(1/4) T4(w) / 2,
-    S(w) = sum_{n>=0} (-1)^n q'^(n(n+1)) sinh((2n+1) w),  T4(w) = theta_4(iw|q') = 1 + 2 sum_{n>=1} (-1)^n q'^(n^2) cosh(2nw).
+    S(w) = sum_{n>=0} (-1)^n q'^(n(n+1)) sinh((2n+1) w),  T4(w) = theta_4(iw|q') = 1 + 2 sum_{n>=1} (-1)^n
+    q'^(n^2) cosh(2nw).
 
 The third kind follows from the direct form by the theta transformation DLMF 20.7.32,
 theta_4(z|tau) = (-i tau)^(-1/2) exp(-i z^2/(pi tau)) theta_2(z/tau | -1/tau): the Gaussian factor
@@ -86,6 +87,7 @@ from .special import elliprf
 from .special._circular import cos_sin
 from .special._common import is_double
 from .special._legendre import _LARGE_NEGATIVE_CHARACTERISTIC, pi_without_first_kind
+
 
 # Terms of the complementary series (n = 0, 1 of S and of the third kind, n = 1, 2 of T4): the next
 # omitted ones are 5 q'^4 and q'^6 relative, below 1e-20 for q' <= 8.3e-5 (q = 0.35, float32's limit).
@@ -135,17 +137,17 @@ class SeriesData(NamedTuple):
     """Per-body data of the series (``coefficients``), the leading (body) shape first in every field."""
 
     rows: Float[Array, "... 4 terms"]
-    amplitude: Float[Array, "..."]
-    origin: Float[Array, "..."]
-    quarter: Float[Array, "..."]
-    nome: Float[Array, "..."]
-    slope: Float[Array, "..."]
-    complementary: Bool[Array, "..."]
-    periodic: Bool[Array, "..."]
+    amplitude: Float[Array, ...]
+    origin: Float[Array, ...]
+    quarter: Float[Array, ...]
+    nome: Float[Array, ...]
+    slope: Float[Array, ...]
+    complementary: Bool[Array, ...]
+    periodic: Bool[Array, ...]
     complementary_rows: Float[Array, "... 4 2"]
-    complementary_log_nome: Float[Array, "..."]
-    complementary_scale: Float[Array, "..."]
-    complementary_cn_factor: Float[Array, "..."]
+    complementary_log_nome: Float[Array, ...]
+    complementary_scale: Float[Array, ...]
+    complementary_cn_factor: Float[Array, ...]
 
 
 def _characteristic_terms(m, characteristic):
@@ -233,7 +235,8 @@ def coefficients(m, mc, characteristic, integrals=None, complete=None) -> Series
     # Materialised: every coefficient below is a product chain of these, and each output's fused
     # loop would otherwise recompute their exponentials (and the nome's) for itself.
     q, q_over_m, rho, origin, shift_decay, shift_gap, beta_decay, beta_gap, amplitude = materialise(
-        (q, q_over_m, rho, origin, shift_decay, shift_gap, beta_decay, beta_gap, amplitude))
+        (q, q_over_m, rho, origin, shift_decay, shift_gap, beta_decay, beta_gap, amplitude)
+    )
     q_squared = q * q
     shift_decay_squared = shift_decay * shift_decay
     beta_decay_squared = beta_decay * beta_decay
@@ -282,8 +285,7 @@ def coefficients(m, mc, characteristic, integrals=None, complete=None) -> Series
     theta_derivative = 4 * sin_double * (q_c - 4 * q_c4 * cos_double)
     theta = 1 - 2 * q_c * cos_double + 2 * q_c4 * (2 * cos_double * cos_double - 1)
     zeta = (np.pi / 2) / complement_quarter * theta_derivative / theta
-    slope_complementary = jnp.where(
-        moving, jnp.where(without_first_kind, -minus_chi, m) / gap + amplitude * zeta, 0)
+    slope_complementary = jnp.where(moving, jnp.where(without_first_kind, -minus_chi, m) / gap + amplitude * zeta, 0)
     complementary_rows = jnp.stack(
         [
             jnp.stack(jnp.broadcast_arrays(cos_shift, q_c * cos_triple), -1),

@@ -42,6 +42,7 @@ from jax.sharding import Mesh, NamedSharding, PartitionSpec
 
 from ._checks import integer
 
+
 if TYPE_CHECKING:
     from ._body import FreeRigidBody
 

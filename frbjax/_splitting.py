@@ -48,10 +48,11 @@ import numpy as np
 from jaxtyping import Array, Float
 
 from . import _quaternion as quaternion
-from ._free_flow import free_flow
 from ._checks import is_concrete, real_array
+from ._free_flow import free_flow
 from ._inertia import InertiaTensor, validate_tensor
 from ._kernel import one_kernel
+
 
 __all__ = ["METHODS", "RigidBodySplitting", "RigidBodyTerm", "splitting_trajectory"]
 
@@ -84,10 +85,25 @@ def _blanes_moan4():
 def _blanes_moan6():
     # SRKN6a (Blanes and Moan 2002, Table 3) as in CALGO 903 example 1 (init_example1.dat): a_i on the
     # free flows (8, the middle one once), b_i on the kicks; no kick at either end.
-    a = (0.0378593198406116, 0.102635633102435, -0.0258678882665587, 0.314241403071477,
-         -0.130144459517415, 0.106417700369543, -0.00879424312851058, 0.207305069056835)
-    b = (0.091719152624462, 0.183983170005006, -0.056534365832888, 0.004914688774713,
-         0.143761127168358, 0.328567693746804, -0.196411466486454)
+    a = (
+        0.0378593198406116,
+        0.102635633102435,
+        -0.0258678882665587,
+        0.314241403071477,
+        -0.130144459517415,
+        0.106417700369543,
+        -0.00879424312851058,
+        0.207305069056835,
+    )
+    b = (
+        0.091719152624462,
+        0.183983170005006,
+        -0.056534365832888,
+        0.004914688774713,
+        0.143761127168358,
+        0.328567693746804,
+        -0.196411466486454,
+    )
     kicks = (0.0, *_palindrome(b, middle_repeated=True), 0.0)
     flows = _palindrome(a, middle_repeated=False)
     return kicks, tuple(flows)
@@ -107,20 +123,38 @@ def _blanes_near_integrable(flows_half, kicks_half):
 def _aba864():
     # ABA(8,6,4) (Blanes et al. 2013, Table 2): 8 free flows, 7 kicks.
     return _blanes_near_integrable(
-        (0.0711334264982231177779387300061549964174, 0.241153427956640098736487795326289649618,
-         0.521411761772814789212136078067994229991, -0.333698616227678005726562603400438876027),
-        (0.183083687472197221961703757166430291072, 0.310782859898574869507522291054262796375,
-         -0.0265646185119588006972121379164987592663, 0.0653961422823734184559721793911134363710))
+        (
+            0.0711334264982231177779387300061549964174,
+            0.241153427956640098736487795326289649618,
+            0.521411761772814789212136078067994229991,
+            -0.333698616227678005726562603400438876027,
+        ),
+        (
+            0.183083687472197221961703757166430291072,
+            0.310782859898574869507522291054262796375,
+            -0.0265646185119588006972121379164987592663,
+            0.0653961422823734184559721793911134363710,
+        ),
+    )
 
 
 def _aba1064():
     # ABA(10,6,4) (Blanes et al. 2013, Table 2): 9 free flows, 8 kicks.
     return _blanes_near_integrable(
-        (0.0380944974224121954569753223086375653406, 0.145298716116913749294020072660663749744,
-         0.207627695725541250716205611324988206516, 0.435909703651526159223154862401065184401,
-         -0.653861225832786709380711737390709412002),
-        (0.0958588808370752106107715037714588477692, 0.204446153142998780680507783916434477976,
-         0.217070347978991101714338592430633671453, -0.0173753819590650930056178801185269971987))
+        (
+            0.0380944974224121954569753223086375653406,
+            0.145298716116913749294020072660663749744,
+            0.207627695725541250716205611324988206516,
+            0.435909703651526159223154862401065184401,
+            -0.653861225832786709380711737390709412002,
+        ),
+        (
+            0.0958588808370752106107715037714588477692,
+            0.204446153142998780680507783916434477976,
+            0.217070347978991101714338592430633671453,
+            -0.0173753819590650930056178801185269971987,
+        ),
+    )
 
 
 #: The named methods: name -> (kicks k_0..k_n, free flows f_0..f_{n-1}, order).  A step is
@@ -250,7 +284,8 @@ class RigidBodyTerm(diffrax.AbstractTerm):
     state with ``args`` shared (per-body parameters: ``jax.vmap`` the whole solve).  ``inertia``
     (..., 3) are the principal moments (> 0, finite), broadcasting with the state's leading
     dimensions, or an `InertiaTensor` (``RigidBodyTerm.from_inertia_tensor``: the state and the torques
-    are then those of the tensor's body frame); ``y = (L, q)`` with L (..., 3) in the body frame and q (..., 4) must carry the full
+    are then those of the tensor's body frame); ``y = (L, q)`` with L (..., 3) in the body frame and q (..., 4)
+    must carry the full
     batch shape.  Everything that uses the moments goes through :meth:`angular_velocity` and the
     free flow.
     """
@@ -261,16 +296,19 @@ class RigidBodyTerm(diffrax.AbstractTerm):
     momentum_torque: _Function | None
     linear_in_momentum: bool = eqx.field(static=True)
 
-    def __init__(self, inertia, *, potential=None, torque=None, momentum_torque=None,
-                 linear_in_momentum=None):
+    def __init__(self, inertia, *, potential=None, torque=None, momentum_torque=None, linear_in_momentum=None):
         if potential is None and torque is None and momentum_torque is None:
-            raise ValueError("RigidBodyTerm needs at least one of potential=V(t, q, args) (a scalar), "
-                             "torque=tau(t, q, args) and momentum_torque=tau(t, q, L, args) (body-frame "
-                             "(3,) vectors)")
-        signatures = {"potential": "(t, q, args) -> scalar", "torque": "(t, q, args) -> (3,) body torque",
-                      "momentum_torque": "(t, q, L, args) -> (3,) body torque"}
-        for name, function in (("potential", potential), ("torque", torque),
-                               ("momentum_torque", momentum_torque)):
+            raise ValueError(
+                "RigidBodyTerm needs at least one of potential=V(t, q, args) (a scalar), "
+                "torque=tau(t, q, args) and momentum_torque=tau(t, q, L, args) (body-frame "
+                "(3,) vectors)"
+            )
+        signatures = {
+            "potential": "(t, q, args) -> scalar",
+            "torque": "(t, q, args) -> (3,) body torque",
+            "momentum_torque": "(t, q, L, args) -> (3,) body torque",
+        }
+        for name, function in (("potential", potential), ("torque", torque), ("momentum_torque", momentum_torque)):
             if function is not None and not callable(function):
                 raise ValueError(f"{name} must be a function {signatures[name]}")
         if not isinstance(inertia, InertiaTensor):
@@ -326,7 +364,7 @@ class RigidBodyTerm(diffrax.AbstractTerm):
         """The exact torque-free motion of the state (L, q) over ``time``: (L(time), q(time))."""
         return free_flow(self.inertia, momentum, attitude, time)
 
-    def kinetic_energy(self, momentum) -> Float[Array, "..."]:
+    def kinetic_energy(self, momentum) -> Float[Array, ...]:
         """L . Omega / 2 per body."""
         return 0.5 * jnp.sum(momentum * self.angular_velocity(momentum), axis=-1)
 
@@ -337,19 +375,20 @@ class RigidBodyTerm(diffrax.AbstractTerm):
         if self.potential is not None:
             shape = jax.eval_shape(self.potential, t, one, args).shape
             if shape != ():
-                raise ValueError(f"potential must return a scalar (the potential energy of one body), "
-                                 f"got shape {shape}")
+                raise ValueError(
+                    f"potential must return a scalar (the potential energy of one body), got shape {shape}"
+                )
         if self.torque is not None:
             shape = jax.eval_shape(self.torque, t, one, args).shape
             if shape != (3,):
-                raise ValueError(f"torque must return the body-frame torque of one body, shape (3,), got "
-                                 f"shape {shape}")
+                raise ValueError(f"torque must return the body-frame torque of one body, shape (3,), got shape {shape}")
         if self.momentum_torque is not None:
             momentum = jax.ShapeDtypeStruct((3,), attitude.dtype)
             shape = jax.eval_shape(self.momentum_torque, t, one, momentum, args).shape
             if shape != (3,):
-                raise ValueError(f"momentum_torque must return the body-frame torque of one body, shape "
-                                 f"(3,), got shape {shape}")
+                raise ValueError(
+                    f"momentum_torque must return the body-frame torque of one body, shape (3,), got shape {shape}"
+                )
 
     def body_torque(self, t, attitude, args, momentum=None) -> Float[Array, "... 3"]:
         """The total body-frame torque tau(t, q, L) of every body, (..., 3) for an attitude (..., 4).
@@ -381,14 +420,15 @@ class RigidBodyTerm(diffrax.AbstractTerm):
 
         return -jax.grad(rotated)(jnp.zeros((3,), attitude.dtype))
 
-    def energy(self, t, y, args) -> Float[Array, "..."]:
+    def energy(self, t, y, args) -> Float[Array, ...]:
         """Kinetic plus potential energy, L . Omega / 2 + V(t, q, args), per body (needs a potential).
 
         With only torques (no potential) use :meth:`kinetic_energy`.
         """
         if self.potential is None:
-            raise ValueError("energy needs a potential; this term has only torque functions "
-                             "(kinetic_energy(L) gives L . Omega / 2)")
+            raise ValueError(
+                "energy needs a potential; this term has only torque functions (kinetic_energy(L) gives L . Omega / 2)"
+            )
         momentum, attitude = y
         return self.kinetic_energy(momentum) + _per_body(self.potential, t, attitude, args)
 
@@ -418,8 +458,7 @@ def _unwrap(terms):
     # is not public API): unwrap by the wrappers' fields.
     direction = 1
     term = terms
-    while not isinstance(term, RigidBodyTerm) and isinstance(getattr(term, "term", None),
-                                                              diffrax.AbstractTerm):
+    while not isinstance(term, RigidBodyTerm) and isinstance(getattr(term, "term", None), diffrax.AbstractTerm):
         direction = direction * getattr(term, "direction", 1)
         term = term.term
     if not isinstance(term, RigidBodyTerm):
@@ -493,25 +532,31 @@ class RigidBodySplitting(diffrax.AbstractSolver):
             kicks = tuple(float(k) for k in np.ravel(kicks))
             flows = tuple(float(f) for f in np.ravel(flows))
             if len(flows) < 1 or len(kicks) != len(flows) + 1:
-                raise ValueError(f"kicks must have one coefficient more than flows (n + 1 and n >= 1), "
-                                 f"got {len(kicks)} kicks and {len(flows)} flows")
+                raise ValueError(
+                    f"kicks must have one coefficient more than flows (n + 1 and n >= 1), "
+                    f"got {len(kicks)} kicks and {len(flows)} flows"
+                )
             for name, values in (("kicks", kicks), ("flows", flows)):
                 if not all(math.isfinite(v) for v in values):
                     raise ValueError(f"{name}: the coefficients must be finite")
                 if abs(math.fsum(values) - 1) > _CONSISTENCY_TOLERANCE:
-                    raise ValueError(f"{name}: the coefficients must add up to 1 (one step), "
-                                     f"they add up to {math.fsum(values)!r}")
+                    raise ValueError(
+                        f"{name}: the coefficients must add up to 1 (one step), they add up to {math.fsum(values)!r}"
+                    )
         else:
             if method not in METHODS:
-                raise ValueError(f"unknown splitting method {method!r}; expected one of "
-                                 f"{', '.join(METHODS)}, or kicks= and flows=")
+                raise ValueError(
+                    f"unknown splitting method {method!r}; expected one of {', '.join(METHODS)}, or kicks= and flows="
+                )
             kicks, flows, order = METHODS[method]
         if kick_solver is None:
             # One step of order 5 (Tsit5) keeps orders up to 4, order 8 (Dopri8) anything higher.
             kick_solver = diffrax.Tsit5() if order is not None and order <= 4 else diffrax.Dopri8()
         if not isinstance(kick_solver, diffrax.AbstractRungeKutta):
-            raise ValueError(f"kick_solver must be an explicit diffrax Runge-Kutta solver (Tsit5, Dopri8, "
-                             f"...), got {type(kick_solver).__name__}")
+            raise ValueError(
+                f"kick_solver must be an explicit diffrax Runge-Kutta solver (Tsit5, Dopri8, "
+                f"...), got {type(kick_solver).__name__}"
+            )
         self.kicks = kicks
         self.flows = flows
         self.method_order = order
@@ -632,13 +677,15 @@ class RigidBodySplitting(diffrax.AbstractSolver):
             def one_step(state, j):
                 momentum, attitude = free_motion(*state, jnp.where(j == 0, first, joined_first) * h)
                 # Kick i, then free flow i, for i = 1..n-2; kick n-1 last.
-                momentum, attitude = stages((momentum, attitude), t + j * h,
-                                            (rest[0][:-1], rest[1][:-1], constant(flows[1:-1])))
+                momentum, attitude = stages(
+                    (momentum, attitude), t + j * h, (rest[0][:-1], rest[1][:-1], constant(flows[1:-1]))
+                )
                 return (kick(momentum, attitude, rest[0][-1], t + (j + rest[1][-1]) * h), attitude), None
 
             state = repeat(one_step, state)
             momentum, attitude = free_motion(*state, constant(flows[-1]) * h)
             return momentum.astype(dtype), attitude.astype(dtype)
+
         # Kicks at both ends: nothing to join, the steps one after the other.
         def one_step(state, j):
             return self.advance(term, t + j * h, h, state, args), None
@@ -659,6 +706,7 @@ class RigidBodySplitting(diffrax.AbstractSolver):
             return term.free_motion(momentum, attitude, time)
 
         if term.momentum_torque is not None and term.linear_in_momentum:
+
             def is_inertia(leaf):
                 return leaf is term.inertia
 
@@ -726,8 +774,10 @@ def _checked_state(y0, term):
     dtype = jnp.result_type(momentum, attitude, moments, float)
     batch = jnp.broadcast_shapes(momentum.shape[:-1], attitude.shape[:-1], moments.shape[:-1])
     attitude = attitude / jnp.linalg.norm(attitude, axis=-1, keepdims=True)
-    return (jnp.broadcast_to(momentum, batch + (3,)).astype(dtype),
-            jnp.broadcast_to(attitude, batch + (4,)).astype(dtype))
+    return (
+        jnp.broadcast_to(momentum, batch + (3,)).astype(dtype),
+        jnp.broadcast_to(attitude, batch + (4,)).astype(dtype),
+    )
 
 
 def _check_initial_torque(term, t0, y0, args):
@@ -738,8 +788,10 @@ def _check_initial_torque(term, t0, y0, args):
     torque = term.body_torque(t0, attitude, args, momentum)
     if _concrete(torque) is not None and not np.all(np.isfinite(np.asarray(torque))):
         names = [name for name in ("potential", "torque", "momentum_torque") if getattr(term, name) is not None]
-        raise ValueError(f"the torque at the initial state is not finite (NaN or inf): check "
-                         f"{' and '.join(names)} at t0 = {float(t0)!r}")
+        raise ValueError(
+            f"the torque at the initial state is not finite (NaN or inf): check "
+            f"{' and '.join(names)} at t0 = {float(t0)!r}"
+        )
 
 
 @eqx.filter_jit

@@ -42,6 +42,7 @@ from . import _quaternion as quaternion
 from ._frame import angular_velocity, matrix_product, matrix_times, to_body, to_principal
 from ._fusion import sum_last
 
+
 # |kappa t^2| below which each function is its Taylor series: where the closed forms lose more than
 # a few ulp to cancellation (x - sin x for x < 2) and the series do not (terms to (-y)^13 / 29!).
 _SERIES_LIMITS = (1.0, 1.0, 4.0)
@@ -67,8 +68,10 @@ def response_functions(y):
     sin_x = jnp.where(growing, jnp.sinh(x), jnp.sin(x))
     half = jnp.where(growing, jnp.sinh(x / 2), jnp.sin(x / 2))
     closed = (sin_x / x, 2 * half * half / (x * x), jnp.where(growing, sin_x - x, x - sin_x) / (x * x * x))
-    return tuple(jnp.where(jnp.abs(y) < limit, taylor(j + 1), value)
-                 for j, (limit, value) in enumerate(zip(_SERIES_LIMITS, closed)))
+    return tuple(
+        jnp.where(jnp.abs(y) < limit, taylor(j + 1), value)
+        for j, (limit, value) in enumerate(zip(_SERIES_LIMITS, closed))
+    )
 
 
 def _response(moments, momentum, t, d_moments, d_momentum):
@@ -96,17 +99,23 @@ def _response(moments, momentum, t, d_moments, d_momentum):
     forced = t * forcing + versine * size * across(forcing) + excess * size_squared * across(across(forcing))
     turned = across(d_momentum)
     turned_twice = across(turned)
-    d_angular_momentum = (d_momentum + sine * size * turned + versine * size_squared * turned_twice
-                          + size * forced)
+    d_angular_momentum = d_momentum + sine * size * turned + versine * size_squared * turned_twice + size * forced
 
     spin_angle = t * omega * size
     g1, g2, _ = response_functions(spin_angle * spin_angle)
     normal = jnp.cross(unit, d_momentum)
-    perpendicular = (-t * omega * (g1 * jnp.cross(unit, normal) + spin_angle * g2 * normal)
-                     - sine * jnp.cross(unit, turned) - versine * size * jnp.cross(unit, turned_twice)
-                     - jnp.cross(unit, forced))
-    parallel = t * (sum_last(unit / moments * d_momentum)
-                    - size[..., 0] * sum_last(unit * unit * d_moments / moments**2))[..., None]
+    perpendicular = (
+        -t * omega * (g1 * jnp.cross(unit, normal) + spin_angle * g2 * normal)
+        - sine * jnp.cross(unit, turned)
+        - versine * size * jnp.cross(unit, turned_twice)
+        - jnp.cross(unit, forced)
+    )
+    parallel = (
+        t
+        * (sum_last(unit / moments * d_momentum) - size[..., 0] * sum_last(unit * unit * d_moments / moments**2))[
+            ..., None
+        ]
+    )
     return d_angular_momentum, perpendicular + parallel * unit
 
 
@@ -182,6 +191,9 @@ def _uniform_spin_jvp(primals, tangents):
     turn_of_axes = matrix_product(d_axes, jnp.swapaxes(axes, -1, -2))  # dR R^T, skew
     w = jnp.stack([turn_of_axes[..., 2, 1], turn_of_axes[..., 0, 2], turn_of_axes[..., 1, 0]], -1)
     half_w = jnp.broadcast_to(_pure(w / 2), spin.shape)
-    d_spin = (quaternion.multiply(half_w, spin) - quaternion.multiply(spin, half_w)
-              + quaternion.multiply(spin, _pure(to_body(axes, rate) / 2)))
+    d_spin = (
+        quaternion.multiply(half_w, spin)
+        - quaternion.multiply(spin, half_w)
+        + quaternion.multiply(spin, _pure(to_body(axes, rate) / 2))
+    )
     return spin, d_spin

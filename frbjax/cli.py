@@ -18,9 +18,10 @@ import argparse
 import os
 import sys
 import tempfile
-from typing import TYPE_CHECKING, TextIO
+from typing import TextIO, TYPE_CHECKING
 
 import numpy as np
+
 
 if TYPE_CHECKING:
     from ._body import FreeRigidBody
@@ -88,33 +89,51 @@ def build_parser() -> argparse.ArgumentParser:
     commands = parser.add_subparsers(dest="command", metavar="COMMAND", required=True)
 
     run = commands.add_parser(
-        "run", help="run a CALGO 903 example input file with the exact motion",
-        description=_RUN_DESCRIPTION, epilog=_EPILOG,
+        "run",
+        help="run a CALGO 903 example input file with the exact motion",
+        description=_RUN_DESCRIPTION,
+        epilog=_EPILOG,
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
     run.add_argument("file", metavar="FILE", help="input file in one of the layouts above")
-    run.add_argument("-o", "--output", metavar="OUT",
-                     help="output file (default: standard output); written whole or not at all")
-    run.add_argument("--layout", choices=["example0", "example1", "example2", "example3", "example4"],
-                     help="read FILE in this layout instead of detecting it from the number of values")
-    run.add_argument("--steps", type=_non_negative_int, metavar="N",
-                     help="take N steps (examples 1, 3 and 4; default: INT(T/h), as the drivers)")
+    run.add_argument(
+        "-o", "--output", metavar="OUT", help="output file (default: standard output); written whole or not at all"
+    )
+    run.add_argument(
+        "--layout",
+        choices=["example0", "example1", "example2", "example3", "example4"],
+        help="read FILE in this layout instead of detecting it from the number of values",
+    )
+    run.add_argument(
+        "--steps",
+        type=_non_negative_int,
+        metavar="N",
+        help="take N steps (examples 1, 3 and 4; default: INT(T/h), as the drivers)",
+    )
     run.set_defaults(handler=_run)
 
     demo = commands.add_parser(
-        "demo", help="the Dzhanibekov effect: a flipping T-handle, table and plot",
-        description=_DEMO_DESCRIPTION, epilog=_EPILOG,
+        "demo",
+        help="the Dzhanibekov effect: a flipping T-handle, table and plot",
+        description=_DEMO_DESCRIPTION,
+        epilog=_EPILOG,
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
-    demo.add_argument("--out", metavar="PNG", default=DEFAULT_DEMO_PATH,
-                      help=f"where to save the plot (default: {DEFAULT_DEMO_PATH})")
-    demo.add_argument("--animation", metavar="PATH",
-                      help="where to save the animation: .gif (Pillow, always available) or .mp4 "
-                           "(needs ffmpeg) (default: the plot's name with .gif)")
-    demo.add_argument("--no-animation", dest="animate", action="store_false",
-                      help="plot only, no animation")
-    demo.add_argument("--quick", action="store_true",
-                      help="fewer sample times, a smaller image and a short, small animation (for tests)")
+    demo.add_argument(
+        "--out", metavar="PNG", default=DEFAULT_DEMO_PATH, help=f"where to save the plot (default: {DEFAULT_DEMO_PATH})"
+    )
+    demo.add_argument(
+        "--animation",
+        metavar="PATH",
+        help="where to save the animation: .gif (Pillow, always available) or .mp4 "
+        "(needs ffmpeg) (default: the plot's name with .gif)",
+    )
+    demo.add_argument("--no-animation", dest="animate", action="store_false", help="plot only, no animation")
+    demo.add_argument(
+        "--quick",
+        action="store_true",
+        help="fewer sample times, a smaller image and a short, small animation (for tests)",
+    )
     demo.set_defaults(handler=_demo)
     return parser
 
@@ -203,8 +222,7 @@ def _run(args):
         return _error("run", str(error))
     layout = problem.layout
     if args.steps is not None and layout.single_step:
-        return _error("run", f"--steps applies to examples 1, 3 and 4; {args.file} is {layout.name}, "
-                             "a single step")
+        return _error("run", f"--steps applies to examples 1, 3 and 4; {args.file} is {layout.name}, a single step")
     if args.output is not None:
         if os.path.isdir(args.output):
             return _error("run", f"{args.output} is a folder; expected an output file name")
@@ -213,15 +231,20 @@ def _run(args):
             return _error("run", f"cannot write {args.output}: no folder {folder}")
 
     if "NP" in problem.values:
-        _note("run", f"NP = {int(problem['NP'])} (order of the semi-exact quadrature) is ignored: "
-                     "frbjax computes the exact motion")
+        _note(
+            "run",
+            f"NP = {int(problem['NP'])} (order of the semi-exact quadrature) is ignored: "
+            "frbjax computes the exact motion",
+        )
     if not layout.single_step and problem.step != problem["h"]:
-        _note("run", f"h = {problem['h']!r} does not divide T = {problem['T']!r}; the step is "
-                     f"T/INT(T/h) = {problem.step!r}, as in the driver")
+        _note(
+            "run",
+            f"h = {problem['h']!r} does not divide T = {problem['T']!r}; the step is "
+            f"T/INT(T/h) = {problem.step!r}, as in the driver",
+        )
     steps = problem.steps if args.steps is None else args.steps
     if layout.name == "example1":
-        _note("run", f"{steps} steps of the splitting, 15 exact free flows each (seconds, "
-                     "most of it compiling)")
+        _note("run", f"{steps} steps of the splitting, 15 exact free flows each (seconds, most of it compiling)")
 
     _configure_jax()
     trajectory = calgo.solve(problem, None if layout.single_step else steps)
@@ -260,9 +283,9 @@ def flip_period(inertia: tuple[float, float, float], angular_momentum: np.ndarra
     i1, i2, i3 = inertia
     norm = float(np.linalg.norm(angular_momentum))
     l1, l2, l3 = np.asarray(angular_momentum) / norm
-    g1 = l2**2 * (i2 - i1) / i2 + l3**2 * (i3 - i1) / i3   # 1 - d I1
-    g2 = l1**2 * (i2 - i1) / i1 - l3**2 * (i3 - i2) / i3   # d I2 - 1
-    g3 = l1**2 * (i3 - i1) / i1 + l2**2 * (i3 - i2) / i2   # d I3 - 1
+    g1 = l2**2 * (i2 - i1) / i2 + l3**2 * (i3 - i1) / i3  # 1 - d I1
+    g2 = l1**2 * (i2 - i1) / i1 - l3**2 * (i3 - i2) / i3  # d I2 - 1
+    g3 = l1**2 * (i3 - i1) / i1 + l2**2 * (i3 - i2) / i2  # d I3 - 1
     if not (i1 < i2 < i3 and g2 > 0):
         raise ValueError("expected I1 < I2 < I3 and rotation about the I1 axis (d > 1/I2)")
     b = np.sqrt(g3 * (i2 - i1) / (i1 * i2 * i3))
@@ -285,16 +308,20 @@ def _crossings(body, times, momentum):
     roots = times[index] + fraction * (times[index + 1] - times[index])
     inertia = np.asarray(body.inertia)
     for _ in range(4):
-        padded = np.concatenate([roots, times[len(roots):]])
+        padded = np.concatenate([roots, times[len(roots) :]])
         moment = np.asarray(body.angular_momentum(padded))[: len(roots)]
         velocity = moment / inertia
         slope = moment[:, 2] * velocity[:, 0] - moment[:, 0] * velocity[:, 2]
         roots = roots - moment[:, 1] / slope
-    return np.sort(roots[: len(upward)]), np.sort(roots[len(upward):])
+    return np.sort(roots[: len(upward)]), np.sort(roots[len(upward) :])
 
 
-def run_demo(out: str | os.PathLike = DEFAULT_DEMO_PATH, quick: bool = False,
-             stream: TextIO | None = None, animation: bool | str | os.PathLike = True) -> dict:
+def run_demo(
+    out: str | os.PathLike = DEFAULT_DEMO_PATH,
+    quick: bool = False,
+    stream: TextIO | None = None,
+    animation: bool | str | os.PathLike = True,
+) -> dict:
     """The demo: print the table and the periods to ``stream`` (stdout), save the plot to ``out``
     and the animation of the tumbling T-handle (`FlipAnimation`) to ``animation``.
 
@@ -329,27 +356,39 @@ def run_demo(out: str | os.PathLike = DEFAULT_DEMO_PATH, quick: bool = False,
 
     print("Dzhanibekov effect: a T-handle with I = (1, 2, 3) spun about its middle axis,", file=stream)
     print(f"L(0) = ({momentum0[0]:.3e}, {momentum0[1]:.9f}, {momentum0[2]:.3e}), |L| = 1.\n", file=stream)
-    print(f"{'t':>8} {'L1':>10} {'L2':>10} {'L3':>10}   {'q0':>9} {'q1':>9} {'q2':>9} {'q3':>9}",
-          file=stream)
+    print(f"{'t':>8} {'L1':>10} {'L2':>10} {'L3':>10}   {'q0':>9} {'q1':>9} {'q2':>9} {'q3':>9}", file=stream)
     rows = slice(None, None, (len(times) - 1) // 10)  # 11 rows, on the sample grid
     for t, l, q in zip(times[rows], momentum[rows], attitude[rows]):
-        print(f"{t:8.2f} {l[0]:10.6f} {l[1]:10.6f} {l[2]:10.6f}   "
-              f"{q[0]:9.5f} {q[1]:9.5f} {q[2]:9.5f} {q[3]:9.5f}", file=stream)
+        print(
+            f"{t:8.2f} {l[0]:10.6f} {l[1]:10.6f} {l[2]:10.6f}   {q[0]:9.5f} {q[1]:9.5f} {q[2]:9.5f} {q[3]:9.5f}",
+            file=stream,
+        )
     print(f"\nflips (L2 changes sign) at t = {', '.join(f'{t:.3f}' for t in flips)}", file=stream)
     print(f"period of L(t), a flip and a flip back, 4K(m)/B = {period:.12f}", file=stream)
-    print(f"observed: L2 rises through 0 every            {observed:.12f}   "
-          f"(relative difference {abs(observed - period) / period:.1e})", file=stream)
-    print(f"drift of |L|, E and the spatial L over the run: {np.ptp(np.linalg.norm(momentum, axis=-1)):.1e}, "
-          f"{np.ptp(energy):.1e}, {np.abs(spatial - spatial[0]).max():.1e}", file=stream)
+    print(
+        f"observed: L2 rises through 0 every            {observed:.12f}   "
+        f"(relative difference {abs(observed - period) / period:.1e})",
+        file=stream,
+    )
+    print(
+        f"drift of |L|, E and the spatial L over the run: {np.ptp(np.linalg.norm(momentum, axis=-1)):.1e}, "
+        f"{np.ptp(energy):.1e}, {np.abs(spatial - spatial[0]).max():.1e}",
+        file=stream,
+    )
 
-    result = {"period": period, "observed_period": observed, "flips": flips, "times": times,
-              "angular_momentum": momentum, "quaternion": attitude}
+    result = {
+        "period": period,
+        "observed_period": observed,
+        "flips": flips,
+        "times": times,
+        "angular_momentum": momentum,
+        "quaternion": attitude,
+    }
     try:
         import matplotlib
     except ImportError:
         # The library does not need matplotlib; the plot is the demo's only use of it.
-        print(f"\nno plot: matplotlib is not installed ({MATPLOTLIB_HINT}); no animation either",
-              file=stream)
+        print(f"\nno plot: matplotlib is not installed ({MATPLOTLIB_HINT}); no animation either", file=stream)
         return result
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
@@ -366,8 +405,7 @@ def run_demo(out: str | os.PathLike = DEFAULT_DEMO_PATH, quick: bool = False,
         axis.grid(True, alpha=0.3)
         axis.legend(loc="center left", bbox_to_anchor=(1.01, 0.5), frameon=False)
     if len(upward) >= 2:
-        top.annotate("", xy=(upward[1], 1.12), xytext=(upward[0], 1.12),
-                     arrowprops=dict(arrowstyle="<->", color="0.2"))
+        top.annotate("", xy=(upward[1], 1.12), xytext=(upward[0], 1.12), arrowprops=dict(arrowstyle="<->", color="0.2"))
         top.text((upward[0] + upward[1]) / 2, 1.16, f"$4K/B = {period:.3f}$", ha="center", va="bottom")
     top.set_ylim(-1.2, 1.35)
     top.set_ylabel("body angular momentum")
@@ -375,8 +413,9 @@ def run_demo(out: str | os.PathLike = DEFAULT_DEMO_PATH, quick: bool = False,
     bottom.set_ylabel("quaternion")
     bottom.set_xlabel("time $t$ (units of $I_1/|L|$)")
     bottom.set_title("Attitude $q(t)$ (body to space)")
-    figure.suptitle("Tennis racket theorem: exact motion of a T-handle, $I = (1, 2, 3)$, "
-                    "spun about the middle axis", fontsize=13)
+    figure.suptitle(
+        "Tennis racket theorem: exact motion of a T-handle, $I = (1, 2, 3)$, spun about the middle axis", fontsize=13
+    )
     figure.savefig(out, dpi=80 if quick else 150)
     plt.close(figure)
     print(f"\nplot saved to {out}", file=stream)
@@ -386,8 +425,10 @@ def run_demo(out: str | os.PathLike = DEFAULT_DEMO_PATH, quick: bool = False,
         frames = FlipAnimation(body, np.linspace(0.0, period, 24 if quick else 180), quick=quick)
         frames.save(path)
         result["animation"] = frames
-        print(f"animation ({len(frames.times)} frames, one period of L: a flip and a flip back) "
-              f"saved to {path}", file=stream)
+        print(
+            f"animation ({len(frames.times)} frames, one period of L: a flip and a flip back) saved to {path}",
+            file=stream,
+        )
     return result
 
 
@@ -419,8 +460,7 @@ def _demo(args):
     try:
         run_demo(args.out, args.quick, animation=animation)
     except OSError as error:
-        return _error("demo", f"cannot save {error.filename or args.out}: {error.strerror or error}",
-                      status=1)
+        return _error("demo", f"cannot save {error.filename or args.out}: {error.strerror or error}", status=1)
     return 0
 
 
@@ -498,8 +538,9 @@ class FlipAnimation:
         momentum_axis = 1.5 * spatial / np.linalg.norm(spatial)
 
         self.figure = figure = plt.figure(figsize=(6.4, 3.6))
-        grid = figure.add_gridspec(1, 2, width_ratios=(1.15, 1), left=0.0, right=0.97, bottom=0.14,
-                                   top=0.84, wspace=0.18)
+        grid = figure.add_gridspec(
+            1, 2, width_ratios=(1.15, 1), left=0.0, right=0.97, bottom=0.14, top=0.84, wspace=0.18
+        )
         space = figure.add_subplot(grid[0], projection="3d")
         space.view_init(elev=16, azim=-62, vertical_axis="y")
         limit = 1.25
@@ -510,21 +551,21 @@ class FlipAnimation:
         thick = 2.2 if quick else 1.0  # line widths are in points: scale with the small figure's dpi
         artists = {}
         space.plot(*np.stack([-momentum_axis, momentum_axis]).T, color="#e0a800", lw=2.0 * thick, ls=(0, (4, 2)))
-        space.text(*(0.92 * momentum_axis), "  $L$ (fixed)", color="#b08400", fontsize=10, ha="left",
-                   va="center")
-        artists["trail"], = space.plot([], [], [], color=colours["e2"], lw=1.0 * thick, alpha=0.55)
+        space.text(*(0.92 * momentum_axis), "  $L$ (fixed)", color="#b08400", fontsize=10, ha="left", va="center")
+        (artists["trail"],) = space.plot([], [], [], color=colours["e2"], lw=1.0 * thick, alpha=0.55)
         for name in ("bar", "stem"):
-            artists[name], = space.plot([], [], [], color=colours[name], lw=7.0 * thick, solid_capstyle="round")
+            (artists[name],) = space.plot([], [], [], color=colours[name], lw=7.0 * thick, solid_capstyle="round")
         for name in ("e1", "e2", "e3"):
-            artists[name], = space.plot([], [], [], color=colours[name], lw=1.8 * thick)
-            artists[name + "_label"] = space.text(0, 0, 0, f"$e_{name[1]}$", color=colours[name],
-                                                  fontsize=10, ha="center", va="center")
+            (artists[name],) = space.plot([], [], [], color=colours[name], lw=1.8 * thick)
+            artists[name + "_label"] = space.text(
+                0, 0, 0, f"$e_{name[1]}$", color=colours[name], fontsize=10, ha="center", va="center"
+            )
 
         plot = figure.add_subplot(grid[1])
         for k, colour in enumerate(("#d62728", "#2ca02c", "#1f77b4")):
             plot.plot(self.times, self.momentum[:, k], color=colour, lw=1.3 * thick, label=f"$L_{k + 1}$")
         artists["cursor"] = plot.axvline(self.times[0], color="0.3", lw=0.8 * thick)
-        artists["marker"], = plot.plot([], [], "o", color=colours["e2"], ms=4 * thick)
+        (artists["marker"],) = plot.plot([], [], "o", color=colours["e2"], ms=4 * thick)
         plot.set_xlim(self.times[0], self.times[-1])
         plot.set_ylim(-1.15, 1.15)
         plot.set_xlabel("time $t$")
@@ -533,8 +574,9 @@ class FlipAnimation:
         plot.grid(True, alpha=0.3)
         artists["title"] = figure.suptitle("", fontsize=11)
         self.artists = artists
-        self.animation = animation.FuncAnimation(figure, self.frame, frames=len(self.times),
-                                                 interval=1000 / self.fps, blit=False)
+        self.animation = animation.FuncAnimation(
+            figure, self.frame, frames=len(self.times), interval=1000 / self.fps, blit=False
+        )
 
     def frame(self, index: int) -> list:
         """Set every artist to frame ``index`` (time ``times[index]``); returns the artists."""
@@ -557,8 +599,8 @@ class FlipAnimation:
 
     def save(self, path: str | os.PathLike) -> None:
         """Write every frame to ``path``: a GIF (``.gif``, Pillow) or an MP4 (``.mp4``, ffmpeg)."""
-        from matplotlib import animation
         import matplotlib.pyplot as plt
+        from matplotlib import animation
 
         if os.fspath(path).lower().endswith(".mp4"):
             writer = animation.FFMpegWriter(fps=self.fps, bitrate=800)

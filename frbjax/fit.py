@@ -76,12 +76,12 @@ import numpy as np
 import optimistix as optx
 from jaxtyping import Array, Float
 
-from . import _quaternion as quaternion
-from . import _checks as checks
+from . import _checks as checks, _quaternion as quaternion
 from ._body import FreeRigidBody, state_with_elliptic_derivatives, with_principal_axes
 from ._errors import FitError
 from ._multistart import solve_each
 from ._trace_once import traced_once
+
 
 __all__ = ["AttitudeFit", "FitError", "fit_attitude"]
 
@@ -131,23 +131,23 @@ class AttitudeFit(eqx.Module):
       per start; ``reference_time``: t_ref; ``loss_scale``: c of the robust loss.
     """
 
-    inertia: Float[Array, "3"]
+    inertia: Float[Array, 3]
     inertia_tensor: Float[Array, "3 3"]
     principal_axes: Float[Array, "3 3"]
     inertia_tensor_covariance: Float[Array, "3 3 3 3"]
     axes_identifiable: Array
-    symmetry_axis: Float[Array, "3"]
-    unidentified_direction: Float[Array, "P"]
-    angular_velocity: Float[Array, "3"]
-    attitude: Float[Array, "4"]
-    parameters: Float[Array, "P"]
+    symmetry_axis: Float[Array, 3]
+    unidentified_direction: Float[Array, " P"]
+    angular_velocity: Float[Array, 3]
+    attitude: Float[Array, 4]
+    parameters: Float[Array, " P"]
     covariance: Float[Array, "P P"]
     inertia_covariance: Float[Array, "3 3"]
     residuals: Float[Array, "N 3"]
     angular_velocity_residuals: Float[Array, "N 3"]
     cost: Float[Array, ""]
     success: Array
-    start_costs: Float[Array, "S"]
+    start_costs: Float[Array, " S"]
     start_success: Array
     reference_time: Float[Array, ""]
     loss_scale: Float[Array, ""]
@@ -284,8 +284,14 @@ def _solve_start(theta0, reference, data, masks, losses, final_loss, loss_scale,
         median = jnp.where(jnp.isfinite(median), median, 1.0)
         scale = jnp.where(loss_scale > 0, loss_scale, 2.5 * median + 1e-12)
         solution = optx.least_squares(
-            _least_squares_fn, solver, theta, args=(data, mask, loss, scale), has_aux=True,
-            max_steps=max_steps, throw=False)
+            _least_squares_fn,
+            solver,
+            theta,
+            args=(data, mask, loss, scale),
+            has_aux=True,
+            max_steps=max_steps,
+            throw=False,
+        )
         # The aux of the solver state belongs to the returned (last accepted) value; solution.aux is
         # that of the step before.
         aux = solution.state.aux
@@ -306,7 +312,8 @@ def _solve_start(theta0, reference, data, masks, losses, final_loss, loss_scale,
 def _fit(thetas0, references, data, masks, final_loss, loss_scale, rtol, atol, max_steps):
     losses = jnp.zeros(masks.shape[0], jnp.int32)
     solve = lambda theta0, reference: _solve_start(  # noqa: E731
-        theta0, reference, data, masks, losses, final_loss, loss_scale, rtol, atol, max_steps)
+        theta0, reference, data, masks, losses, final_loss, loss_scale, rtol, atol, max_steps
+    )
     thetas, costs, oks, scales, aux = solve_each(solve, (thetas0, references))
     # The best start: lowest cost among converged ones (any start if none converged).
     finite_costs = jnp.where(jnp.isfinite(costs), costs, jnp.inf)
@@ -319,9 +326,19 @@ def _fit(thetas0, references, data, masks, final_loss, loss_scale, rtol, atol, m
     covariance = jnp.linalg.pinv(jac.T @ jac) * variance
     # The model at the samples and, in the last row, at t = 0 (unweighted).
     q_obs, w_obs = data[1][:-1], data[2][:-1]
-    return dict(theta=theta, costs=costs, oks=oks, best=best, covariance=covariance, scale=scale, jacobian=jac,
-                residuals=_attitude_residual(q_model[:-1], q_obs), gyro_residuals=w_model[:-1] - w_obs,
-                attitude0=q_model[-1], omega0=w_model[-1])
+    return dict(
+        theta=theta,
+        costs=costs,
+        oks=oks,
+        best=best,
+        covariance=covariance,
+        scale=scale,
+        jacobian=jac,
+        residuals=_attitude_residual(q_model[:-1], q_obs),
+        gyro_residuals=w_model[:-1] - w_obs,
+        attitude0=q_model[-1],
+        omega0=w_model[-1],
+    )
 
 
 def _normalised_inertia(p):
@@ -338,6 +355,7 @@ def _normalised_inertia(p):
 
 def _rotation_matrix(rotation_vector):
     """Rodrigues' formula (numpy): the rotation by |v| about v."""
+
     def cross(v):  # cross(v) @ x = v x x
         return np.array([[0.0, -v[2], v[1]], [v[2], 0.0, -v[0]], [-v[1], v[0], 0.0]])
 
@@ -385,8 +403,7 @@ def _tensor_result(theta, covariance, jacobian):
     identifiable = True
     for (i, j), third in (((0, 1), 2), ((1, 2), 0)):
         gap = moments[j] - moments[i]
-        spread = np.sqrt(max(moments_covariance[i, i] + moments_covariance[j, j]
-                             - 2 * moments_covariance[i, j], 0.0))
+        spread = np.sqrt(max(moments_covariance[i, i] + moments_covariance[j, j] - 2 * moments_covariance[i, j], 0.0))
         if not gap > _SIGNIFICANT_GAP * spread:
             identifiable = False
             symmetry_axis = axes[:, third]
@@ -398,10 +415,16 @@ def _tensor_result(theta, covariance, jacobian):
         _, vectors = np.linalg.eigh((jacobian / norms).T @ (jacobian / norms))
         unidentified = vectors[:, 0] / norms
         unidentified /= np.linalg.norm(unidentified)
-    return dict(principal_moments=moments, principal_axes=axes, inertia_tensor=tensor,
-                inertia_tensor_covariance=tensor_covariance, moments_covariance=moments_covariance,
-                axes_identifiable=identifiable, symmetry_axis=symmetry_axis,
-                unidentified_direction=unidentified)
+    return dict(
+        principal_moments=moments,
+        principal_axes=axes,
+        inertia_tensor=tensor,
+        inertia_tensor_covariance=tensor_covariance,
+        moments_covariance=moments_covariance,
+        axes_identifiable=identifiable,
+        symmetry_axis=symmetry_axis,
+        unidentified_direction=unidentified,
+    )
 
 
 def _principal_result(moments, moments_covariance):
@@ -410,10 +433,16 @@ def _principal_result(moments, moments_covariance):
     for i in range(3):
         for j in range(3):
             covariance[i, i, j, j] = moments_covariance[i, j]
-    return dict(principal_moments=moments, principal_axes=np.eye(3), inertia_tensor=np.diag(moments),
-                inertia_tensor_covariance=covariance, moments_covariance=moments_covariance,
-                axes_identifiable=True, symmetry_axis=np.zeros(3),
-                unidentified_direction=np.zeros(_PRINCIPAL_PARAMETERS))
+    return dict(
+        principal_moments=moments,
+        principal_axes=np.eye(3),
+        inertia_tensor=np.diag(moments),
+        inertia_tensor_covariance=covariance,
+        moments_covariance=moments_covariance,
+        axes_identifiable=True,
+        symmetry_axis=np.zeros(3),
+        unidentified_direction=np.zeros(_PRINCIPAL_PARAMETERS),
+    )
 
 
 _make_body = eqx.filter_jit(FreeRigidBody)
@@ -424,8 +453,9 @@ def _fitted_body(inertia, angular_momentum, attitude, tensor=False):
     """The fitted FreeRigidBody.  Built as any body is (its constructor is one compiled program, cached
     by shapes); a fit that ended non-finite, which the eager constructor rejects, gets the NaN body of
     a construction under jit.  ``inertia``: moments, or the tensor when ``tensor``."""
-    build, build_traced = ((FreeRigidBody.from_inertia_tensor, _make_tensor_body) if tensor
-                           else (FreeRigidBody, _make_body))
+    build, build_traced = (
+        (FreeRigidBody.from_inertia_tensor, _make_tensor_body) if tensor else (FreeRigidBody, _make_body)
+    )
     try:
         return build(inertia, angular_momentum, attitude)
     except ValueError:
@@ -440,8 +470,7 @@ DEFAULT_COMPILER_OPTIONS = {"xla_cpu_use_fusion_emitters": False}
 @functools.cache
 def _compiled_fit(options):
     """The jitted solver for XLA compiler options ``options`` (a sorted tuple of items)."""
-    return jax.jit(_fit, static_argnames=("rtol", "atol", "max_steps"),
-                   compiler_options=dict(options) or None)
+    return jax.jit(_fit, static_argnames=("rtol", "atol", "max_steps"), compiler_options=dict(options) or None)
 
 
 def _solve(options, *args, **static):
@@ -518,14 +547,14 @@ def _checked_data(times, quaternions, angular_velocity_data, nan_policy):
     if angular_velocity_data is not None:
         gyro_np = checks.real_array("angular_velocity_data", angular_velocity_data)
         if gyro_np.shape != (n, 3):
-            raise ValueError(f"angular_velocity_data must have shape (N, 3) = ({n}, 3) like times, "
-                             f"got {gyro_np.shape}")
+            raise ValueError(f"angular_velocity_data must have shape (N, 3) = ({n}, 3) like times, got {gyro_np.shape}")
         arrays.append(gyro_np)
     omitted = checks.nonfinite_rows(*arrays)
     if np.any(omitted) and nan_policy == "raise":
         names = "times, quaternions or angular_velocity_data" if gyro_np is not None else "times or quaternions"
-        raise ValueError(f"samples {checks.describe_rows(omitted)} have non-finite {names}; pass "
-                         "nan_policy='omit' to leave them out")
+        raise ValueError(
+            f"samples {checks.describe_rows(omitted)} have non-finite {names}; pass nan_policy='omit' to leave them out"
+        )
     kept = np.flatnonzero(~omitted)
     # The checks below see the kept rows under their input indices (rows left out read as valid).
     checked = np.where(omitted[:, None], np.array([1.0, 0.0, 0.0, 0.0]), q_np)
@@ -533,15 +562,18 @@ def _checked_data(times, quaternions, angular_velocity_data, nan_policy):
     checks.check_unit_rows("quaternions", checked.astype(q_np.dtype))
     checks.check_distinct_times("times", times_np[kept], kept)
     if len(kept) < 4:
-        raise ValueError(f"times: the fit needs at least 4 samples, got {len(kept)}"
-                         + (f" after leaving out {n - len(kept)}" if np.any(omitted) else ""))
+        raise ValueError(
+            f"times: the fit needs at least 4 samples, got {len(kept)}"
+            + (f" after leaving out {n - len(kept)}" if np.any(omitted) else "")
+        )
     dtype = jnp.result_type(times_np.dtype, q_np.dtype, float)  # the fit runs in the data's dtype
     gyro_np = None if gyro_np is None else gyro_np[kept].astype(float)
     return times_np[kept].astype(float), q_np[kept].astype(float), gyro_np, omitted, dtype
 
 
-def _check_options(*, loss, loss_scale, attitude_sigma, angular_velocity_sigma, inertia, n_starts, seed,
-                   rtol, atol, max_steps):
+def _check_options(
+    *, loss, loss_scale, attitude_sigma, angular_velocity_sigma, inertia, n_starts, seed, rtol, atol, max_steps
+):
     checks.choice("loss", loss, _LOSSES)
     checks.choice("inertia", inertia, ("principal", "tensor"))
     if loss_scale is not None:
@@ -622,9 +654,18 @@ def fit_attitude(
     All starts share one compilation for a given (N, n_starts), dtype, solver settings and compiler
     options (module docstring, "Compilation").
     """
-    _check_options(loss=loss, loss_scale=loss_scale, attitude_sigma=attitude_sigma,
-                   angular_velocity_sigma=angular_velocity_sigma, inertia=inertia, n_starts=n_starts,
-                   seed=seed if key is None else 0, rtol=rtol, atol=atol, max_steps=max_steps)
+    _check_options(
+        loss=loss,
+        loss_scale=loss_scale,
+        attitude_sigma=attitude_sigma,
+        angular_velocity_sigma=angular_velocity_sigma,
+        inertia=inertia,
+        n_starts=n_starts,
+        seed=seed if key is None else 0,
+        rtol=rtol,
+        atol=atol,
+        max_steps=max_steps,
+    )
     times_np, q_np, gyro_np, omitted, dtype = _checked_data(times, quaternions, angular_velocity_data, nan_policy)
     tensor = inertia == "tensor"
     n_parameters = _TENSOR_PARAMETERS if tensor else _PRINCIPAL_PARAMETERS
@@ -689,9 +730,17 @@ def fit_attitude(
     )
     scale_in = jnp.asarray(-1.0 if loss_scale is None else loss_scale, dtype)
     out = _solve(
-        compiler_options, jnp.asarray(thetas0, dtype), jnp.asarray(references, dtype), data,
-        jnp.asarray(masks, dtype), jnp.asarray(_LOSSES[loss], jnp.int32), scale_in, rtol=float(rtol),
-        atol=float(atol), max_steps=int(max_steps))
+        compiler_options,
+        jnp.asarray(thetas0, dtype),
+        jnp.asarray(references, dtype),
+        data,
+        jnp.asarray(masks, dtype),
+        jnp.asarray(_LOSSES[loss], jnp.int32),
+        scale_in,
+        rtol=float(rtol),
+        atol=float(atol),
+        max_steps=int(max_steps),
+    )
 
     # Back to physical parameters (Omega in 1/time).  The rest is numpy on the solver's outputs (one
     # transfer each): eager JAX operations would each compile a small program on a first call.
@@ -702,8 +751,11 @@ def fit_attitude(
     covariance = out["covariance"].astype(float) * unscale[:, None] * unscale[None, :]
     moments, d_inertia = _normalised_inertia(theta_physical)
     inertia_covariance = d_inertia @ covariance @ d_inertia.T
-    tensor_result = _tensor_result(theta_physical, covariance, out["jacobian"] / unscale) if tensor else \
-        _principal_result(moments, inertia_covariance)
+    tensor_result = (
+        _tensor_result(theta_physical, covariance, out["jacobian"] / unscale)
+        if tensor
+        else _principal_result(moments, inertia_covariance)
+    )
     omega0 = out["omega0"]
     attitude0 = -out["attitude0"] if out["attitude0"][0] < 0 else out["attitude0"]
     moments = tensor_result["principal_moments"]
@@ -743,5 +795,7 @@ def fit_attitude(
             f"fit_attitude did not converge: the best of {n_starts} starts stopped at cost {costs[best]:.6g} "
             f"without meeting rtol={rtol}, atol={atol} within max_steps={max_steps} ({int(np.sum(oks))} "
             "starts converged).  Check the data and their units, raise max_steps or n_starts, or pass "
-            "throw=False for the unconverged result (FitError.result).", result)
+            "throw=False for the unconverged result (FitError.result).",
+            result,
+        )
     return result

@@ -40,6 +40,7 @@ from ._checks import check_positive, real_array
 from ._inertia import InertiaTensor
 from ._quaternion import as_matrix, conjugate, multiply
 
+
 __all__ = [
     "AbstractTorque",
     "BDot",
@@ -72,14 +73,17 @@ def _moments(inertia):
     """(J, J^-1) as (3, 3) matrices of one body: from principal moments (3,) or an InertiaTensor."""
     if isinstance(inertia, InertiaTensor):
         if inertia.matrix.shape != (3, 3):
-            raise ValueError(f"inertia must be the inertia tensor of one body, shape (3, 3), got shape "
-                             f"{tuple(inertia.matrix.shape)}")
+            raise ValueError(
+                f"inertia must be the inertia tensor of one body, shape (3, 3), got shape {tuple(inertia.matrix.shape)}"
+            )
         axes, moments = inertia.principal_axes, inertia.principal_moments
         return inertia.matrix, (axes / moments[None, :]) @ axes.T
     inertia = _float_array(inertia, "inertia")
     if inertia.shape != (3,):
-        raise ValueError(f"inertia must be the three principal moments, shape (3,), or an InertiaTensor, "
-                         f"got shape {tuple(inertia.shape)}")
+        raise ValueError(
+            f"inertia must be the three principal moments, shape (3,), or an InertiaTensor, "
+            f"got shape {tuple(inertia.shape)}"
+        )
     if _is_concrete(inertia) and not (np.all(np.isfinite(inertia)) and np.all(np.asarray(inertia) > 0)):
         raise ValueError("inertia: the principal moments of inertia must be finite and > 0")
     return jnp.diag(inertia), jnp.diag(1 / inertia)
@@ -104,27 +108,28 @@ def _positive_semidefinite(value, name):
     elif value.shape == (3, 3):
         matrix = value
     else:
-        raise ValueError(f"{name} must be a scalar, three diagonal entries (3,) or a (3, 3) matrix, got "
-                         f"shape {tuple(value.shape)}")
+        raise ValueError(
+            f"{name} must be a scalar, three diagonal entries (3,) or a (3, 3) matrix, got shape {tuple(value.shape)}"
+        )
     if _is_concrete(matrix):
         concrete = np.asarray(matrix, dtype=float)
         if not np.all(np.isfinite(concrete)):
             raise ValueError(f"{name} must be finite")
         scale = max(np.abs(concrete).max(), np.finfo(float).tiny)
         if np.abs(concrete - concrete.T).max() > 1e-12 * scale:
-            raise ValueError(f"{name} must be a symmetric positive semidefinite matrix; it is not "
-                             f"symmetric")
+            raise ValueError(f"{name} must be a symmetric positive semidefinite matrix; it is not symmetric")
         smallest = np.linalg.eigvalsh(concrete).min()
         if smallest < -1e-12 * scale:
-            raise ValueError(f"{name} must be a symmetric positive semidefinite matrix; its smallest "
-                             f"eigenvalue is {smallest:.3g}")
+            raise ValueError(
+                f"{name} must be a symmetric positive semidefinite matrix; its smallest eigenvalue is {smallest:.3g}"
+            )
     return matrix
 
 
 class _Fixed(eqx.Module):
     """A vector that does not change with time, as a function of time."""
 
-    vector: Float[Array, "3"]
+    vector: Float[Array, 3]
 
     def __call__(self, t):
         return self.vector
@@ -154,7 +159,7 @@ class AbstractTorque(eqx.Module):
     with no matrix exponential.
     """
 
-    def __call__(self, t, q, L, args) -> Float[Array, "3"]:
+    def __call__(self, t, q, L, args) -> Float[Array, 3]:
         raise NotImplementedError
 
     @property
@@ -202,7 +207,7 @@ class SumOfTorques(AbstractTorque):
 class ConstantTorque(AbstractTorque):
     """A torque fixed in the body (a thruster pair, a momentum wheel's constant friction): tau = c."""
 
-    torque: Float[Array, "3"]
+    torque: Float[Array, 3]
 
     def __init__(self, torque):
         self.torque = _vector(torque, "torque")
@@ -230,8 +235,8 @@ class UniformGravity(AbstractTorque):
     2084-2112, section 5.
     """
 
-    centre_of_mass: Float[Array, "3"]
-    weight: Float[Array, "3"]
+    centre_of_mass: Float[Array, 3]
+    weight: Float[Array, 3]
 
     def __init__(self, centre_of_mass, weight):
         self.centre_of_mass = _vector(centre_of_mass, "centre_of_mass")
@@ -265,10 +270,10 @@ class CircularOrbit(eqx.Module):
     phase: Float[Array, ""]
 
     def __init__(self, radius, mu, *, inclination=0.0, phase=0.0):
-        radius, mu = (jnp.asarray(_float_array(value, name), dtype=float)
-                      for name, value in (("radius", radius), ("mu", mu)))
-        if _is_concrete((radius, mu)) and not (np.isfinite(radius) and np.isfinite(mu) and radius > 0
-                                               and mu > 0):
+        radius, mu = (
+            jnp.asarray(_float_array(value, name), dtype=float) for name, value in (("radius", radius), ("mu", mu))
+        )
+        if _is_concrete((radius, mu)) and not (np.isfinite(radius) and np.isfinite(mu) and radius > 0 and mu > 0):
             raise ValueError("CircularOrbit needs a finite radius > 0 and gravitational parameter mu > 0")
         self.radius = radius
         self.rate = jnp.sqrt(mu / radius**3)
@@ -278,8 +283,9 @@ class CircularOrbit(eqx.Module):
     def __call__(self, t):
         angle = self.rate * t + self.phase
         in_plane = jnp.sin(angle)
-        return self.radius * jnp.stack([jnp.cos(angle), jnp.cos(self.inclination) * in_plane,
-                                        jnp.sin(self.inclination) * in_plane])
+        return self.radius * jnp.stack(
+            [jnp.cos(angle), jnp.cos(self.inclination) * in_plane, jnp.sin(self.inclination) * in_plane]
+        )
 
 
 class GravityGradient(AbstractTorque):
@@ -307,8 +313,9 @@ class GravityGradient(AbstractTorque):
     def __init__(self, inertia, position, mu=None):
         if mu is None:
             if not isinstance(position, CircularOrbit):
-                raise ValueError("GravityGradient needs mu (the gravitational parameter) unless the position "
-                                 "is a CircularOrbit")
+                raise ValueError(
+                    "GravityGradient needs mu (the gravitational parameter) unless the position is a CircularOrbit"
+                )
             mu = position.rate**2 * position.radius**3
         self.inertia, self.inverse_inertia = _moments(inertia)
         self.position = _function_of_time(position, "position")
@@ -410,11 +417,10 @@ class PDController(AbstractTorque):
     inverse_inertia: Float[Array, "3 3"]
     proportional: Float[Array, "3 3"]
     derivative: Float[Array, "3 3"]
-    target: Float[Array, "4"]
-    target_rate: Float[Array, "3"]
+    target: Float[Array, 4]
+    target_rate: Float[Array, 3]
 
-    def __init__(self, inertia, proportional, derivative, *, target=(1.0, 0.0, 0.0, 0.0),
-                 target_rate=(0.0, 0.0, 0.0)):
+    def __init__(self, inertia, proportional, derivative, *, target=(1.0, 0.0, 0.0, 0.0), target_rate=(0.0, 0.0, 0.0)):
         self.inertia, self.inverse_inertia = _moments(inertia)
         self.proportional = _positive_semidefinite(proportional, "proportional (the gain K_p)")
         self.derivative = _positive_semidefinite(derivative, "derivative (the gain K_d)")

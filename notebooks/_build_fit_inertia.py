@@ -4,6 +4,7 @@ import pathlib
 
 import nbformat
 
+
 md, code = nbformat.v4.new_markdown_cell, nbformat.v4.new_code_cell
 
 cells = [
@@ -18,11 +19,14 @@ at $t = 0$.  It runs optimistix's Levenberg-Marquardt solver from a batch of sta
 Here: a body like a tumbling asteroid, $I = (0.64, 0.97, 1)$ in the data's body axes (in a shuffled
 order), 64 uneven observation times over six rotation periods (about ten per period), 2 mrad
 attitude noise, each quaternion reported with a random sign, and a few gross outliers."""),
-    code("""# Number of times at which the fitted and true motions are drawn; the tests run with fewer.
+    code(
+        """# Number of times at which the fitted and true motions are drawn; the tests run with fewer.
 N_SAMPLES = 20000
 # Number of observed attitudes.  The fit compiles once per number of samples (and of starts); 64 and
 # 6 starts are the sizes of tests/test_fit.py, so that CI compiles the fit once for both.
-N_OBS = 64""", metadata={"tags": ["parameters"]}),
+N_OBS = 64""",
+        metadata={"tags": ["parameters"]},
+    ),
     code("""import time
 
 import jax

@@ -4,6 +4,7 @@ import pathlib
 
 import nbformat
 
+
 md, code = nbformat.v4.new_markdown_cell, nbformat.v4.new_code_cell
 
 cells = [
@@ -15,11 +16,13 @@ short-axis-mode tumbler with Apophis's moments (0.61 : 0.965 : 1, $E/E_0 = 1.024
 spin (precession period 4.8 hours), its shape a bumpy convex hull (not the model's facets: no
 inverse crime), observed 16 times a night on 24 nights over 90 days at changing geometry with 1%
 noise and an unknown scale per night; four later nights are held out."""),
-    code("""# Number of times at which the model light curves are drawn, and the inversion's settings (those of
+    code(
+        """# Number of times at which the model light curves are drawn, and the inversion's settings (those of
 # tests/test_lightcurve_fit.py, described below); the tests run smaller.
 N_SAMPLES = 20000
 FIT_SETTINGS = dict(shape="convex", convex_subdivisions=2, period_grid=(3, 3), starts_per_period=128, n_refine=16)""",
-         metadata={"tags": ["parameters"]}),
+        metadata={"tags": ["parameters"]},
+    ),
     code("""import pathlib
 import sys
 import time

@@ -4,6 +4,7 @@ import pathlib
 
 import nbformat
 
+
 md, code = nbformat.v4.new_markdown_cell, nbformat.v4.new_code_cell
 
 cells = [
@@ -16,8 +17,11 @@ gravity torque (here the 6th-order Blanes–Moan method of CALGO 903 example 1, 
 the same `frbjax.RigidBodyTerm` is an ordinary diffrax term, so diffrax's Runge–Kutta methods solve
 the identical ODE for comparison.  Then the centre-of-mass offset is recovered from observed
 attitudes by gradient descent through the integration."""),
-    code("""# Number of steps drawn and compared; the tests run with fewer.
-N_SAMPLES = 20000""", metadata={"tags": ["parameters"]}),
+    code(
+        """# Number of steps drawn and compared; the tests run with fewer.
+N_SAMPLES = 20000""",
+        metadata={"tags": ["parameters"]},
+    ),
     code("""import diffrax
 import jax
 

@@ -32,6 +32,7 @@ import jax.numpy as jnp
 import mpmath
 import numpy as np
 
+
 # --------------------------------------------------------------------------------------------------
 # Quaternion algebra (written out from the definition of the Hamilton product).
 
@@ -193,8 +194,14 @@ def diffrax_references(inertia, momentum, attitude, times, rtol=RTOL, atol=ATOL,
     L_matrix, R, steps_matrix = integrate_matrix(
         inertia, momentum, matrix_of(attitude), times, rtol=rtol, atol=atol, max_steps=max_steps
     )
-    return dict(L_quaternion=L_quaternion, q=q, L_matrix=L_matrix, R=R, steps_quaternion=steps_quaternion,
-                steps_matrix=steps_matrix)
+    return dict(
+        L_quaternion=L_quaternion,
+        q=q,
+        L_matrix=L_matrix,
+        R=R,
+        steps_quaternion=steps_quaternion,
+        steps_matrix=steps_matrix,
+    )
 
 
 # --------------------------------------------------------------------------------------------------
@@ -318,11 +325,12 @@ def evaluate(inertia, momentum, attitude, times, quantities=("angular_momentum",
     SERIES_BODIES bodies by SERIES_TIMES times (padded; a body's values at a time do not depend on its
     other times).
     """
-    from frbjax import FreeRigidBody, free_flow, quaternion_to_matrix
+    from frbjax import free_flow, FreeRigidBody, quaternion_to_matrix
 
     inertia, momentum, attitude, times = (np.asarray(a) for a in (inertia, momentum, attitude, times))
     n, k = times.shape
     if path == "series":
+
         def body_at_times(inertia, momentum, attitude, times):
             body = FreeRigidBody(inertia, momentum, attitude)
             return tuple(getattr(body, name)(times) for name in quantities)
@@ -334,8 +342,10 @@ def evaluate(inertia, momentum, attitude, times, quantities=("angular_momentum",
         for start in range(0, len(padded_times), SERIES_BODIES):
             block = slice(start, start + SERIES_BODIES)
             columns = [
-                batched(*(jnp.asarray(a[block]) for a in bodies),
-                        jnp.asarray(padded_times[block, column : column + SERIES_TIMES]))
+                batched(
+                    *(jnp.asarray(a[block]) for a in bodies),
+                    jnp.asarray(padded_times[block, column : column + SERIES_TIMES]),
+                )
                 for column in range(0, padded_times.shape[1], SERIES_TIMES)
             ]
             rows.append([np.concatenate([np.asarray(c[i]) for c in columns], axis=1) for i in range(len(quantities))])
@@ -347,8 +357,12 @@ def evaluate(inertia, momentum, attitude, times, quantities=("angular_momentum",
 
     def one(inertia, momentum, attitude, time):
         momentum_at, attitude_at = free_flow(inertia, momentum, attitude, time)
-        values = dict(angular_momentum=momentum_at, angular_velocity=momentum_at / inertia, quaternion=attitude_at,
-                      rotation_matrix=quaternion_to_matrix(attitude_at))
+        values = dict(
+            angular_momentum=momentum_at,
+            angular_velocity=momentum_at / inertia,
+            quaternion=attitude_at,
+            rotation_matrix=quaternion_to_matrix(attitude_at),
+        )
         return tuple(values[name] for name in quantities)
 
     batched = jax.vmap(one)

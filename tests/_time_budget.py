@@ -20,6 +20,7 @@ import time
 
 import pytest
 
+
 _SETUP_SECONDS = pytest.StashKey[float]()
 _PHASE_START = pytest.StashKey[float]()
 _SLOW_PROPERTY = "frbjax_slow_seconds"
@@ -77,9 +78,12 @@ def pytest_runtest_makereport(item, call):
     total = setup + seconds
     if total <= limit:
         return
-    message = (f"{item.nodeid} took {total:.1f} s, the lesser of CPU and wall time (setup {setup:.1f} s, call {seconds:.1f} s), "
-               f"over the limit of {limit:g} s (FRBJAX_TEST_TIME_LIMIT) for a test not marked slow: make "
-               "it smaller, or mark it @pytest.mark.slow with the reason.")
+    message = (
+        f"{item.nodeid} took {total:.1f} s, the lesser of CPU and wall time "
+        f"(setup {setup:.1f} s, call {seconds:.1f} s), "
+        f"over the limit of {limit:g} s (FRBJAX_TEST_TIME_LIMIT) for a test not marked slow: make "
+        "it smaller, or mark it @pytest.mark.slow with the reason."
+    )
     if report.passed:
         report.outcome = "failed"
         report.longrepr = message
@@ -107,8 +111,9 @@ def pytest_sessionfinish(session):
         return
     limit = _limit("FRBJAX_SLOW_TOTAL_LIMIT", 180)
     total = sum(_slow_seconds.values())
-    summary = (f"tests marked slow: {len(_slow_seconds)}, {total:.1f} s in all (limit {limit:g} s, "
-               "FRBJAX_SLOW_TOTAL_LIMIT)")
+    summary = (
+        f"tests marked slow: {len(_slow_seconds)}, {total:.1f} s in all (limit {limit:g} s, FRBJAX_SLOW_TOTAL_LIMIT)"
+    )
     if total > limit:
         summary += ": over the limit"
         if session.exitstatus == pytest.ExitCode.OK:

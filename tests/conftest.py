@@ -25,6 +25,7 @@ from _time_budget import (  # noqa: F401  (pytest finds the hooks among this mod
     pytest_terminal_summary,
 )
 
+
 # The CLI (called in process by test_cli.py, and by the subprocesses that inherit this environment)
 # turns on the persistent compilation cache unless FRBJAX_CACHE_DIR is empty: a worker whose later
 # compilations wrote to it died in executable.serialize() (see above).

@@ -12,14 +12,26 @@ import json
 import subprocess
 import sys
 
-from _benchmark_runs import ROOT, finite_positive
+from _benchmark_runs import finite_positive, ROOT
 
 
 def test_torques_basilisk_quick(tmp_path):
     proc = subprocess.run(
-        [sys.executable, str(ROOT / "benchmarks" / "torques_basilisk.py"), "--quick", "--without-basilisk",
-         "--repeats", "1", "--output-dir", str(tmp_path)],
-        cwd=ROOT, capture_output=True, text=True, timeout=1800)
+        [
+            sys.executable,
+            str(ROOT / "benchmarks" / "torques_basilisk.py"),
+            "--quick",
+            "--without-basilisk",
+            "--repeats",
+            "1",
+            "--output-dir",
+            str(tmp_path),
+        ],
+        cwd=ROOT,
+        capture_output=True,
+        text=True,
+        timeout=1800,
+    )
     assert proc.returncode == 0, proc.stdout + proc.stderr
 
     basilisk = json.loads((tmp_path / "torques_basilisk.json").read_text())

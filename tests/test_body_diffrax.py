@@ -33,11 +33,11 @@ import functools
 import itertools
 import os
 
+import _reference as ref
 import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
-import _reference as ref
 
 RTOL = ATOL = 1e-16
 TIMES = 20
@@ -139,8 +139,14 @@ def build_cases(seed=SEED):
 
     # Symmetric bodies (I1 = I2, I2 = I3, in any position) and spheres.
     for inertia in (
-        (1.0, 1.0, 2.0), (2.0, 1.0, 1.0), (1.0, 2.0, 2.0), (2.0, 1.0, 2.0),
-        (0.7, 0.7, 0.3), (3.0, 1.5, 3.0), (1.5, 1.5, 1.5), (0.4, 0.4, 0.4),
+        (1.0, 1.0, 2.0),
+        (2.0, 1.0, 1.0),
+        (1.0, 2.0, 2.0),
+        (2.0, 1.0, 2.0),
+        (0.7, 0.7, 0.3),
+        (3.0, 1.5, 3.0),
+        (1.5, 1.5, 1.5),
+        (0.4, 0.4, 0.4),
     ):
         add("symmetric", inertia, ref.random_directions(rng, 1)[0] * rng.uniform(0.5, 2.0), 50.0)
 
@@ -197,9 +203,7 @@ def build_cases(seed=SEED):
     bases = [cases["major_axis_regime"][0], cases["minor_axis_regime"][0], cases["near_separatrix"][2]]
     for inertia, momentum, attitude_, tau in bases:
         for permutation in itertools.permutations(range(3)):
-            cases.setdefault("axis_orders", []).append(
-                (*permute_body(inertia, momentum, attitude_, permutation), tau)
-            )
+            cases.setdefault("axis_orders", []).append((*permute_body(inertia, momentum, attitude_, permutation), tau))
     return cases
 
 
@@ -257,13 +261,13 @@ TOLERANCE = {
 }
 
 
-@functools.lru_cache(maxsize=None)
+@functools.cache
 def stored_references(seed):
     """{name: array} of one stored seed (inputs and solutions, see tests/data/make_diffrax_references.py)."""
     with np.load(DATA) as data:
         assert float(data["rtol"]) == RTOL and float(data["atol"]) == ATOL
         prefix = f"seed{seed}_"
-        return {key[len(prefix):]: data[key] for key in data.files if key.startswith(prefix)}
+        return {key[len(prefix) :]: data[key] for key in data.files if key.startswith(prefix)}
 
 
 def references(seed):
@@ -287,9 +291,7 @@ def errors_against(solutions, inertia, momentum, attitude, times, path="one_time
         L, q, R = reference_values["L_quaternion"], reference_values["q"], reference_values["R"]
     scale = np.linalg.norm(momentum, axis=-1)
     scale = np.where(scale > 0, scale, 1.0)[:, None]
-    error_L = np.maximum(
-        np.abs(L - solutions["L_quaternion"]).max(-1), np.abs(L - solutions["L_matrix"]).max(-1)
-    )
+    error_L = np.maximum(np.abs(L - solutions["L_quaternion"]).max(-1), np.abs(L - solutions["L_matrix"]).max(-1))
     error_q = np.abs(q - solutions["q"]).max(-1)
     error_R = np.abs(R - solutions["R"]).max((-1, -2))
     return error_L / scale, error_q, error_R
@@ -366,8 +368,9 @@ def test_stored_inputs_are_the_cases():
         stored = stored_references(seed)
         _, *inputs = stack(build_cases(seed))
         for name, value in zip(("inertia", "momentum", "attitude", "times"), inputs):
-            np.testing.assert_array_equal(stored[name], value, err_msg=f"seed {seed}: {name}; rerun "
-                                          "tests/data/make_diffrax_references.py")
+            np.testing.assert_array_equal(
+                stored[name], value, err_msg=f"seed {seed}: {name}; rerun tests/data/make_diffrax_references.py"
+            )
         count, times = inputs[-1].shape
         assert stored["q"].shape == (count, times, 4) and stored["R"].shape == (count, times, 3, 3)
         for name in ("L_quaternion", "q", "L_matrix", "R"):

@@ -7,11 +7,11 @@ of at least 10%, |d I2 - 1| >= 0.05, |L| in [0.5, 2], |L| |t| <= 10 (the accurac
 
 from __future__ import annotations
 
+import _reference as ref
 import jax.numpy as jnp
 import numpy as np
 import pytest
 
-import _reference as ref
 
 SEED = 2718
 QUANTITIES = ("angular_momentum", "quaternion", "rotation_matrix")

@@ -12,10 +12,10 @@ from __future__ import annotations
 
 import functools
 
+import _reference as ref
 import numpy as np
 import pytest
 
-import _reference as ref
 
 EPS = np.finfo(np.float64).eps
 SEED = 31415
@@ -97,18 +97,31 @@ def special_bodies():
     ulp = EPS
     sep = lambda inertia, offset, l2: ref.separatrix_momentum(inertia, offset, l2)  # noqa: E731
     return {
-        "symmetric": [((1.0, 1.0, 2.0), (0.3, -0.5, 0.8)), ((2.0, 1.0, 1.0), (0.6, 0.6, -0.5)),
-                      ((0.7, 1.4, 1.4), (-0.2, 0.9, 0.4))],
+        "symmetric": [
+            ((1.0, 1.0, 2.0), (0.3, -0.5, 0.8)),
+            ((2.0, 1.0, 1.0), (0.6, 0.6, -0.5)),
+            ((0.7, 1.4, 1.4), (-0.2, 0.9, 0.4)),
+        ],
         "sphere": [((1.5, 1.5, 1.5), (0.3, -0.5, 0.8)), ((0.4, 0.4, 0.4), (-2.0, 1.0, 0.5))],
-        "near_sphere": [((1.0, 1.0 + 1e-10, 1.0 + 2e-10), (0.3, -0.5, 0.8)),
-                        ((1.0, 1.0 + ulp, 1.0 + 2 * ulp), (-0.29, 0.85, -0.44)),
-                        ((2.0 + 6 * ulp, 2.0, 2.0 + 2 * ulp), (0.27, -0.75, 0.6))],
-        "on_separatrix": [((1.0, 3.0, 6.0), (1.0, 2.0, 2.0)), ((6.0, 1.0, 3.0), (2.0, -1.0, 2.0)),
-                          ((1.0, 2.0, 4.0), (1.0, 0.5, np.sqrt(2.0)))],
-        "near_separatrix": [((1.0, 2.0, 3.0), sep((1.0, 2.0, 3.0), 1e-12, 0.3)),
-                            ((1.0, 2.0, 3.0), sep((1.0, 2.0, 3.0), -1e-12, -0.6))],
-        "principal_axis": [((2.0, 0.8, 1.3), (1.0, 0.0, 0.0)), ((2.0, 0.8, 1.3), (0.0, -3.0, 0.0)),
-                           ((2.0, 0.8, 1.3), (0.0, 0.0, 0.5))],
+        "near_sphere": [
+            ((1.0, 1.0 + 1e-10, 1.0 + 2e-10), (0.3, -0.5, 0.8)),
+            ((1.0, 1.0 + ulp, 1.0 + 2 * ulp), (-0.29, 0.85, -0.44)),
+            ((2.0 + 6 * ulp, 2.0, 2.0 + 2 * ulp), (0.27, -0.75, 0.6)),
+        ],
+        "on_separatrix": [
+            ((1.0, 3.0, 6.0), (1.0, 2.0, 2.0)),
+            ((6.0, 1.0, 3.0), (2.0, -1.0, 2.0)),
+            ((1.0, 2.0, 4.0), (1.0, 0.5, np.sqrt(2.0))),
+        ],
+        "near_separatrix": [
+            ((1.0, 2.0, 3.0), sep((1.0, 2.0, 3.0), 1e-12, 0.3)),
+            ((1.0, 2.0, 3.0), sep((1.0, 2.0, 3.0), -1e-12, -0.6)),
+        ],
+        "principal_axis": [
+            ((2.0, 0.8, 1.3), (1.0, 0.0, 0.0)),
+            ((2.0, 0.8, 1.3), (0.0, -3.0, 0.0)),
+            ((2.0, 0.8, 1.3), (0.0, 0.0, 0.5)),
+        ],
         "near_middle_axis": [((2.0, 0.8, 1.3), (1e-10, -2e-10, 1.0)), ((2.0, 0.8, 1.3), (3e-7, 1e-7, -1.0))],
     }
 
@@ -132,8 +145,9 @@ SPECIAL_TOLERANCE = {
 @pytest.fixture(scope="module", params=ref.PATHS)
 def special_motion(request):
     rng = np.random.default_rng(SEED + 1)
-    rows = [(family, np.array(i, float), np.array(l, float)) for family, items in special_bodies().items()
-            for i, l in items]
+    rows = [
+        (family, np.array(i, float), np.array(l, float)) for family, items in special_bodies().items() for i, l in items
+    ]
     families = np.array([r[0] for r in rows])
     inertia, momentum = np.stack([r[1] for r in rows]), np.stack([r[2] for r in rows])
     attitude = ref.random_attitudes(rng, len(rows))
@@ -205,7 +219,7 @@ def test_initial_values():
 LONG_TIMES = (1e2, 1e4, 1e6)
 
 
-@functools.lru_cache(maxsize=None)
+@functools.cache
 def group_measurements(count=48, tau_max=50.0, seed=SEED + 3):
     """Evolve by t1, restart from (L(t1), q(t1)) and evolve by t2; compare with evolving by t1 + t2.
 
@@ -270,7 +284,7 @@ def test_long_times_group_property():
         assert worst <= 3.0 * EPS * tau_long, f"|L| t1 = {tau_long:g}: {worst:.2e}"
 
 
-@functools.lru_cache(maxsize=None)
+@functools.cache
 def composition_measurements(steps=8, count=16, seed=SEED + 4):
     """q(T) against the composition of ``steps`` exact steps of T / steps (restarting each time), for
     |L| |T| in LONG_TIMES, |L| from 1e-3 to 1e3.  Returns {tau: (L / |L| error, q error, finite)}."""
@@ -317,7 +331,7 @@ def test_long_times_composition():
 CENTERS = (0.0, 1e4, -1e6)
 
 
-@functools.lru_cache(maxsize=None)
+@functools.cache
 def continuity_measurements(span=30.0, points=601):
     """Largest |q(t + h) - q(t)| / (h max|Omega| / 2) on a fine grid of |L| t in center +- span/2.
 
@@ -372,7 +386,7 @@ NAMES = ("angular_momentum", "quaternion", "rotation_matrix")
 SHAPE_COUNT = 3
 
 
-@functools.lru_cache(maxsize=None)
+@functools.cache
 def _single_bodies():
     """Bodies, times (T = 7) and their L, q, R one body at a time: (N, T, ...) arrays."""
     rng = np.random.default_rng(SEED + 6)
@@ -384,7 +398,7 @@ def _single_bodies():
 
 def _compare(got, expected, shape):
     for value, want, name in zip(got, expected, NAMES):
-        assert value.shape == shape + want.shape[len(shape):], name
+        assert value.shape == shape + want.shape[len(shape) :], name
         np.testing.assert_allclose(np.asarray(value), want, rtol=0, atol=SHAPE_ATOL[name], err_msg=name)
 
 

@@ -19,12 +19,12 @@ import functools
 import json
 import os
 
+import _reference as ref
 import mpmath
 import numpy as np
 import pytest
 import scipy.optimize
 
-import _reference as ref
 
 DATA = os.path.join(os.path.dirname(__file__), "data", "mpmath_references.json")
 
@@ -99,12 +99,13 @@ def test_near_separatrix(frbjax_values, name):
     assert error_q <= NEAR_SEPARATRIX_TOLERANCE, f"{name}: q error {error_q:.2e}"
 
 
-@functools.lru_cache(maxsize=None)
+@functools.cache
 def live_reference():
     """The first two times (|L| t = 5, 10) of one case recomputed at 30 digits (~2 s, once per process)."""
     case = CASES["major_unit"]
-    return ref.mpmath_solution(case["inertia"], case["momentum"], case["attitude"], case["times"][:2], dps=30,
-                               digits=30)
+    return ref.mpmath_solution(
+        case["inertia"], case["momentum"], case["attitude"], case["times"][:2], dps=30, digits=30
+    )
 
 
 def test_live_reference(frbjax_values):
@@ -199,9 +200,7 @@ def test_flip_period():
     upward = np.flatnonzero((l2[:-1] < 0) & (l2[1:] >= 0))
     assert len(upward) >= 2
     l2_at = lambda t: float(body.angular_momentum(t)[1])  # noqa: E731
-    crossings = [
-        scipy.optimize.brentq(l2_at, grid[i], grid[i + 1], xtol=1e-14, rtol=1e-15) for i in upward[:2]
-    ]
+    crossings = [scipy.optimize.brentq(l2_at, grid[i], grid[i + 1], xtol=1e-14, rtol=1e-15) for i in upward[:2]]
     period = crossings[1] - crossings[0]
 
     assert abs(period - 116.472) < 5e-4  # the printed digits

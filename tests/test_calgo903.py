@@ -21,8 +21,10 @@ import pytest
 
 from frbjax import _calgo903 as calgo
 
+
 REPOSITORY = pathlib.Path(__file__).resolve().parents[1]
 DATA = REPOSITORY / "tests" / "data" / "calgo903"
+
 
 def needs_data(test):
     """The CALGO 903 files must be there (tests/data/calgo903, tracked): no skip, a missing folder
@@ -30,16 +32,28 @@ def needs_data(test):
     assert DATA.is_dir(), f"CALGO 903 reference data not found: {DATA}"
     return test
 
+
 # Tolerances on max |frbjax - Fortran| over Pi and the attitude (see the module docstring).
 TOLERANCE = {"example0": 1e-14, "example2": 1e-14, "example3": 1e-9, "example4": 1e-9}
 EXAMPLE1_STEPS = 1000
 EXAMPLE1_TOLERANCE = 5e-12  # measured 7.0e-13 over the first 1000 steps (2.1e-12 with earlier roundings)
 
 EXAMPLE1_LINES = [
-    "0.0378593198406116", "0.102635633102435", "-0.0258678882665587", "0.314241403071477",
-    "-0.130144459517415", "0.106417700369543", "-0.00879424312851058", "0.207305069056835",
-    "0.091719152624462", "0.183983170005006", "-0.056534365832888", "0.004914688774713",
-    "0.143761127168358", "0.328567693746804", "-0.196411466486454",
+    "0.0378593198406116",
+    "0.102635633102435",
+    "-0.0258678882665587",
+    "0.314241403071477",
+    "-0.130144459517415",
+    "0.106417700369543",
+    "-0.00879424312851058",
+    "0.207305069056835",
+    "0.091719152624462",
+    "0.183983170005006",
+    "-0.056534365832888",
+    "0.004914688774713",
+    "0.143761127168358",
+    "0.328567693746804",
+    "-0.196411466486454",
 ]
 
 
@@ -223,8 +237,7 @@ def test_inconsistent_values(old, new, line, words):
 
 
 def test_rotation_matrix_and_steps_are_checked():
-    example3 = ["1.0", "10.0", "0.6", "0.8", "0", "1", "0", "0", "0", "1", "0", "0", "0", "1",
-                "1", "2", "3", "5"]
+    example3 = ["1.0", "10.0", "0.6", "0.8", "0", "1", "0", "0", "0", "1", "0", "0", "0", "1", "1", "2", "3", "5"]
     assert calgo.parse_input("\n".join(example3)).steps == 10
     not_rotation = example3.copy()
     not_rotation[13] = "-1"

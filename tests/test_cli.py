@@ -17,11 +17,12 @@ import numpy as np
 import pytest
 
 import frbjax
-from frbjax import _calgo903 as calgo
-from frbjax import cli
+from frbjax import _calgo903 as calgo, cli
+
 
 REPOSITORY = pathlib.Path(__file__).resolve().parents[1]
 DATA = REPOSITORY / "tests" / "data" / "calgo903"
+
 
 def needs_data(test):
     """The CALGO 903 files must be there (tests/data/calgo903, tracked): no skip, a missing folder
@@ -29,8 +30,8 @@ def needs_data(test):
     assert DATA.is_dir(), f"CALGO 903 reference data not found: {DATA}"
     return test
 
-TOLERANCE = {"example0": 1e-14, "example1": 1e-10, "example2": 1e-14, "example3": 1e-9,
-             "example4": 1e-9}
+
+TOLERANCE = {"example0": 1e-14, "example1": 1e-10, "example2": 1e-14, "example3": 1e-9, "example4": 1e-9}
 EXAMPLE1_STEPS = 200
 PNG_SIGNATURE = b"\x89PNG\r\n\x1a\n"
 GIF_SIGNATURE = b"GIF89a"
@@ -59,8 +60,10 @@ def compare(path, name, records=None):
     assert len(produced.time) == records
     recorded = ~np.isnan(produced.time)
     np.testing.assert_array_equal(produced.time[recorded], expected.time[:records][recorded])
-    return max(np.abs(produced.momentum - expected.momentum[:records]).max(),
-               np.abs(produced.attitude - expected.attitude[:records]).max())
+    return max(
+        np.abs(produced.momentum - expected.momentum[:records]).max(),
+        np.abs(produced.attitude - expected.attitude[:records]).max(),
+    )
 
 
 # ------------------------------------------------------------------------------------------------ run
@@ -98,7 +101,12 @@ def test_console_script(tmp_path, cache_environment):
     output = tmp_path / "out.dat"
     result = subprocess.run(
         [*console_script(), "run", str(DATA / "init_example4.dat"), "-o", str(output)],
-        capture_output=True, text=True, cwd=tmp_path, env=cache_environment, timeout=300)
+        capture_output=True,
+        text=True,
+        cwd=tmp_path,
+        env=cache_environment,
+        timeout=300,
+    )
     assert result.returncode == 0, result.stderr
     assert "NP = 5" in result.stderr and "ignored" in result.stderr
     assert compare(output, "example4") <= 1e-9
@@ -187,8 +195,13 @@ def test_malformed_file_leaves_an_existing_output_alone(tmp_path, capsys):
 def test_malformed_file_console_script(tmp_path, cache_environment):
     path = malformed_example0(tmp_path, delete_line_8)
     output = tmp_path / "out.dat"
-    result = subprocess.run([*console_script(), "run", str(path), "-o", str(output)],
-                            capture_output=True, text=True, env=cache_environment, timeout=300)
+    result = subprocess.run(
+        [*console_script(), "run", str(path), "-o", str(output)],
+        capture_output=True,
+        text=True,
+        env=cache_environment,
+        timeout=300,
+    )
     assert result.returncode == 2
     assert f"{path}, line 15:" in result.stderr
     assert not output.exists()
@@ -256,8 +269,12 @@ def test_flip_period_against_the_published_value():
 def test_demo_folder_must_exist(tmp_path, capsys):
     assert cli.main(["demo", "--quick", "--out", str(tmp_path / "no" / "demo.png")]) == 2
     assert "no folder" in capsys.readouterr().err
-    assert cli.main(["demo", "--quick", "--out", str(tmp_path / "demo.png"),
-                     "--animation", str(tmp_path / "no" / "demo.gif")]) == 2
+    assert (
+        cli.main(
+            ["demo", "--quick", "--out", str(tmp_path / "demo.png"), "--animation", str(tmp_path / "no" / "demo.gif")]
+        )
+        == 2
+    )
     assert "no folder" in capsys.readouterr().err
     assert list(tmp_path.iterdir()) == []
 
@@ -271,8 +288,7 @@ def test_demo_animation_format_errors(tmp_path, capsys, monkeypatch):
     monkeypatch.setattr(cli, "_ffmpeg_available", lambda: False)
     assert cli.main(["demo", "--quick", "--out", png, "--animation", str(tmp_path / "demo.mp4")]) == 2
     assert "ffmpeg is not installed" in capsys.readouterr().err
-    assert cli.main(["demo", "--quick", "--out", png, "--animation", str(tmp_path / "demo.gif"),
-                     "--no-animation"]) == 2
+    assert cli.main(["demo", "--quick", "--out", png, "--animation", str(tmp_path / "demo.gif"), "--no-animation"]) == 2
     assert "exclude each other" in capsys.readouterr().err
     assert list(tmp_path.iterdir()) == []
 
@@ -295,8 +311,9 @@ def test_t_handle_geometry():
     geometry = cli.t_handle_geometry(rotation)
     for name, points in cli.BODY_POINTS.items():
         np.testing.assert_allclose(geometry[name], points @ rotation.T, atol=1e-15)
-        np.testing.assert_allclose(np.linalg.norm(np.diff(geometry[name], axis=0)),
-                                   np.linalg.norm(np.diff(points, axis=0)), rtol=1e-14)
+        np.testing.assert_allclose(
+            np.linalg.norm(np.diff(geometry[name], axis=0)), np.linalg.norm(np.diff(points, axis=0)), rtol=1e-14
+        )
     for k in range(3):
         np.testing.assert_allclose(geometry[f"e{k + 1}"][1], cli.AXIS_LENGTH * rotation[:, k], atol=1e-15)
 
@@ -377,14 +394,21 @@ def test_readme_quick_start_commands(tmp_path, cache_environment):
     block = section.split("```", 2)[1]
     commands = [line.strip() for line in block.splitlines()[1:] if line.strip()]
     assert commands == ["make demo", "make test"]
-    dry_run = subprocess.run(["make", "--dry-run", "demo"], capture_output=True, text=True, cwd=root,
-                             env=cache_environment, timeout=60)
+    dry_run = subprocess.run(
+        ["make", "--dry-run", "demo"], capture_output=True, text=True, cwd=root, env=cache_environment, timeout=60
+    )
     assert dry_run.returncode == 0, dry_run.stdout + dry_run.stderr
     program, *arguments = dry_run.stdout.strip().splitlines()[-1].split()
     assert program.endswith("/frbjax") and arguments == ["demo"], dry_run.stdout
     output = tmp_path / "frbjax_demo.png"
-    result = subprocess.run([str(root / program), *arguments, "--quick", "--out", str(output)],
-                            capture_output=True, text=True, cwd=tmp_path, env=cache_environment, timeout=300)
+    result = subprocess.run(
+        [str(root / program), *arguments, "--quick", "--out", str(output)],
+        capture_output=True,
+        text=True,
+        cwd=tmp_path,
+        env=cache_environment,
+        timeout=300,
+    )
     assert result.returncode == 0, result.stdout + result.stderr
     assert "4K(m)/B" in result.stdout and f"plot saved to {output}" in result.stdout
     assert f"saved to {tmp_path / 'frbjax_demo.gif'}" in result.stdout

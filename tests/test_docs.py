@@ -35,6 +35,7 @@ import pytest
 import frbjax
 from frbjax import cli, special
 
+
 REPOSITORY = pathlib.Path(__file__).resolve().parents[1]
 DOCS = REPOSITORY / "docs"
 PAGES = sorted(path.relative_to(DOCS) for path in DOCS.rglob("*.md"))
@@ -59,8 +60,11 @@ def public_names():
         value = getattr(frbjax, name)
         if inspect.isclass(value) or inspect.isfunction(value):
             names.append(name)
-    names += [f"FreeRigidBody.{name}" for name, _ in inspect.getmembers(frbjax.FreeRigidBody)
-              if not name.startswith("_") and callable(getattr(frbjax.FreeRigidBody, name))]
+    names += [
+        f"FreeRigidBody.{name}"
+        for name, _ in inspect.getmembers(frbjax.FreeRigidBody)
+        if not name.startswith("_") and callable(getattr(frbjax.FreeRigidBody, name))
+    ]
     names += [f"special.{name}" for name in special.__all__]
     names += ["cli.main"]
     return names
@@ -69,9 +73,14 @@ def public_names():
 @pytest.fixture(scope="module")
 def site(tmp_path_factory):
     folder = tmp_path_factory.mktemp("site")
-    result = subprocess.run([sys.executable, "-m", "mkdocs", "build", "--strict", "--site-dir", str(folder)],
-                            cwd=REPOSITORY, capture_output=True, text=True, timeout=300,
-                            env=environment())
+    result = subprocess.run(
+        [sys.executable, "-m", "mkdocs", "build", "--strict", "--site-dir", str(folder)],
+        cwd=REPOSITORY,
+        capture_output=True,
+        text=True,
+        timeout=300,
+        env=environment(),
+    )
     assert result.returncode == 0, result.stdout + result.stderr
     return folder
 
@@ -93,8 +102,11 @@ def test_api_reference_names_every_public_function(site):
         anchors |= set(re.findall(r'id="(frbjax\.[\w.]+)"', page.read_text()))
     names = public_names()
     assert len(names) >= 20, names
-    missing = [name for name in names
-               if not any(anchor == f"frbjax.{name}" or anchor.endswith(f".{name}") for anchor in anchors)]
+    missing = [
+        name
+        for name in names
+        if not any(anchor == f"frbjax.{name}" or anchor.endswith(f".{name}") for anchor in anchors)
+    ]
     assert not missing, f"not in the API reference: {missing}"
 
 
@@ -128,9 +140,16 @@ SLOW_PAGES = {
 }
 
 
-@pytest.mark.parametrize("page", [
-    pytest.param(str(page), marks=pytest.mark.slow(reason=SLOW_PAGES[str(page)])) if str(page) in SLOW_PAGES
-    else str(page) for page in PAGES if python_blocks(page)])
+@pytest.mark.parametrize(
+    "page",
+    [
+        pytest.param(str(page), marks=pytest.mark.slow(reason=SLOW_PAGES[str(page)]))
+        if str(page) in SLOW_PAGES
+        else str(page)
+        for page in PAGES
+        if python_blocks(page)
+    ],
+)
 def test_page_examples_run(page, monkeypatch):
     """The page's blocks as one script, in a fresh namespace, from the repository root; a failure's
     traceback names the page and shows its lines."""
@@ -157,18 +176,22 @@ def test_api_pages_typeset_mathematics_and_show_types(site):
     theory page, and the signatures carry their annotations."""
     special_page = (site / "api" / "special" / "index.html").read_text()
     # Display mathematics of ellipk's docstring, inline mathematics of ellipj's.
-    assert ('<div class="arithmatex">\\[K(m) = \\int_0^{\\pi/2} \\frac{d\\theta}{\\sqrt{1 - m \\sin^2\\theta}}'
-            in special_page)
+    assert (
+        '<div class="arithmatex">\\[K(m) = \\int_0^{\\pi/2} \\frac{d\\theta}{\\sqrt{1 - m \\sin^2\\theta}}'
+        in special_page
+    )
     assert '<span class="arithmatex">\\(0 \\le m \\le 1\\)</span>' in special_page
     assert special_page.count('class="arithmatex"') >= 30
     theory = (site / "theory" / "index.html").read_text()
     assert '<span class="arithmatex">\\(' in theory  # the same markup as the theory page's own
 
     assert signature_text(special_page, "frbjax.special.ellipk") == (
-        "ellipk(m: ArrayLike, *, mc: ArrayLike | None = None) -> Array")
+        "ellipk(m: ArrayLike, *, mc: ArrayLike | None = None) -> Array"
+    )
     sharding_page = (site / "api" / "sharding" / "index.html").read_text()
     assert signature_text(sharding_page, "frbjax.shard_bodies") == (
-        "shard_bodies(body: FreeRigidBody, mesh: Mesh | None = None, *, pad: bool = True) -> FreeRigidBody")
+        "shard_bodies(body: FreeRigidBody, mesh: Mesh | None = None, *, pad: bool = True) -> FreeRigidBody"
+    )
     cli_page = (site / "api" / "cli" / "index.html").read_text()
     assert signature_text(cli_page, "frbjax.cli.main") == "main(argv: list[str] | None = None) -> int"
     # And the page loads MathJax with the settings that typeset arithmatex's markup.
@@ -179,8 +202,14 @@ def test_docstring_mathematics_reads_as_text():
     """help() shows the same docstrings as plain text: the dollars, no HTML, no reST directives."""
     text = special.ellipk.__doc__
     assert "$$K(m) = \\int_0^{\\pi/2}" in text and "<" not in text
-    for function in (special.ellipk, special.ellipj, special.elliprj, frbjax.shard_batch,
-                     frbjax.quaternion_to_matrix, cli.flip_period):
+    for function in (
+        special.ellipk,
+        special.ellipj,
+        special.elliprj,
+        frbjax.shard_batch,
+        frbjax.quaternion_to_matrix,
+        cli.flip_period,
+    ):
         assert ".. math::" not in function.__doc__ and ":math:" not in function.__doc__, function
 
 
@@ -196,8 +225,10 @@ def test_hook_fails_the_build_on_mathematics_left_untypeset():
         class file:
             src_uri = "api/special.md"
 
-    typeset = ('<p>For <span class="arithmatex">\\(m = 1\\)</span> and <code>$HOME</code>:</p>'
-               '<div class="arithmatex">\\[K(m)\\]</div>')
+    typeset = (
+        '<p>For <span class="arithmatex">\\(m = 1\\)</span> and <code>$HOME</code>:</p>'
+        '<div class="arithmatex">\\[K(m)\\]</div>'
+    )
     broken = "<p>For $ m = 1$ the integral diverges.</p>"
     records = []
     handler = logging.Handler()
@@ -224,8 +255,7 @@ def test_readme_is_short_and_its_links_resolve():
     """Under 6.5 KB, and every relative link (pages, the animation, CONTRIBUTING) names a file here."""
     size = README.stat().st_size
     assert size < 6500, size
-    targets = [target for target in MARKDOWN_LINK.findall(README.read_text())
-               if not re.match(r"[a-z]+://", target)]
+    targets = [target for target in MARKDOWN_LINK.findall(README.read_text()) if not re.match(r"[a-z]+://", target)]
     assert len(targets) >= 10, targets
     for target in targets:
         path = REPOSITORY / target.split("#")[0]

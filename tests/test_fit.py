@@ -21,9 +21,9 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from frbjax import AttitudeFit, FitError, FreeRigidBody, fit_attitude
-from frbjax import _quaternion as quaternion
+from frbjax import _quaternion as quaternion, AttitudeFit, fit_attitude, FitError, FreeRigidBody
 from frbjax.fit import _attitude_residual
+
 
 N_SAMPLES = 200  # the acceptance problems (benchmarks/fit_success.py)
 NOISE = 1e-3
@@ -111,15 +111,21 @@ def test_recovers_moments_and_angular_velocity(fit, seed, separatrix):
     assert bool(result.success)
     assert inertia_error < 0.01 and omega_error < 0.01, (inertia_error, omega_error)
     # The attitude at t = 0 (either sign) and the residuals at the noise level.
-    assert min(np.abs(np.asarray(result.attitude) - attitude).max(),
-               np.abs(np.asarray(result.attitude) + attitude).max()) < 0.01
+    assert (
+        min(np.abs(np.asarray(result.attitude) - attitude).max(), np.abs(np.asarray(result.attitude) + attitude).max())
+        < 0.01
+    )
     rms = np.sqrt(np.mean(np.sum(np.asarray(result.residuals) ** 2, -1)))
     assert rms < 3 * NOISE * np.sqrt(3)
     assert np.max(np.asarray(result.inertia)) == pytest.approx(1.0)
     # The fitted body holds the reported state at t = 0, and its motion gives the residuals.
     body = result.body
-    assert np.allclose(np.asarray(body.initial_angular_momentum / body.inertia),
-                       np.asarray(result.angular_velocity), rtol=1e-14, atol=0)
+    assert np.allclose(
+        np.asarray(body.initial_angular_momentum / body.inertia),
+        np.asarray(result.angular_velocity),
+        rtol=1e-14,
+        atol=0,
+    )
     model = motion(body.inertia, body.initial_angular_momentum, body.initial_attitude, times)[0]
     expected = np.asarray(_attitude_residual(model, jnp.asarray(q)))
     assert np.allclose(np.asarray(result.residuals), expected, rtol=0, atol=1e-8)
@@ -142,8 +148,13 @@ def test_time_origin_and_order_do_not_matter(fit):
     at_shift = motion(inertia, inertia * omega, attitude, np.full(CI_SAMPLES, shift))
     expected_attitude, expected_omega = (np.asarray(a[0]) for a in at_shift)
     assert np.linalg.norm(np.asarray(result.angular_velocity) - expected_omega) < 0.01 * np.linalg.norm(omega)
-    assert min(np.abs(np.asarray(result.attitude) - expected_attitude).max(),
-               np.abs(np.asarray(result.attitude) + expected_attitude).max()) < 0.01
+    assert (
+        min(
+            np.abs(np.asarray(result.attitude) - expected_attitude).max(),
+            np.abs(np.asarray(result.attitude) + expected_attitude).max(),
+        )
+        < 0.01
+    )
     assert float(result.reference_time) == pytest.approx(-shift)  # the sample nearest t' = 0
     # Residuals come back in the caller's order: those of the fitted body against the data.
     body = result.body
@@ -184,7 +195,8 @@ def test_asteroid_sparse_noisy(fit):
     """A tumbling asteroid: moments 0.64 : 0.97 : 1, uneven, noisy (3e-3 rad) observations over six
     rotation periods (about ten per period)."""
     times, q, inertia, omega, _ = synthetic_problem(
-        2024, n=CI_SAMPLES, noise=3e-3, periods=6.0, inertia=[0.64, 0.97, 1.0])
+        2024, n=CI_SAMPLES, noise=3e-3, periods=6.0, inertia=[0.64, 0.97, 1.0]
+    )
     result = fit(times, q, seed=1)
     inertia_error, omega_error = errors(result, inertia, omega)
     assert inertia_error < 0.01 and omega_error < 0.01, (inertia_error, omega_error)
@@ -232,9 +244,17 @@ def test_refuses_data_it_cannot_use(case):
 
 
 REFUSED_OPTIONS = {
-    "loss": "l1", "inertia": "diagonal", "nan_policy": "drop", "attitude_sigma": -1.0,
-    "angular_velocity_sigma": np.nan, "loss_scale": 0.0, "n_starts": 0, "max_steps": 1.5, "rtol": -1e-10,
-    "seed": -3, "angular_velocity_data": np.zeros((5, 3)),
+    "loss": "l1",
+    "inertia": "diagonal",
+    "nan_policy": "drop",
+    "attitude_sigma": -1.0,
+    "angular_velocity_sigma": np.nan,
+    "loss_scale": 0.0,
+    "n_starts": 0,
+    "max_steps": 1.5,
+    "rtol": -1e-10,
+    "seed": -3,
+    "angular_velocity_data": np.zeros((5, 3)),
 }
 
 
@@ -259,8 +279,9 @@ def test_omitted_rows_fit_as_clean_data(fit):
     with pytest.raises(ValueError, match="samples 0, 5, 17, 40, 41, 69 \\(6 of 70\\)"):
         fit_attitude(times, q, angular_velocity_data=gyro, angular_velocity_sigma=1e6)
     # gyro weighted off (sigma 1e6): the rates above are not the body's, only their rows' NaNs matter.
-    omitted = fit_attitude(times, q, angular_velocity_data=gyro, angular_velocity_sigma=1e6, nan_policy="omit",
-                           n_starts=N_STARTS)  # CI_SAMPLES kept: the module's compiled fit
+    omitted = fit_attitude(
+        times, q, angular_velocity_data=gyro, angular_velocity_sigma=1e6, nan_policy="omit", n_starts=N_STARTS
+    )  # CI_SAMPLES kept: the module's compiled fit
     clean = fit(times[kept], q[kept], angular_velocity_data=gyro[kept], angular_velocity_sigma=1e6)
     np.testing.assert_array_equal(np.asarray(omitted.parameters), np.asarray(clean.parameters))
     inertia_error, omega_error = errors(omitted, inertia, omega)
@@ -315,8 +336,12 @@ MODEL_BODIES = {
 # Largest |dJ| of the fits' model's Jacobian from the body's (entries of order 1), the same for L and q:
 # measured 0, 0, 1.26e-13 and 9.0e-5.  Next to the plane it is the expansion's derivative against the
 # elliptic formulas', which lose about 1e-16 / (e . n)^2.
-MODEL_JACOBIAN_DIFFERENCE = {"triaxial": 0.0, "principal_axis": 0.0, "symmetric_near_plane": 1.5e-13,
-                             "symmetric_1e-6_off_plane": 1.1e-4}
+MODEL_JACOBIAN_DIFFERENCE = {
+    "triaxial": 0.0,
+    "principal_axis": 0.0,
+    "symmetric_near_plane": 1.5e-13,
+    "symmetric_1e-6_off_plane": 1.1e-4,
+}
 
 
 @functools.cache

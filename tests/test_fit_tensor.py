@@ -7,7 +7,8 @@ the motion of the principal frame (FreeRigidBody with principal moments, L_p = R
 turned back to the body frame, q = q_p ⊗ conj(q(R)).
 
 Every fit here has CI_SAMPLES samples and N_STARTS starts: the module compiles the tensor solver once.
-The acceptance run (100 problems with and without gyro data) is benchmarks/fit_tensor_success.py, which imports ``tilted_problem`` from here.
+The acceptance run (100 problems with and without gyro data) is benchmarks/fit_tensor_success.py, which imports
+``tilted_problem`` from here.
 """
 
 from __future__ import annotations
@@ -19,8 +20,8 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from frbjax import FreeRigidBody, fit_attitude
-from frbjax import _quaternion as quaternion
+from frbjax import _quaternion as quaternion, fit_attitude, FreeRigidBody
+
 
 CI_SAMPLES = 64
 N_STARTS = 6
@@ -40,8 +41,14 @@ def _rotation(axis_angle):
 def _quaternion_of(matrix):
     """Unit quaternion (w, x, y, z) of a rotation matrix with a positive trace (numpy)."""
     w = np.sqrt(1 + np.trace(matrix)) / 2
-    return np.array([w, (matrix[2, 1] - matrix[1, 2]) / (4 * w), (matrix[0, 2] - matrix[2, 0]) / (4 * w),
-                     (matrix[1, 0] - matrix[0, 1]) / (4 * w)])
+    return np.array(
+        [
+            w,
+            (matrix[2, 1] - matrix[1, 2]) / (4 * w),
+            (matrix[0, 2] - matrix[2, 0]) / (4 * w),
+            (matrix[1, 0] - matrix[0, 1]) / (4 * w),
+        ]
+    )
 
 
 @jax.jit
@@ -50,8 +57,7 @@ def principal_motion(inertia, momentum, attitude, times):
     return body.quaternion(times), body.angular_momentum(times)
 
 
-def tilted_problem(seed, n=CI_SAMPLES, noise=NOISE, periods=5.0, tilt_degrees=20.0, moments=None,
-                   gyro_noise=None):
+def tilted_problem(seed, n=CI_SAMPLES, noise=NOISE, periods=5.0, tilt_degrees=20.0, moments=None, gyro_noise=None):
     """(times, observed quaternions, observed rates or None, true scaled tensor, true Omega(0), true q(0)).
 
     The axes' rotation is kept small enough (< 20 degrees) for its quaternion formula above.

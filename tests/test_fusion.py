@@ -57,7 +57,8 @@ def test_body_keeps_its_conditionals_under_vmap():
     assert _conditionals(jax.vmap(quaternion), jnp.stack([point, 1.1 * point])) == alone
     loss = lambda x: jnp.sum(quaternion(x) ** 3)  # noqa: E731
     assert _conditionals(jax.vmap(jax.grad(loss)), jnp.stack([point, 1.1 * point])) == _conditionals(
-        jax.grad(loss), point)
+        jax.grad(loss), point
+    )
 
 
 def test_apply_value_and_derivatives():
@@ -76,6 +77,7 @@ def test_apply_value_and_derivatives():
 def test_normalised_value_and_derivatives():
     """_normalised is v / |v| and its custom JVP gives that map's derivatives to second order."""
     vector = jnp.asarray(np.random.default_rng(4).normal(size=(3, 5, 4)))
-    np.testing.assert_allclose(_normalised(vector), vector / np.linalg.norm(vector, axis=-1, keepdims=True),
-                               rtol=4e-16, atol=0)
+    np.testing.assert_allclose(
+        _normalised(vector), vector / np.linalg.norm(vector, axis=-1, keepdims=True), rtol=4e-16, atol=0
+    )
     check_grads(_normalised, (vector,), order=2, modes=("fwd", "rev"))

@@ -8,6 +8,7 @@ from pathlib import Path
 
 import numpy as np
 
+
 FUZZ = Path(__file__).resolve().parent.parent / "benchmarks" / "fuzz.py"
 
 # Measured worst (n = 2000, seed 0, 4 times per body, |L| 1e-3 .. 1e3, |t| up to 1e3): |q| - 1 4.4e-16

@@ -34,7 +34,8 @@ applied to the 32-digit values; the Hessian of (L(t), q(t)) in (I, L, t) at four
 second derivative of R_J at a zero argument (which the constructor's complete Pi has) against mpmath.
 
 Cost: compilation dominates (the attitude is a large program), so there are a few programs, each
-jitted and vmapped over all the points at once and compiled once per session: the values with the forward-mode Jacobian, the reverse-mode Jacobian, the second
+jitted and vmapped over all the points at once and compiled once per session: the values with the forward-mode
+Jacobian, the reverse-mode Jacobian, the second
 derivatives in t, the Hessians.  On CPU they are compiled with XLA:CPU's fusion emitters off (as frbjax.fit does), the
 reverse and second-order ones also at XLA backend optimisation level 0: 2-4x less compile time
 (reverse mode: 140 s -> 40 s under load), the same mathematics: with XLA's default options the worst
@@ -54,8 +55,8 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from frbjax import FreeRigidBody
-from frbjax import _quaternion as quaternion
+from frbjax import _quaternion as quaternion, FreeRigidBody
+
 
 # Worst measured relative column errors (generic and smooth points): jacfwd 3.9e-13, jacrev 2.1e-13
 # (both at "separatrix +1e-03", d/dI2; the derivatives there are ill-conditioned), every other point
@@ -100,8 +101,14 @@ def outputs(x, path="one_time"):
     body = FreeRigidBody(x[:3], x[3:6], x[6:10])
     t = x[10]
     q = _at(body.quaternion, t, path)
-    return jnp.concatenate([_at(body.angular_momentum, t, path), _at(body.angular_velocity, t, path), q,
-                            quaternion.as_matrix(q).reshape(-1)])
+    return jnp.concatenate(
+        [
+            _at(body.angular_momentum, t, path),
+            _at(body.angular_velocity, t, path),
+            q,
+            quaternion.as_matrix(q).reshape(-1),
+        ]
+    )
 
 
 @functools.cache
@@ -178,7 +185,9 @@ def _check(mode, automatic):
         tolerance = TOL_NEXT_TO_SEPARATRIX if name.endswith("e-06") else TOL
         if worst > tolerance:
             bad[name] = float(worst)
-    assert not bad, f"{mode}: relative column errors above {TOL} ({TOL_NEXT_TO_SEPARATRIX} at 1e-6 from the separatrix): {bad}"
+    assert not bad, (
+        f"{mode}: relative column errors above {TOL} ({TOL_NEXT_TO_SEPARATRIX} at 1e-6 from the separatrix): {bad}"
+    )
 
 
 @pytest.mark.parametrize("path", PATHS)
@@ -207,8 +216,14 @@ def _time_second_derivative(x, path):
 
     def in_time(t):
         q = _at(body.quaternion, t, path)
-        return jnp.concatenate([_at(body.angular_momentum, t, path), _at(body.angular_velocity, t, path), q,
-                                quaternion.as_matrix(q).reshape(-1)])
+        return jnp.concatenate(
+            [
+                _at(body.angular_momentum, t, path),
+                _at(body.angular_velocity, t, path),
+                q,
+                quaternion.as_matrix(q).reshape(-1),
+            ]
+        )
 
     one = jnp.ones_like(x[10])
     return jax.jvp(lambda s: jax.jvp(in_time, (s,), (one,))[1], (x[10],), (one,))[1]

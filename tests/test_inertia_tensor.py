@@ -39,6 +39,7 @@ from __future__ import annotations
 import functools
 import os
 
+import _reference as ref
 import diffrax
 import jax
 import jax.numpy as jnp
@@ -46,8 +47,8 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
-import _reference as ref
-from frbjax import FreeRigidBody, InertiaTensor, free_flow
+from frbjax import free_flow, FreeRigidBody, InertiaTensor
+
 
 SEED = 20261125
 RTOL = ATOL = 1e-13
@@ -71,10 +72,18 @@ def _integrate(tensor, momentum, attitude, times, rtol, atol):
         norm = jnp.linalg.norm(momentum)
         scale = jnp.where(norm > 0, norm, 1.0)
         solution = diffrax.diffeqsolve(
-            diffrax.ODETerm(_tensor_field), diffrax.Dopri8(), t0=jnp.zeros_like(times[-1]), t1=times[-1],
-            dt0=None, y0=jnp.concatenate([momentum / scale, attitude]), args=(tensor, scale),
-            saveat=diffrax.SaveAt(ts=times), stepsize_controller=diffrax.PIDController(rtol=rtol, atol=atol, step_ts=times),
-            max_steps=100_000, throw=False)
+            diffrax.ODETerm(_tensor_field),
+            diffrax.Dopri8(),
+            t0=jnp.zeros_like(times[-1]),
+            t1=times[-1],
+            dt0=None,
+            y0=jnp.concatenate([momentum / scale, attitude]),
+            args=(tensor, scale),
+            saveat=diffrax.SaveAt(ts=times),
+            stepsize_controller=diffrax.PIDController(rtol=rtol, atol=atol, step_ts=times),
+            max_steps=100_000,
+            throw=False,
+        )
         return scale * solution.ys[:, :3], solution.ys[:, 3:], solution.result == diffrax.RESULTS.successful
 
     return jax.vmap(one)(tensor, momentum, attitude, times)
@@ -94,10 +103,10 @@ def integrate_both_ways(tensor, momentum, attitude, times):
     n = len(tensor)
     negative, positive = times[times < 0][::-1], times[times > 0]
     assert len(negative) == len(positive)
-    grid = np.concatenate([np.broadcast_to(negative, (n, len(negative))),
-                           np.broadcast_to(positive, (n, len(positive)))])
-    L, q = integrate(np.concatenate([tensor] * 2), np.concatenate([momentum] * 2),
-                     np.concatenate([attitude] * 2), grid)
+    grid = np.concatenate(
+        [np.broadcast_to(negative, (n, len(negative))), np.broadcast_to(positive, (n, len(positive)))]
+    )
+    L, q = integrate(np.concatenate([tensor] * 2), np.concatenate([momentum] * 2), np.concatenate([attitude] * 2), grid)
     L = np.concatenate([L[:n, ::-1], L[n:]], axis=1)
     q = np.concatenate([q[:n, ::-1], q[n:]], axis=1)
     return np.swapaxes(L, 0, 1), np.swapaxes(q, 0, 1)
@@ -112,13 +121,14 @@ def stored(prefix):
     """{name: array} of the stored solutions whose keys start with ``prefix`` ("motion", "derivative")."""
     with np.load(DATA) as data:
         assert float(data["rtol"]) == RTOL and float(data["atol"]) == ATOL and float(data["step"]) == STEP
-        return {key[len(prefix) + 1:]: data[key] for key in data.files if key.startswith(prefix + "_")}
+        return {key[len(prefix) + 1 :]: data[key] for key in data.files if key.startswith(prefix + "_")}
 
 
 def check_stored_inputs(prefix, **inputs):
     for name, value in inputs.items():
-        np.testing.assert_array_equal(stored(prefix)[name], value,
-                                      err_msg=f"{prefix} {name}; rerun tests/data/make_tensor_references.py")
+        np.testing.assert_array_equal(
+            stored(prefix)[name], value, err_msg=f"{prefix} {name}; rerun tests/data/make_tensor_references.py"
+        )
 
 
 # --------------------------------------------------------------------------------------------------
@@ -152,8 +162,7 @@ def build_bodies(seed=SEED):
     def add(name, moments, rotation, principal_momentum):
         moments = np.asarray(moments, float)
         momentum = rotation @ np.asarray(principal_momentum, float)
-        bodies[name] = (tensor_of(moments, rotation), momentum, ref.random_attitudes(rng, 1)[0], moments,
-                        rotation)
+        bodies[name] = (tensor_of(moments, rotation), momentum, ref.random_attitudes(rng, 1)[0], moments, rotation)
 
     def generic(side, degrees=None):
         while True:
@@ -180,8 +189,12 @@ def build_bodies(seed=SEED):
     # Nearly axisymmetric: two moments 1e-9 and 1e-6 apart (relative), both pairs.
     for gap in (1e-9, 1e-6):
         add(f"near_axisymmetric_oblate_{gap:.0e}", (1.0, 1.0 + gap, 2.0), tilt(rng), ref.random_directions(rng, 1)[0])
-        add(f"near_axisymmetric_prolate_{gap:.0e}", (1.0, 2.0 * (1 - gap), 2.0), tilt(rng),
-            ref.random_directions(rng, 1)[0] * 1.3)
+        add(
+            f"near_axisymmetric_prolate_{gap:.0e}",
+            (1.0, 2.0 * (1 - gap), 2.0),
+            tilt(rng),
+            ref.random_directions(rng, 1)[0] * 1.3,
+        )
     # Exactly axisymmetric moments (I1 = I2 < I3 and I1 < I2 = I3), tilted: symmetric to rounding only.
     add("axisymmetric_oblate", (1.2, 1.2, 2.1), tilt(rng), ref.random_directions(rng, 1)[0] * 0.8)
     add("axisymmetric_prolate", (0.9, 1.6, 1.6), tilt(rng), ref.random_directions(rng, 1)[0] * 1.5)
@@ -204,6 +217,7 @@ TIMES = np.array([-7.0, -4.5, -2.0, -0.6, 0.6, 2.0, 4.5, 7.0])
 # --------------------------------------------------------------------------------------------------
 # Motion: FreeRigidBody at many times and free_flow at one time per body.
 
+
 @pytest.fixture(scope="module")
 def motion():
     names, tensor, momentum, attitude = stack(build_bodies())
@@ -211,8 +225,12 @@ def motion():
     L_ref, q_ref = stored("motion")["L"], stored("motion")["q"]
     body = FreeRigidBody.from_inertia_tensor(tensor, momentum, attitude)
     times = TIMES[:, None]
-    values = dict(L=np.asarray(body.angular_momentum(times)), q=np.asarray(body.quaternion(times)),
-                  R=np.asarray(body.rotation_matrix(times)), omega=np.asarray(body.angular_velocity(times)))
+    values = dict(
+        L=np.asarray(body.angular_momentum(times)),
+        q=np.asarray(body.quaternion(times)),
+        R=np.asarray(body.rotation_matrix(times)),
+        omega=np.asarray(body.angular_velocity(times)),
+    )
     # free_flow at one time per body: the last positive time for even bodies, the first for odd.
     pick = np.where(np.arange(len(names)) % 2 == 0, len(TIMES) - 1, 0)
     L_flow, q_flow = free_flow(InertiaTensor(tensor), momentum, attitude, TIMES[pick])
@@ -226,12 +244,24 @@ def motion():
         omega=np.abs(values["omega"] - omega_ref).max(-1) / (norm / smallest),
     )
     columns = np.arange(len(names))
-    flow_errors = dict(L=np.abs(np.asarray(L_flow) - L_ref[pick, columns]).max(-1) / norm,
-                       q=np.abs(np.asarray(q_flow) - q_ref[pick, columns]).max(-1))
-    return dict(names=names, tensor=tensor, momentum=momentum, attitude=attitude, body=body, values=values,
-                L_ref=L_ref, q_ref=q_ref, errors=errors, flow_errors=flow_errors,
-                flow=(np.asarray(L_flow), np.asarray(q_flow)), pick=pick)
-
+    flow_errors = dict(
+        L=np.abs(np.asarray(L_flow) - L_ref[pick, columns]).max(-1) / norm,
+        q=np.abs(np.asarray(q_flow) - q_ref[pick, columns]).max(-1),
+    )
+    return dict(
+        names=names,
+        tensor=tensor,
+        momentum=momentum,
+        attitude=attitude,
+        body=body,
+        values=values,
+        L_ref=L_ref,
+        q_ref=q_ref,
+        errors=errors,
+        flow_errors=flow_errors,
+        flow=(np.asarray(L_flow), np.asarray(q_flow)),
+        pick=pick,
+    )
 
 
 def test_bodies_are_as_intended():
@@ -261,8 +291,9 @@ def test_bodies_are_as_intended():
 
 # The 6 independent entries; an off-diagonal one is perturbed in T_ij and T_ji together.
 ENTRIES = ((0, 0), (1, 1), (2, 2), (0, 1), (0, 2), (1, 2))
-DIRECTIONS = np.stack([np.eye(3)[:, [i]] @ np.eye(3)[[j]] + (np.eye(3)[:, [j]] @ np.eye(3)[[i]] if i != j else 0)
-                       for i, j in ENTRIES])
+DIRECTIONS = np.stack(
+    [np.eye(3)[:, [i]] @ np.eye(3)[[j]] + (np.eye(3)[:, [j]] @ np.eye(3)[[i]] if i != j else 0) for i, j in ENTRIES]
+)
 # 4-point stencil (f(-2h) - 8 f(-h) + 8 f(h) - f(2h)) / (12 h).
 STENCIL = np.array([-2.0, -1.0, 1.0, 2.0])
 WEIGHTS = np.array([1.0, -8.0, 8.0, -1.0]) / 12.0
@@ -272,9 +303,17 @@ STEP = 1e-3
 # moment's axis, along an axisymmetric body's symmetry axis, in the plane of its equal moments), whose
 # change under a tilt of the tensor is a nutation (the derivative rule of frbjax._uniform); at L = 0
 # the exact zero is asserted.
-DERIVATIVE_BODIES = ("tilted_minor_axis_0", "tilted_major_axis_0", "slightly_tilted_minor_axis",
-                     "near_axisymmetric_oblate_1e-09", "near_axisymmetric_prolate_1e-09",
-                     "near_axisymmetric_oblate_1e-06", "axisymmetric_oblate", "axisymmetric_prolate", "sphere")
+DERIVATIVE_BODIES = (
+    "tilted_minor_axis_0",
+    "tilted_major_axis_0",
+    "slightly_tilted_minor_axis",
+    "near_axisymmetric_oblate_1e-09",
+    "near_axisymmetric_prolate_1e-09",
+    "near_axisymmetric_oblate_1e-06",
+    "axisymmetric_oblate",
+    "axisymmetric_prolate",
+    "sphere",
+)
 UNIFORM_BODIES = ("principal_axis", "symmetry_axis", "equal_moments_plane")
 # L in a principal plane of a tilted tensor: its component across the plane is rounding in value, a
 # zero whose tangent the tilt of the axes sets.
@@ -363,11 +402,11 @@ _PROGRAMS = {
 
 def library_derivatives(path, mode, tensor, momentum, attitude, times):
     """((L, q) values, (dL, dq) along DIRECTIONS) from frbjax; free_flow at each body's last time."""
-    arguments = [jnp.asarray(a) for a in (tensor, momentum, attitude, times if path == "FreeRigidBody"
-                                           else times[:, -1])]
+    arguments = [
+        jnp.asarray(a) for a in (tensor, momentum, attitude, times if path == "FreeRigidBody" else times[:, -1])
+    ]
     (dL, dq), (L, q) = jax.jit(_PROGRAMS[(path, mode)])(*arguments)
-    return (np.asarray(L), np.asarray(q)), (symmetric_derivative(np.asarray(dL)),
-                                            symmetric_derivative(np.asarray(dq)))
+    return (np.asarray(L), np.asarray(q)), (symmetric_derivative(np.asarray(dL)), symmetric_derivative(np.asarray(dq)))
 
 
 @functools.cache
@@ -381,8 +420,12 @@ def derivative_reference():
     names, tensor, momentum, attitude, times = derivative_bodies()
     check_stored_inputs("derivative", tensor=tensor, momentum=momentum, attitude=attitude, times=times)
     data = stored("derivative")
-    return dict(names=names, inputs=(tensor, momentum, attitude, times), values=(data["L"], data["q"]),
-                derivatives=(data["dL"], data["dq"]))
+    return dict(
+        names=names,
+        inputs=(tensor, momentum, attitude, times),
+        values=(data["L"], data["q"]),
+        derivatives=(data["dL"], data["dq"]),
+    )
 
 
 def derivative_errors(reference, path, mode):
@@ -399,8 +442,10 @@ def derivative_errors(reference, path, mode):
     axes = tuple(range(1, L.ndim))
     daxes = tuple(range(1, dL.ndim))
     return dict(
-        L=np.abs(L - L_ref).max(axes) / norm, q=np.abs(q - q_ref).max(axes),
-        dL=np.abs(dL - dL_ref).max(daxes) / norm, dq=np.abs(dq - dq_ref).max(daxes),
+        L=np.abs(L - L_ref).max(axes) / norm,
+        q=np.abs(q - q_ref).max(axes),
+        dL=np.abs(dL - dL_ref).max(daxes) / norm,
+        dq=np.abs(dq - dq_ref).max(daxes),
         finite=np.isfinite(dL).all(daxes) & np.isfinite(dq).all(daxes),
         largest=np.maximum(np.abs(dL).max(daxes), np.abs(dq).max(daxes)),
         raw=(dL, dq),
@@ -468,8 +513,9 @@ def test_derivatives_against_stencil(derivatives, key):
     for k, name in enumerate(STENCIL_BODIES):
         bound_L, bound_q = DERIVATIVE_TOLERANCE[name]
         if not (errors["dL"][k] <= bound_L and errors["dq"][k] <= bound_q):
-            failures.append(f"{name}: dL {errors['dL'][k]:.2e} (<= {bound_L:.1e}), "
-                            f"dq {errors['dq'][k]:.2e} (<= {bound_q:.1e})")
+            failures.append(
+                f"{name}: dL {errors['dL'][k]:.2e} (<= {bound_L:.1e}), dq {errors['dq'][k]:.2e} (<= {bound_q:.1e})"
+            )
     assert not failures, "\n".join(failures)
     # vmap over tensors: values as in the motion test (measured worst L 8.8e-15, q 5.4e-14).
     assert errors["L"].max() <= 1.5e-14 and errors["q"].max() <= 8e-14
@@ -546,10 +592,17 @@ def test_motion_against_diffrax(motion):
     errors, flow = motion["errors"], motion["flow_errors"]
     failures = []
     for k, name in enumerate(motion["names"]):
-        measured = (errors["L"][:, k].max(), errors["q"][:, k].max(), errors["R"][:, k].max(),
-                    errors["omega"][:, k].max(), flow["L"][k], flow["q"][k])
-        for label, value, bound in zip(("L", "q", "R", "Omega", "free_flow L", "free_flow q"), measured,
-                                       MOTION_TOLERANCE[family_of(name)]):
+        measured = (
+            errors["L"][:, k].max(),
+            errors["q"][:, k].max(),
+            errors["R"][:, k].max(),
+            errors["omega"][:, k].max(),
+            flow["L"][k],
+            flow["q"][k],
+        )
+        for label, value, bound in zip(
+            ("L", "q", "R", "Omega", "free_flow L", "free_flow q"), measured, MOTION_TOLERANCE[family_of(name)]
+        ):
             if not value <= bound:
                 failures.append(f"{name}: {label} error {value:.2e} > {bound:.1e}")
     assert not failures, "\n".join(failures)
@@ -567,8 +620,9 @@ def test_inertia_tensor_fields(motion):
     rebuilt = np.einsum("nij,nj,nkj->nik", axes, moments, axes)
     assert np.abs(rebuilt - tensor).max() <= 4.5e-15  # measured 3.1e-15
     omega = np.asarray(inertia.angular_velocity(momentum))
-    np.testing.assert_allclose(omega, np.linalg.solve(tensor, momentum[..., None])[..., 0], rtol=0,
-                               atol=1e-15)  # measured 5.6e-16
+    np.testing.assert_allclose(
+        omega, np.linalg.solve(tensor, momentum[..., None])[..., 0], rtol=0, atol=1e-15
+    )  # measured 5.6e-16
     body = motion["body"]
     assert body.inertia_tensor is not None and body.inertia.shape == (len(tensor), 3)
 
@@ -591,9 +645,11 @@ BAD = {
 def test_bad_tensor_raises_eagerly(kind):
     momentum, attitude = np.array([0.3, -0.2, 0.9]), np.array([1.0, 0, 0, 0])
     # Each message names the argument: InertiaTensor(matrix), from_inertia_tensor(inertia_tensor, ...).
-    for argument, build in (("matrix", lambda T: InertiaTensor(T)),
-                            ("inertia_tensor", lambda T: FreeRigidBody.from_inertia_tensor(T, momentum)),
-                            ("matrix", lambda T: free_flow(InertiaTensor(T), momentum, attitude, 1.0))):
+    for argument, build in (
+        ("matrix", lambda T: InertiaTensor(T)),
+        ("inertia_tensor", lambda T: FreeRigidBody.from_inertia_tensor(T, momentum)),
+        ("matrix", lambda T: free_flow(InertiaTensor(T), momentum, attitude, 1.0)),
+    ):
         with pytest.raises(ValueError, match=argument):
             build(BAD[kind])
 
@@ -618,8 +674,12 @@ def test_bad_tensor_under_jit_gives_nan():
     def outputs(tensor, momentum, attitude):
         body = FreeRigidBody.from_inertia_tensor(tensor, momentum, attitude)
         flow = free_flow(InertiaTensor(tensor), momentum, attitude, jnp.full(n, 2.5))
-        return (body.angular_momentum(2.5), body.quaternion(2.5), body.angular_velocity(2.5),
-                body.rotation_matrix(2.5)) + flow
+        return (
+            body.angular_momentum(2.5),
+            body.quaternion(2.5),
+            body.angular_velocity(2.5),
+            body.rotation_matrix(2.5),
+        ) + flow
 
     values = [np.asarray(v) for v in outputs(tensor, momentum, attitude)]
     for value in values:
@@ -641,8 +701,12 @@ def test_three_by_three_moments_stay_a_batch():
     L = np.asarray(body.angular_momentum(np.array([2.0, 3.0])[:, None]))
     assert L.shape == (2, 3, 3)
     # The reference with diagonal tensors: the three bodies' principal moments (measured 2.5e-14).
-    L_ref, _ = integrate(np.stack([np.diag(row) for row in moments]), np.broadcast_to(momentum, (3, 3)),
-                         np.broadcast_to([1.0, 0, 0, 0], (3, 4)), np.tile([2.0, 3.0], (3, 1)))
+    L_ref, _ = integrate(
+        np.stack([np.diag(row) for row in moments]),
+        np.broadcast_to(momentum, (3, 3)),
+        np.broadcast_to([1.0, 0, 0, 0], (3, 4)),
+        np.tile([2.0, 3.0], (3, 1)),
+    )
     np.testing.assert_allclose(L, np.swapaxes(L_ref, 0, 1), rtol=0, atol=4e-14)
     with pytest.raises(ValueError, match="inertia"):
         FreeRigidBody(GOOD, momentum)
@@ -663,8 +727,10 @@ def test_live_diffrax_cross_check():
     its equal moments), reproduces the stored values: measured identical to the last bit; the bound
     allows a few ulp of another machine's rounding."""
     reference = derivative_reference()
-    rows = [reference["names"].index(name) for name in ("tilted_minor_axis_0", "middle_axis_long",
-                                                        "near_plane_oblate_1e-06")]
+    rows = [
+        reference["names"].index(name)
+        for name in ("tilted_minor_axis_0", "middle_axis_long", "near_plane_oblate_1e-06")
+    ]
     tensor, momentum, attitude, times = (a[rows] for a in reference["inputs"])
     L, q = integrate(tensor, momentum, attitude, times)
     L_stored, q_stored = (a[rows] for a in reference["values"])
@@ -680,8 +746,9 @@ def test_float32_agrees_with_float64(motion):
     the float64 evaluation of the rounded inputs, |L| t <= 14: measured worst L 3.5e-6 (relative to
     |L|), q 1.4e-6, both at the 1e-6-gap oblate body (8 float32 ulp: equal to float32's rounding);
     elsewhere L <= 2.5e-6, q <= 1.2e-6."""
-    tensor, momentum, attitude = (a.astype(np.float32) for a in (motion["tensor"], motion["momentum"],
-                                                                  motion["attitude"]))
+    tensor, momentum, attitude = (
+        a.astype(np.float32) for a in (motion["tensor"], motion["momentum"], motion["attitude"])
+    )
     times = TIMES[:, None].astype(np.float32)
     body32 = FreeRigidBody.from_inertia_tensor(tensor, momentum, attitude)
     body64 = FreeRigidBody.from_inertia_tensor(*(a.astype(np.float64) for a in (tensor, momentum, attitude)))
@@ -702,13 +769,17 @@ if __name__ == "__main__":
     result = motion.__wrapped__()
     for k, name in enumerate(result["names"]):
         e, f = result["errors"], result["flow_errors"]
-        print(f"{name:34s} L {e['L'][:, k].max():.1e} q {e['q'][:, k].max():.1e} R {e['R'][:, k].max():.1e} "
-              f"Omega {e['omega'][:, k].max():.1e} | free_flow L {f['L'][k]:.1e} q {f['q'][k]:.1e}")
+        print(
+            f"{name:34s} L {e['L'][:, k].max():.1e} q {e['q'][:, k].max():.1e} R {e['R'][:, k].max():.1e} "
+            f"Omega {e['omega'][:, k].max():.1e} | free_flow L {f['L'][k]:.1e} q {f['q'][k]:.1e}"
+        )
     reference = derivative_reference()
     names = reference["names"]
     for key in _PROGRAMS:
         errors = derivative_errors(reference, *key)
         print(*key)
         for k, name in enumerate(names):
-            print(f"  {name:32s} L {errors['L'][k]:.1e} q {errors['q'][k]:.1e} dL {errors['dL'][k]:.1e} "
-                  f"dq {errors['dq'][k]:.1e} largest {errors['largest'][k]:.2g}")
+            print(
+                f"  {name:32s} L {errors['L'][k]:.1e} q {errors['q'][k]:.1e} dL {errors['dL'][k]:.1e} "
+                f"dq {errors['dq'][k]:.1e} largest {errors['largest'][k]:.2g}"
+            )

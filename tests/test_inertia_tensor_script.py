@@ -12,14 +12,23 @@ import json
 import subprocess
 import sys
 
-from _benchmark_runs import ROOT, finite_positive
+from _benchmark_runs import finite_positive, ROOT
 
 
 def test_inertia_tensor_quick(tmp_path):
     proc = subprocess.run(
-        [sys.executable, str(ROOT / "benchmarks" / "inertia_tensor.py"), "--quick", "--no-orekit",
-         "--output-dir", str(tmp_path)],
-        cwd=ROOT, capture_output=True, text=True, timeout=1800,
+        [
+            sys.executable,
+            str(ROOT / "benchmarks" / "inertia_tensor.py"),
+            "--quick",
+            "--no-orekit",
+            "--output-dir",
+            str(tmp_path),
+        ],
+        cwd=ROOT,
+        capture_output=True,
+        text=True,
+        timeout=1800,
     )
     assert proc.returncode == 0, proc.stdout + proc.stderr
     result = json.loads((tmp_path / "inertia_tensor.json").read_text())

@@ -25,15 +25,19 @@ from scipy.spatial import ConvexHull
 from scipy.spatial.transform import Rotation
 
 from frbjax import FreeRigidBody
-from frbjax.lightcurve import ConvexShape, brightness, icosphere, mesh_inertia, tumbler_periods
+from frbjax.lightcurve import brightness, ConvexShape, icosphere, mesh_inertia, tumbler_periods
 from frbjax.lightcurve._periods import momentum_from_periods
+
 
 LAWS = ("lambert", "lommel_seeliger", "lommel_seeliger_lambert")
 
 
 def scattering(mu, mu0, law, c=0.1):
-    return {"lambert": mu * mu0, "lommel_seeliger": mu * mu0 / (mu + mu0),
-            "lommel_seeliger_lambert": mu * mu0 / (mu + mu0) + c * mu * mu0}[law]
+    return {
+        "lambert": mu * mu0,
+        "lommel_seeliger": mu * mu0 / (mu + mu0),
+        "lommel_seeliger_lambert": mu * mu0 / (mu + mu0) + c * mu * mu0,
+    }[law]
 
 
 def box_mesh(a, b, c):
@@ -54,8 +58,7 @@ def ellipsoid_flux_reference(axes, rotation, sun, observer, law, nodes=80):
     phi, w_phi = (high - low) / 2 * g + (high + low) / 2, w * (high - low) / 2
     theta, w_theta = np.pi / 2 * (g + 1), w * np.pi / 2
     t, p = np.meshgrid(theta, phi, indexing="ij")
-    normal = ((np.sin(t) * np.cos(p))[..., None] * x + (np.sin(t) * np.sin(p))[..., None] * y
-              + np.cos(t)[..., None] * z)
+    normal = (np.sin(t) * np.cos(p))[..., None] * x + (np.sin(t) * np.sin(p))[..., None] * y + np.cos(t)[..., None] * z
     mu, mu0 = normal @ observer_body, normal @ sun_body
     support_squared = np.sum(np.asarray(axes) ** 2 * normal**2, -1)
     weights = np.outer(w_theta, w_phi) * np.sin(t)
@@ -92,8 +95,9 @@ def test_gradient_finite_where_no_facet_is_lit_and_seen():
 
     def flux(t, inertia, momentum, vertices):
         shape = ConvexShape.from_mesh(vertices, faces)
-        return brightness(FreeRigidBody(inertia, momentum), shape, t, jnp.array([1.0, 0.0, 0.0]),
-                          jnp.array([0.0, 1.0, 0.0]))[0]
+        return brightness(
+            FreeRigidBody(inertia, momentum), shape, t, jnp.array([1.0, 0.0, 0.0]), jnp.array([0.0, 1.0, 0.0])
+        )[0]
 
     # At t = 0 every facet has mu = 0 or mu0 = 0: the kink of max(mu, 0).
     gradients = jax.grad(flux, argnums=(0, 1, 2, 3))(jnp.zeros(1), *body_args, jnp.asarray(vertices))
@@ -115,8 +119,9 @@ ATTITUDE = unit([0.8, 0.3, -0.4, 0.33])  # w x y z, body to space
 def test_ellipsoid_reference_is_converged():
     rotation = Rotation.from_quat(np.roll(ATTITUDE, -1))
     sun, observer = GEOMETRIES[1]
-    values = [ellipsoid_flux_reference((1.3, 1.0, 0.7), rotation, sun, observer, "lommel_seeliger", n)
-              for n in (40, 80, 160)]
+    values = [
+        ellipsoid_flux_reference((1.3, 1.0, 0.7), rotation, sun, observer, "lommel_seeliger", n) for n in (40, 80, 160)
+    ]
     assert abs(values[0] - values[2]) < 1e-14 * values[2] and abs(values[1] - values[2]) < 1e-14 * values[2]
 
 
@@ -166,8 +171,16 @@ def test_gradients_against_finite_differences():
     times = np.linspace(0.0, 12.0, 7)
     sun = unit(rng.normal(size=(7, 3)))
     observer = unit(sun + 0.5 * rng.normal(size=(7, 3)))
-    args = [np.array([0.62, 0.95, 1.0]), np.array([0.2, 0.1, 0.9]), ATTITUDE, np.asarray(shape.areas),
-            np.asarray(shape.normals), sun, observer, times]
+    args = [
+        np.array([0.62, 0.95, 1.0]),
+        np.array([0.2, 0.1, 0.9]),
+        ATTITUDE,
+        np.asarray(shape.areas),
+        np.asarray(shape.normals),
+        sun,
+        observer,
+        times,
+    ]
     function = jax.jit(_flux_sum, static_argnames="law")
     gradients = jax.jit(jax.jacfwd(_flux_sum, argnums=tuple(range(8))), static_argnames="law")(*args, law=law)
     reverse = jax.jit(jax.grad(_flux_sum, argnums=(3, 4, 5, 6)), static_argnames="law")(*args, law=law)
@@ -182,10 +195,13 @@ def test_gradients_against_finite_differences():
             plus, minus = flat.copy(), flat.copy()
             plus[k] += step
             minus[k] -= step
-            shifted = lambda v: [v.reshape(args[index].shape) if i == index else a  # noqa: E731
-                                 for i, a in enumerate(args)]
-            numeric = (float(function(*shifted(plus), law=law))
-                       - float(function(*shifted(minus), law=law))) / (2 * step)
+            shifted = lambda v: [
+                v.reshape(args[index].shape) if i == index else a  # noqa: E731
+                for i, a in enumerate(args)
+            ]
+            numeric = (float(function(*shifted(plus), law=law)) - float(function(*shifted(minus), law=law))) / (
+                2 * step
+            )
             analytic = float(np.asarray(gradients[index]).reshape(-1)[k])
             worst = max(worst, abs(analytic - numeric) / max(1.0, abs(numeric)))
     # Measured 4.9e-10 (finite-difference truncation and rounding); a facet crossing the terminator
@@ -205,13 +221,19 @@ def test_float32_and_batches():
     batched = np.asarray(brightness(bodies, shapes, times, sun, observer))
     assert batched.shape == (2, 11)
     for k in range(2):
-        one = brightness(FreeRigidBody(inertia[k], momentum[k], np.asarray(bodies.initial_attitude[k])),
-                         ConvexShape(shapes.normals[k], shapes.areas[k]), times, sun, observer)
+        one = brightness(
+            FreeRigidBody(inertia[k], momentum[k], np.asarray(bodies.initial_attitude[k])),
+            ConvexShape(shapes.normals[k], shapes.areas[k]),
+            times,
+            sun,
+            observer,
+        )
         np.testing.assert_allclose(batched[k], np.asarray(one), rtol=1e-13)
     single = jax.tree.map(lambda x: np.asarray(x, np.float32), (inertia[0], momentum[0], ATTITUDE))
     shape32 = ConvexShape(np.asarray(shapes.normals[0], np.float32), np.asarray(shapes.areas[0], np.float32))
-    flux32 = brightness(FreeRigidBody(*single), shape32, times.astype(np.float32), sun.astype(np.float32),
-                        observer.astype(np.float32))
+    flux32 = brightness(
+        FreeRigidBody(*single), shape32, times.astype(np.float32), sun.astype(np.float32), observer.astype(np.float32)
+    )
     assert flux32.dtype == jnp.float32
     # Measured 7.1e-7: float32 rounding of the motion over 20 time units and of the sums.
     np.testing.assert_allclose(np.asarray(flux32), batched[0], rtol=2e-6)
@@ -249,7 +271,11 @@ def test_inertia_of_box_and_ellipsoid():
     vertices, faces = icosphere(4)
     volume, _, inertia = (np.asarray(x) for x in mesh_inertia(vertices * axes, faces))
     exact_volume = 4 / 3 * np.pi * np.prod(axes)
-    exact = exact_volume / 5 * np.array([axes[1]**2 + axes[2]**2, axes[0]**2 + axes[2]**2, axes[0]**2 + axes[1]**2])
+    exact = (
+        exact_volume
+        / 5
+        * np.array([axes[1] ** 2 + axes[2] ** 2, axes[0] ** 2 + axes[2] ** 2, axes[0] ** 2 + axes[1] ** 2])
+    )
     assert abs(volume / exact_volume - 1) < 2.4e-3
     assert np.max(np.abs(np.diag(inertia) / exact - 1)) < 4e-3
     assert np.max(np.abs(inertia - np.diag(np.diag(inertia)))) < 1e-12
@@ -306,9 +332,11 @@ def test_minkowski_reconstruction_of_an_image_that_is_not_closed():
 
 
 def test_periods_against_the_motion():
-    for inertia, momentum in [((0.61, 0.965, 1.0), (0.19, 0.05, 0.98)),   # SAM
-                              ((0.4, 0.8, 1.0), (0.9, 0.3, 0.3)),       # LAM
-                              ((1.0, 0.5, 0.8), (0.2, 0.95, -0.1))]:    # LAM, axes in any order
+    for inertia, momentum in [
+        ((0.61, 0.965, 1.0), (0.19, 0.05, 0.98)),  # SAM
+        ((0.4, 0.8, 1.0), (0.9, 0.3, 0.3)),  # LAM
+        ((1.0, 0.5, 0.8), (0.2, 0.95, -0.1)),
+    ]:  # LAM, axes in any order
         inertia, momentum = np.asarray(inertia), 2.3 * unit(momentum)
         p_psi, p_phi, long_axis = (np.asarray(x) for x in tumbler_periods(inertia, momentum))
         body = FreeRigidBody(inertia, momentum, ATTITUDE)
@@ -346,8 +374,9 @@ def test_apophis_periods_from_its_published_spin_state():
 def test_momentum_from_periods_round_trip():
     inertia = jnp.array([[0.61, 0.965, 1.0], [0.4, 0.8, 1.0]])
     targets = jnp.array([[1.1, 11.0], [3.0, 10.0]])
-    momentum, exists = momentum_from_periods(inertia, targets[:, 0], targets[:, 1], jnp.array([False, True]),
-                                             jnp.array([0.3, 1.0]))
+    momentum, exists = momentum_from_periods(
+        inertia, targets[:, 0], targets[:, 1], jnp.array([False, True]), jnp.array([0.3, 1.0])
+    )
     assert bool(jnp.all(exists))
     p_psi, p_phi, long_axis = tumbler_periods(inertia, momentum)
     np.testing.assert_allclose(np.asarray(p_psi), targets[:, 0], rtol=1e-10)
@@ -367,26 +396,49 @@ def test_convex_fit_jacobian_against_finite_differences():
     sun = unit(np.tile([1.0, 0.1, 0.0], (12, 1)) + 0.1 * rng.normal(size=(12, 3)))
     observer = unit(sun + np.array([0.0, 0.4, 0.1]))
     curves = np.repeat(np.eye(2), 6, axis=0)
-    data = {key: jnp.asarray(value, float) for key, value in dict(
-        times=times, sun=sun, observer=observer, log_brightness=rng.normal(scale=0.1, size=12), curves=curves,
-        sigma=0.01, normals=normals, laplacian=_fit._laplacian(faces), regularisation=(10.0, 1.0),
-        free=np.ones(8 + len(normals))).items()}
+    data = {
+        key: jnp.asarray(value, float)
+        for key, value in dict(
+            times=times,
+            sun=sun,
+            observer=observer,
+            log_brightness=rng.normal(scale=0.1, size=12),
+            curves=curves,
+            sigma=0.01,
+            normals=normals,
+            laplacian=_fit._laplacian(faces),
+            regularisation=(10.0, 1.0),
+            free=np.ones(8 + len(normals)),
+        ).items()
+    }
     direction = unit([0.2, 0.1, 0.95])
     reference = tuple(jnp.asarray(x) for x in (ATTITUDE, direction, _fit._tangent_basis(direction)))
-    parameters = np.concatenate([[np.log(0.6), np.log(0.9), 1.5, 0.1, -0.2, 0.05, 0.03, -0.02],
-                                 0.2 * rng.normal(size=len(normals))])
+    parameters = np.concatenate(
+        [[np.log(0.6), np.log(0.9), 1.5, 0.1, -0.2, 0.05, 0.03, -0.02], 0.2 * rng.normal(size=len(normals))]
+    )
     weights = jnp.asarray(np.r_[np.ones(10), 0.0, 1.0])
     # The continuation's period prior on too: log P_psi, log P_phi about centres off the motion's.
     prior = (jnp.log(jnp.array([2.0, 9.0])), jnp.array([40.0, 25.0]))
     window = (weights, prior, jnp.asarray(1.0))
-    function = jax.jit(lambda p: _fit._residuals_and_jacobian(p, reference, data, window,
-                                                              ("convex", "lommel_seeliger_lambert", 0.1, 1, False)))
+    function = jax.jit(
+        lambda p: _fit._residuals_and_jacobian(
+            p, reference, data, window, ("convex", "lommel_seeliger_lambert", 0.1, 1, False)
+        )
+    )
     _, jacobian = function(jnp.asarray(parameters))
     step = 1e-6
     columns = [0, 1, 2, 4, 7, 8, 15, 27]
-    numeric = np.stack([(np.asarray(function(jnp.asarray(parameters + step * np.eye(parameters.size)[k]))[0])
-                         - np.asarray(function(jnp.asarray(parameters - step * np.eye(parameters.size)[k]))[0]))
-                        / (2 * step) for k in columns], 1)
+    numeric = np.stack(
+        [
+            (
+                np.asarray(function(jnp.asarray(parameters + step * np.eye(parameters.size)[k]))[0])
+                - np.asarray(function(jnp.asarray(parameters - step * np.eye(parameters.size)[k]))[0])
+            )
+            / (2 * step)
+            for k in columns
+        ],
+        1,
+    )
     error = np.max(np.abs(np.asarray(jacobian)[:, columns] - numeric)) / np.max(np.abs(numeric))
     # Measured 2.7e-10 (relative to the largest entry; 2.9e-10 without the prior rows, which are
     # -23.5 and -11.2 here): finite-difference truncation and rounding.

@@ -14,11 +14,13 @@ import numpy as np
 import pytest
 
 from frbjax import FitError, FreeRigidBody
-from frbjax.lightcurve import ConvexShape, LightcurveFit, brightness, fit_lightcurve
+from frbjax.lightcurve import brightness, ConvexShape, fit_lightcurve, LightcurveFit
+
 
 NIGHTS, PER_NIGHT = 8, 9
-OPTIONS = dict(periods=(0.297, 0.303), principal_axis=True, shape="ellipsoid", period_grid=(9,),
-               starts_per_period=8, n_refine=4)
+OPTIONS = dict(
+    periods=(0.297, 0.303), principal_axis=True, shape="ellipsoid", period_grid=(9,), starts_per_period=8, n_refine=4
+)
 
 
 def observations():
@@ -30,8 +32,9 @@ def observations():
     sun = np.stack([np.cos(longitude), np.sin(longitude), 0 * times], -1)
     observer = np.stack([np.cos(longitude + 0.3), np.sin(longitude + 0.3), 0.1 + 0 * times], -1)
     observer /= np.linalg.norm(observer, axis=-1, keepdims=True)
-    rotator = FreeRigidBody(np.array([0.6, 0.8, 1.0]), np.array([0.0, 0.0, 2 * np.pi / 0.3]),
-                            np.array([0.9, 0.2, -0.3, 0.2]))
+    rotator = FreeRigidBody(
+        np.array([0.6, 0.8, 1.0]), np.array([0.0, 0.0, 2 * np.pi / 0.3]), np.array([0.9, 0.2, -0.3, 0.2])
+    )
     shape = ConvexShape.ellipsoid(1.0, 0.7, 0.5, subdivisions=2)
     flux = np.asarray(brightness(rotator, shape, times - np.median(times), sun, observer))
     flux = flux * np.exp(0.01 * rng.normal(size=flux.shape)) * np.exp(rng.normal(size=NIGHTS))[night]

@@ -15,6 +15,7 @@ import optimistix as optx
 
 from frbjax._multistart import solve_each, starts_in_sequence
 
+
 TIMES = jnp.linspace(0.0, 3.0, 40)
 DATA = 1.7 * jnp.exp(-0.8 * TIMES) * jnp.cos(2.3 * TIMES)
 
@@ -26,15 +27,18 @@ def _residuals(parameters, _):
 
 def _solve(start, offset, absent):
     assert absent is None
-    solution = optx.least_squares(_residuals, optx.LevenbergMarquardt(rtol=1e-12, atol=1e-12), start + offset,
-                                  max_steps=200, throw=False)
+    solution = optx.least_squares(
+        _residuals, optx.LevenbergMarquardt(rtol=1e-12, atol=1e-12), start + offset, max_steps=200, throw=False
+    )
     return solution.value, optx.RESULTS.successful == solution.result
 
 
 @jax.jit
 def _both(starts, offsets):
-    return (solve_each(_solve, (starts, offsets, None), in_sequence=True),
-            solve_each(_solve, (starts, offsets, None), in_sequence=False))
+    return (
+        solve_each(_solve, (starts, offsets, None), in_sequence=True),
+        solve_each(_solve, (starts, offsets, None), in_sequence=False),
+    )
 
 
 def test_sequence_and_batch_agree():

@@ -11,11 +11,11 @@ from __future__ import annotations
 
 import pathlib
 
-import pytest
-
 import nbclient  # noqa: E402
 import nbformat  # noqa: E402
+import pytest
 from nbclient.util import run_sync  # noqa: E402
+
 
 REPOSITORY = pathlib.Path(__file__).resolve().parents[1]
 NOTEBOOKS = sorted((REPOSITORY / "notebooks").glob("*.ipynb"))
@@ -38,8 +38,7 @@ def with_small_parameters(notebook, folder):
             break
     else:
         raise AssertionError("no code cell tagged 'parameters'")
-    notebook.cells.insert(0, nbformat.v4.new_code_cell(
-        f"%reset -f\nimport os\nos.chdir({str(folder)!r})\ndel os"))
+    notebook.cells.insert(0, nbformat.v4.new_code_cell(f"%reset -f\nimport os\nos.chdir({str(folder)!r})\ndel os"))
     return notebook
 
 
@@ -59,22 +58,35 @@ SLOW_NOTEBOOKS = {
 }
 
 
-@pytest.mark.parametrize("path", [
-    pytest.param(path, id=path.stem, marks=pytest.mark.slow(reason=SLOW_NOTEBOOKS[path.stem]))
-    if path.stem in SLOW_NOTEBOOKS else pytest.param(path, id=path.stem) for path in NOTEBOOKS])
+@pytest.mark.parametrize(
+    "path",
+    [
+        pytest.param(path, id=path.stem, marks=pytest.mark.slow(reason=SLOW_NOTEBOOKS[path.stem]))
+        if path.stem in SLOW_NOTEBOOKS
+        else pytest.param(path, id=path.stem)
+        for path in NOTEBOOKS
+    ],
+)
 def test_notebook_runs(path, tmp_path, kernel):
     notebook = nbformat.read(path, as_version=4)
     assert all(not cell.get("outputs") for cell in notebook.cells if cell.cell_type == "code"), (
-        f"{path.name} is committed with outputs; clear them")
-    client = nbclient.NotebookClient(with_small_parameters(notebook, tmp_path), km=kernel, timeout=TIMEOUT,
-                                     kernel_name="python3")
+        f"{path.name} is committed with outputs; clear them"
+    )
+    client = nbclient.NotebookClient(
+        with_small_parameters(notebook, tmp_path), km=kernel, timeout=TIMEOUT, kernel_name="python3"
+    )
     try:
         client.execute()  # raises CellExecutionError, naming the cell, on any error
     finally:
         if client.kc is not None:
             client.kc.stop_channels()
-    errors = [output for cell in notebook.cells if cell.cell_type == "code"
-              for output in cell.get("outputs", []) if output.get("output_type") == "error"]
+    errors = [
+        output
+        for cell in notebook.cells
+        if cell.cell_type == "code"
+        for output in cell.get("outputs", [])
+        if output.get("output_type") == "error"
+    ]
     assert not errors
 
 

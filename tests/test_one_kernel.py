@@ -14,6 +14,7 @@ import pytest
 
 from frbjax import _kernel
 
+
 INERTIA = np.array([1.0, 2.0, 3.0])
 MOMENTUM = np.array([0.3, 1.0, 0.2])
 ATTITUDE = np.array([0.9, 0.1, -0.3, 0.2]) / np.linalg.norm([0.9, 0.1, -0.3, 0.2])
@@ -46,6 +47,7 @@ def _forget_library_traces():
 def switch(monkeypatch):
     """``switch("0")`` sets FRBJAX_ONE_KERNEL, read when a program is traced; after the test the
     environment is restored and the library's traces made under the switch are forgotten."""
+
     def set_switch(value):
         monkeypatch.setenv("FRBJAX_ONE_KERNEL", value)
         _forget_library_traces()
@@ -57,7 +59,8 @@ def switch(monkeypatch):
 
 def _one_body_args(batch=()):
     return tuple(jnp.asarray(np.broadcast_to(a, batch + a.shape)) for a in (INERTIA, MOMENTUM, ATTITUDE)) + (
-        jnp.full(batch, 3.7),)
+        jnp.full(batch, 3.7),
+    )
 
 
 @pytest.fixture(scope="module")
@@ -94,6 +97,7 @@ def test_both_programs_agree(switch):
     def programs(x):
         """The value and both Jacobians as one program, traced anew (a new function: no trace of the
         other switch's)."""
+
         def state(x):
             momentum, attitude = _state_once(x[:3], x[3:6], x[6:10], x[10])
             return jnp.concatenate([momentum, attitude])
@@ -221,6 +225,7 @@ def test_values_known_when_traced_enter_as_constants():
     from frbjax import free_flow
 
     inertia = jnp.asarray(INERTIA)
+
     def step(momentum, scale):
         return free_flow(inertia, momentum, ATTITUDE, 0.25)[0] * scale, None
 
@@ -258,8 +263,9 @@ def test_derivative_programs_are_regions_too(switch):
     many = jnp.asarray(MOMENTUM)[None, :] * jnp.asarray([[1.0], [1.5], [0.7]])
     results = (gradient(momentum, t), jax.jit(jax.vmap(jax.grad(_loss), in_axes=(0, None)))(many, t))
     switch("0")
-    _agree(results, (jax.jit(jax.grad(_loss))(momentum, t),
-                     jax.jit(jax.vmap(jax.grad(_loss), in_axes=(0, None)))(many, t)))
+    _agree(
+        results, (jax.jit(jax.grad(_loss))(momentum, t), jax.jit(jax.vmap(jax.grad(_loss), in_axes=(0, None)))(many, t))
+    )
 
 
 # Slow: the Hessian's program holds the region of the Jacobian of the region's own forward-mode

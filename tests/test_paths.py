@@ -8,13 +8,13 @@ other on random bodies and on every family of special bodies, values and derivat
 
 from __future__ import annotations
 
+import _reference as ref
 import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
-
-import _reference as ref
 from test_body_invariants import random_bodies, special_bodies
+
 
 # Measured over 256 random bodies and the special families at 8 times each, |tau| = |L| t up to 100:
 # L (relative to |L|) 6.1e-16 max(1, |tau|), q 1.0e-15 max(1, |tau|) (rounding grows with the periods).
@@ -34,7 +34,7 @@ def _bodies(seed, count):
 
 
 def test_values_agree():
-    from frbjax import FreeRigidBody, free_flow
+    from frbjax import free_flow, FreeRigidBody
 
     rng, inertia, momentum, attitude = _bodies(5, 256)
     tau = 10.0 ** rng.uniform(-3, 2, (len(inertia), 8)) * rng.choice([-1.0, 1.0], (len(inertia), 8))
@@ -79,8 +79,11 @@ def test_prebuilt_bodies_evaluate_through_their_series(monkeypatch):
     L_scalar_axis, q_scalar_axis = state(body, np.full((1, 1), times[0, 0]))
     L_rows, q_rows = np.stack([row[0] for row in rows]), np.stack([row[1] for row in rows])
     scale = np.maximum(np.linalg.norm(momentum, axis=-1), 1)[:, None]
-    for L, q, L_want, q_want in ((L_rows, q_rows, L_axis, q_axis), (L_mapped, q_mapped, L_axis, q_axis),
-                                 (L_scalar, q_scalar, L_scalar_axis[0], q_scalar_axis[0])):
+    for L, q, L_want, q_want in (
+        (L_rows, q_rows, L_axis, q_axis),
+        (L_mapped, q_mapped, L_axis, q_axis),
+        (L_scalar, q_scalar, L_scalar_axis[0], q_scalar_axis[0]),
+    ):
         assert L.shape == L_want.shape and q.shape == q_want.shape
         assert (np.abs(np.asarray(L - L_want)) / scale).max() <= 1e-14
         assert np.abs(np.asarray(q - q_want)).max() <= 1e-14
@@ -88,7 +91,7 @@ def test_prebuilt_bodies_evaluate_through_their_series(monkeypatch):
 
 
 def _state(x, series):
-    from frbjax import FreeRigidBody, free_flow
+    from frbjax import free_flow, FreeRigidBody
 
     if series:
         momentum, attitude = (v[0] for v in FreeRigidBody(x[:3], x[3:6], x[6:10]).state(x[10:]))
@@ -142,8 +145,9 @@ def test_free_flow_checks_and_broadcasts():
 
     with pytest.raises(ValueError, match="inertia"):
         free_flow([1.0, -2.0, 3.0], [1.0, 0.0, 0.0], [1.0, 0.0, 0.0, 0.0], 1.0)
-    momentum, attitude = free_flow(np.array([1.0, 2.0, 3.0]), np.array([0.3, 0.2, 0.9]),
-                                   np.array([1.0, 0.0, 0.0, 0.0]), np.linspace(0, 1, 5))
+    momentum, attitude = free_flow(
+        np.array([1.0, 2.0, 3.0]), np.array([0.3, 0.2, 0.9]), np.array([1.0, 0.0, 0.0, 0.0]), np.linspace(0, 1, 5)
+    )
     assert momentum.shape == (5, 3) and attitude.shape == (5, 4)
     # At t = 0 the given state, to rounding (measured 1.2e-16).
     np.testing.assert_allclose(np.asarray(momentum[0]), [0.3, 0.2, 0.9], rtol=0, atol=2.5e-16)

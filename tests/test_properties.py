@@ -25,13 +25,13 @@ from __future__ import annotations
 
 import itertools
 
+import _reference as ref
 import jax
 import numpy as np
-from hypothesis import given, settings
-from hypothesis import strategies as st
+from hypothesis import given, settings, strategies as st
 
-import _reference as ref
 from frbjax import FreeRigidBody
+
 
 EPS = np.finfo(np.float64).eps
 BATCH, TIMES = 4, 4
@@ -42,8 +42,12 @@ SETTINGS = settings(deadline=None, max_examples=40, derandomize=True, database=N
 def _motion(inertia, momentum, attitude, times):
     """(L, Omega, q, R) of BATCH bodies at their TIMES times each: arrays (BATCH, TIMES, ...)."""
     body = FreeRigidBody(inertia[:, None], momentum[:, None], attitude[:, None])
-    return (body.angular_momentum(times), body.angular_velocity(times), body.quaternion(times),
-            body.rotation_matrix(times))
+    return (
+        body.angular_momentum(times),
+        body.angular_velocity(times),
+        body.quaternion(times),
+        body.rotation_matrix(times),
+    )
 
 
 def motion(inertia, momentum, attitude, times):
@@ -196,8 +200,7 @@ def conditioning(inertia, momentum):
     unit = momentum / np.linalg.norm(momentum, axis=-1, keepdims=True)
     h = np.abs(np.sum(unit**2 / inertia, axis=-1) * sorted_inertia[:, 1] - 1)
     factor = np.where(h < ILL_POSED_RESTART, np.inf, np.maximum(1.0, 1e-3 / np.maximum(h, EPS)))
-    two_equal = (sorted_inertia[:, 0] == sorted_inertia[:, 1]) | (
-        sorted_inertia[:, 1] == sorted_inertia[:, 2])
+    two_equal = (sorted_inertia[:, 0] == sorted_inertia[:, 1]) | (sorted_inertia[:, 1] == sorted_inertia[:, 2])
     return np.where(two_equal, 1.0, factor)
 
 
@@ -240,8 +243,12 @@ def test_group_property_and_time_reversal(case):
 def _rotation_quaternion(matrix):
     """Unit quaternion (w, x, y, z) of a rotation matrix (trace method on the largest diagonal term)."""
     m = np.asarray(matrix, float)
-    candidates = [1 + np.trace(m), 1 + m[0, 0] - m[1, 1] - m[2, 2], 1 - m[0, 0] + m[1, 1] - m[2, 2],
-                  1 - m[0, 0] - m[1, 1] + m[2, 2]]
+    candidates = [
+        1 + np.trace(m),
+        1 + m[0, 0] - m[1, 1] - m[2, 2],
+        1 - m[0, 0] + m[1, 1] - m[2, 2],
+        1 - m[0, 0] - m[1, 1] + m[2, 2],
+    ]
     k = int(np.argmax(candidates))
     s = np.sqrt(candidates[k]) * 2
     if k == 0:
@@ -275,8 +282,7 @@ SIGNED_PERMUTATIONS = _signed_permutations()
 # working frame, so relabelled axes give the same working data bit for bit.  Measured worst (2000
 # random examples, benchmarks/properties.py): permutation L 0.44, q 1.5, R 5.0; scaling Omega and q 0
 # (c = 2^k scales every intermediate exactly, so the scaled body computes the same motion).
-PERMUTATION_TOLERANCE = dict(permutation_L=4, permutation_q=4, permutation_R=10, scaling_omega=0.0,
-                             scaling_q=0.0)
+PERMUTATION_TOLERANCE = dict(permutation_L=4, permutation_q=4, permutation_R=10, scaling_omega=0.0, scaling_q=0.0)
 
 
 def permutation_errors(case, permutations, factors):

@@ -26,16 +26,21 @@ import jax
 import numpy as np
 import pytest
 import scipy.special
-from hypothesis import HealthCheck, given, settings
-from hypothesis import strategies as st
+from hypothesis import given, HealthCheck, settings, strategies as st
 
 import frbjax
 from frbjax import lightcurve, special, torques
 
+
 # The suite's size; the benchmark sets FRBJAX_HARNESS_EXAMPLES for its larger run.
 EXAMPLES = int(os.environ.get("FRBJAX_HARNESS_EXAMPLES", "12"))
-HARNESS = settings(max_examples=EXAMPLES, deadline=None, derandomize=True, database=None,
-                   suppress_health_check=[HealthCheck.too_slow, HealthCheck.data_too_large])
+HARNESS = settings(
+    max_examples=EXAMPLES,
+    deadline=None,
+    derandomize=True,
+    database=None,
+    suppress_health_check=[HealthCheck.too_slow, HealthCheck.data_too_large],
+)
 
 # ------------------------------------------------------------------------------ valid arguments
 
@@ -63,7 +68,8 @@ def unit_vectors(count=None):
 
 def times(count=5):
     return st.lists(floats(-50.0, 50.0), min_size=count, max_size=count, unique=True).map(
-        lambda t: np.sort(np.array(t)))
+        lambda t: np.sort(np.array(t))
+    )
 
 
 def rotations():
@@ -170,8 +176,16 @@ _OBSERVER = np.array([np.cos(0.3), np.sin(0.3), 0.0])
 
 
 def _fit_lightcurve(times, brightness, sun, periods, inertia_range, starts_per_period, law):
-    return lightcurve.fit_lightcurve(times, brightness, sun, _OBSERVER, periods=periods, inertia_range=inertia_range,
-                                     starts_per_period=starts_per_period, law=law)
+    return lightcurve.fit_lightcurve(
+        times,
+        brightness,
+        sun,
+        _OBSERVER,
+        periods=periods,
+        inertia_range=inertia_range,
+        starts_per_period=starts_per_period,
+        law=law,
+    )
 
 
 _ICOSAHEDRON = lightcurve.icosphere(0)
@@ -180,123 +194,199 @@ _ICOSAHEDRON = lightcurve.icosphere(0)
 def _sum_of_torques(parts):
     return torques.SumOfTorques(parts)
 
+
 ENTRIES = {
     "FreeRigidBody": Entry(
         dict(inertia=moments(), angular_momentum=vectors(3), attitude=quaternions(), t=times()),
         dict(inertia="positive3", angular_momentum="finite3", attitude="quaternion", t="times"),
-        lambda inertia, angular_momentum, attitude, t: _body(inertia, angular_momentum, attitude).state(t)),
+        lambda inertia, angular_momentum, attitude, t: _body(inertia, angular_momentum, attitude).state(t),
+    ),
     "FreeRigidBody.from_inertia_tensor": Entry(
         dict(inertia_tensor=tensors(), angular_momentum=vectors(3)),
         dict(inertia_tensor="spd", angular_momentum="finite3"),
-        lambda inertia_tensor, angular_momentum: frbjax.FreeRigidBody.from_inertia_tensor(
-            inertia_tensor, angular_momentum).momentum_norm),
+        lambda inertia_tensor, angular_momentum: (
+            frbjax.FreeRigidBody.from_inertia_tensor(inertia_tensor, angular_momentum).momentum_norm
+        ),
+    ),
     "free_flow": Entry(
         dict(inertia=moments(), angular_momentum=vectors(3), attitude=quaternions(), t=floats(-50, 50)),
         dict(inertia="positive3", angular_momentum="finite3", attitude="quaternion", t="times"),
-        frbjax.free_flow),
-    "InertiaTensor": Entry(dict(matrix=tensors()), dict(matrix="spd"),
-                           lambda matrix: frbjax.InertiaTensor(matrix).principal_moments),
+        frbjax.free_flow,
+    ),
+    "InertiaTensor": Entry(
+        dict(matrix=tensors()), dict(matrix="spd"), lambda matrix: frbjax.InertiaTensor(matrix).principal_moments
+    ),
     "quaternion_to_matrix": Entry(dict(q=quaternions()), dict(q="unit_quaternion"), frbjax.quaternion_to_matrix),
-    "quaternion_from_matrix": Entry(dict(matrix=rotations()), dict(matrix="rotation"),
-                                    frbjax.quaternion_from_matrix),
+    "quaternion_from_matrix": Entry(dict(matrix=rotations()), dict(matrix="rotation"), frbjax.quaternion_from_matrix),
     "fit_attitude": Entry(
-        dict(data=_attitude_data(), angular_velocity_sigma=positive_scalar(), n_starts=st.integers(1, 4),
-             loss=st.sampled_from(["squared", "huber", "cauchy"])),
+        dict(
+            data=_attitude_data(),
+            angular_velocity_sigma=positive_scalar(),
+            n_starts=st.integers(1, 4),
+            loss=st.sampled_from(["squared", "huber", "cauchy"]),
+        ),
         dict(data="fit_data", angular_velocity_sigma="positive", n_starts="count", loss="option"),
-        _fit_attitude, call=None),
-    "pad_batch": Entry(dict(tree=vectors(3), multiple=st.integers(1, 4)), dict(multiple="count"),
-                       frbjax.pad_batch),
-    "ConstantTorque": Entry(dict(torque=vectors(3)), dict(torque="finite3"),
-                            lambda torque: torques.ConstantTorque(torque).torque),
-    "UniformGravity": Entry(dict(centre_of_mass=vectors(3), weight=vectors(3)),
-                            dict(centre_of_mass="finite3", weight="finite3"),
-                            lambda centre_of_mass, weight: torques.UniformGravity(centre_of_mass, weight).weight),
-    "CircularOrbit": Entry(dict(radius=positive_scalar(1.0, 10.0), mu=positive_scalar()),
-                           dict(radius="positive", mu="positive"),
-                           lambda radius, mu: torques.CircularOrbit(radius, mu).rate),
-    "LinearDamping": Entry(dict(inertia=moments(), damping=moments()),
-                           dict(inertia="positive3", damping="finite3"),
-                           lambda inertia, damping: torques.LinearDamping(inertia, damping).damping),
-    "RigidBodyTerm": Entry(dict(inertia=moments()), dict(inertia="positive3"),
-                           lambda inertia: frbjax.RigidBodyTerm(inertia, torque=lambda t, q, args: q[1:]).inertia),
+        _fit_attitude,
+        call=None,
+    ),
+    "pad_batch": Entry(dict(tree=vectors(3), multiple=st.integers(1, 4)), dict(multiple="count"), frbjax.pad_batch),
+    "ConstantTorque": Entry(
+        dict(torque=vectors(3)), dict(torque="finite3"), lambda torque: torques.ConstantTorque(torque).torque
+    ),
+    "UniformGravity": Entry(
+        dict(centre_of_mass=vectors(3), weight=vectors(3)),
+        dict(centre_of_mass="finite3", weight="finite3"),
+        lambda centre_of_mass, weight: torques.UniformGravity(centre_of_mass, weight).weight,
+    ),
+    "CircularOrbit": Entry(
+        dict(radius=positive_scalar(1.0, 10.0), mu=positive_scalar()),
+        dict(radius="positive", mu="positive"),
+        lambda radius, mu: torques.CircularOrbit(radius, mu).rate,
+    ),
+    "LinearDamping": Entry(
+        dict(inertia=moments(), damping=moments()),
+        dict(inertia="positive3", damping="finite3"),
+        lambda inertia, damping: torques.LinearDamping(inertia, damping).damping,
+    ),
+    "RigidBodyTerm": Entry(
+        dict(inertia=moments()),
+        dict(inertia="positive3"),
+        lambda inertia: frbjax.RigidBodyTerm(inertia, torque=lambda t, q, args: q[1:]).inertia,
+    ),
     "splitting_trajectory": Entry(
         dict(y0=st.tuples(vectors(3), quaternions()), dt=positive_scalar(0.01, 0.1), steps=st.integers(1, 3)),
         dict(dt="positive", steps="count"),
         lambda y0, dt, steps: frbjax.splitting_trajectory(
-            frbjax.RigidBodyTerm(np.array([1.0, 2.0, 3.0]), torque=lambda t, q, args: q[1:]), y0, dt=dt,
-            steps=steps), call=None),
+            frbjax.RigidBodyTerm(np.array([1.0, 2.0, 3.0]), torque=lambda t, q, args: q[1:]), y0, dt=dt, steps=steps
+        ),
+        call=None,
+    ),
     "ConvexShape.ellipsoid": Entry(
         dict(a=positive_scalar(), b=positive_scalar(), c=positive_scalar(), subdivisions=st.integers(0, 1)),
         dict(a="positive", b="positive", c="positive", subdivisions="count"),
-        lambda a, b, c, subdivisions: lightcurve.ConvexShape.ellipsoid(a, b, c, subdivisions).areas),
+        lambda a, b, c, subdivisions: lightcurve.ConvexShape.ellipsoid(a, b, c, subdivisions).areas,
+    ),
     "ConvexShape": Entry(
         dict(normals=unit_vectors(6), areas=vectors(6, 0.0, 2.0)),
         dict(normals="unit_vectors", areas="finite"),
-        lambda normals, areas: lightcurve.ConvexShape(normals, areas).total_area),
+        lambda normals, areas: lightcurve.ConvexShape(normals, areas).total_area,
+    ),
     "ConvexShape.from_mesh": Entry(
-        dict(vertices=moments().map(lambda axes: _ICOSAHEDRON[0] * axes)), dict(vertices="finite3"),
-        lambda vertices: lightcurve.ConvexShape.from_mesh(vertices, _ICOSAHEDRON[1]).areas),
+        dict(vertices=moments().map(lambda axes: _ICOSAHEDRON[0] * axes)),
+        dict(vertices="finite3"),
+        lambda vertices: lightcurve.ConvexShape.from_mesh(vertices, _ICOSAHEDRON[1]).areas,
+    ),
     "mesh_inertia": Entry(
-        dict(vertices=moments().map(lambda axes: _ICOSAHEDRON[0] * axes)), dict(vertices="finite3"),
-        lambda vertices: lightcurve.mesh_inertia(vertices, _ICOSAHEDRON[1])),
+        dict(vertices=moments().map(lambda axes: _ICOSAHEDRON[0] * axes)),
+        dict(vertices="finite3"),
+        lambda vertices: lightcurve.mesh_inertia(vertices, _ICOSAHEDRON[1]),
+    ),
     "icosphere": Entry(dict(subdivisions=st.integers(0, 2)), dict(subdivisions="count"), lightcurve.icosphere),
     "tumbler_periods": Entry(
         dict(inertia=moments(), angular_momentum=vectors(3).filter(lambda v: np.linalg.norm(v) > 0.1)),
         dict(inertia="positive3", angular_momentum="finite3"),
-        lambda inertia, angular_momentum: lightcurve.tumbler_periods(inertia, angular_momentum)[0]),
+        lambda inertia, angular_momentum: lightcurve.tumbler_periods(inertia, angular_momentum)[0],
+    ),
     "GravityGradient": Entry(
-        dict(inertia=moments(), mu=positive_scalar()), dict(inertia="positive3", mu="positive"),
-        lambda inertia, mu: torques.GravityGradient(inertia, lambda t: np.array([7.0, 0.0, 0.0]), mu).mu),
+        dict(inertia=moments(), mu=positive_scalar()),
+        dict(inertia="positive3", mu="positive"),
+        lambda inertia, mu: torques.GravityGradient(inertia, lambda t: np.array([7.0, 0.0, 0.0]), mu).mu,
+    ),
     "EddyCurrent": Entry(
-        dict(inertia=moments(), tensor=moments()), dict(inertia="positive3", tensor="finite3"),
-        lambda inertia, tensor: torques.EddyCurrent(inertia, tensor, lambda t: np.array([0.0, 0.0, 1.0])).tensor),
+        dict(inertia=moments(), tensor=moments()),
+        dict(inertia="positive3", tensor="finite3"),
+        lambda inertia, tensor: torques.EddyCurrent(inertia, tensor, lambda t: np.array([0.0, 0.0, 1.0])).tensor,
+    ),
     "PDController": Entry(
         dict(inertia=moments(), proportional=moments(), derivative=moments(), target=quaternions()),
         dict(inertia="positive3", proportional="finite3", derivative="finite3", target="quaternion"),
-        lambda inertia, proportional, derivative, target: torques.PDController(
-            inertia, proportional, derivative, target=target).proportional),
+        lambda inertia, proportional, derivative, target: (
+            torques.PDController(inertia, proportional, derivative, target=target).proportional
+        ),
+    ),
     "BDot": Entry(
-        dict(inertia=moments(), gain=positive_scalar()), dict(inertia="positive3", gain="nonnegative"),
-        lambda inertia, gain: torques.BDot(inertia, gain, lambda t: np.array([0.0, 0.0, 1.0])).gain),
+        dict(inertia=moments(), gain=positive_scalar()),
+        dict(inertia="positive3", gain="nonnegative"),
+        lambda inertia, gain: torques.BDot(inertia, gain, lambda t: np.array([0.0, 0.0, 1.0])).gain,
+    ),
     "SumOfTorques": Entry(
-        dict(torques=vectors(3).map(lambda v: [torques.ConstantTorque(v)])), dict(torques="nonempty"),
-        lambda torques: _sum_of_torques(torques).linear_in_momentum, call=lambda result: np.asarray(0.0)),
+        dict(torques=vectors(3).map(lambda v: [torques.ConstantTorque(v)])),
+        dict(torques="nonempty"),
+        lambda torques: _sum_of_torques(torques).linear_in_momentum,
+        call=lambda result: np.asarray(0.0),
+    ),
     "RigidBodySplitting": Entry(
-        dict(method=st.sampled_from(sorted(frbjax.SPLITTING_METHODS))), dict(method="option"),
-        lambda method: frbjax.RigidBodySplitting(method), call=lambda result: np.asarray(0.0)),
-    "batch_mesh": Entry(dict(devices=st.just(jax.devices())), dict(devices="nonempty"),
-                        lambda devices: frbjax.batch_mesh(devices), call=lambda result: np.asarray(0.0)),
+        dict(method=st.sampled_from(sorted(frbjax.SPLITTING_METHODS))),
+        dict(method="option"),
+        lambda method: frbjax.RigidBodySplitting(method),
+        call=lambda result: np.asarray(0.0),
+    ),
+    "batch_mesh": Entry(
+        dict(devices=st.just(jax.devices())),
+        dict(devices="nonempty"),
+        lambda devices: frbjax.batch_mesh(devices),
+        call=lambda result: np.asarray(0.0),
+    ),
     "shard_batch": Entry(dict(tree=vectors(4)), dict(tree="batched_tree"), frbjax.shard_batch),
     "shard_bodies": Entry(
-        dict(inertia=st.lists(moments(), min_size=2, max_size=2).map(np.array)), dict(inertia="batch"),
+        dict(inertia=st.lists(moments(), min_size=2, max_size=2).map(np.array)),
+        dict(inertia="batch"),
         lambda inertia: frbjax.shard_bodies(_body(inertia, np.array([0.3, 1.0, -0.2]), None)).momentum_norm,
-        named={"inertia": "body"}),
+        named={"inertia": "body"},
+    ),
     "facet_brightness": Entry(
-        dict(normals=unit_vectors(6), sun_body=unit_vectors(5), c=positive_scalar(),
-             law=st.sampled_from(lightcurve.LAWS)),
+        dict(
+            normals=unit_vectors(6), sun_body=unit_vectors(5), c=positive_scalar(), law=st.sampled_from(lightcurve.LAWS)
+        ),
         dict(c="nonnegative", law="option", sun_body="finite3"),
-        lambda normals, sun_body, c, law: lightcurve.facet_brightness(normals, sun_body, sun_body, law=law, c=c)),
+        lambda normals, sun_body, c, law: lightcurve.facet_brightness(normals, sun_body, sun_body, law=law, c=c),
+    ),
     "brightness": Entry(
         dict(inertia=moments(), t=times(), sun=unit_vectors(5), law=st.sampled_from(lightcurve.LAWS)),
         dict(inertia="positive3", t="times", sun="unit_vectors", law="option"),
         lambda inertia, t, sun, law: lightcurve.brightness(
-            _body(inertia, np.array([0.3, 1.0, -0.2]), None), lightcurve.ConvexShape.ellipsoid(1.0, 0.8, 0.6, 0),
-            t, sun, _OBSERVER, law=law), named={"t": "times"}),
+            _body(inertia, np.array([0.3, 1.0, -0.2]), None),
+            lightcurve.ConvexShape.ellipsoid(1.0, 0.8, 0.6, 0),
+            t,
+            sun,
+            _OBSERVER,
+            law=law,
+        ),
+        named={"t": "times"},
+    ),
     "fit_lightcurve": Entry(
-        dict(times=times(6), brightness=vectors(6, 0.5, 2.0), sun=unit_vectors(6),
-             periods=st.just(np.array([[1.0, 2.0], [3.0, 4.0]])), inertia_range=st.just(np.array([0.3, 0.98])),
-             starts_per_period=st.integers(1, 4), law=st.sampled_from(lightcurve.LAWS)),
-        dict(times="times", brightness="positive", sun="unit_vectors", periods="range", inertia_range="range",
-             starts_per_period="count", law="option"),
-        _fit_lightcurve, call=None),
+        dict(
+            times=times(6),
+            brightness=vectors(6, 0.5, 2.0),
+            sun=unit_vectors(6),
+            periods=st.just(np.array([[1.0, 2.0], [3.0, 4.0]])),
+            inertia_range=st.just(np.array([0.3, 0.98])),
+            starts_per_period=st.integers(1, 4),
+            law=st.sampled_from(lightcurve.LAWS),
+        ),
+        dict(
+            times="times",
+            brightness="positive",
+            sun="unit_vectors",
+            periods="range",
+            inertia_range="range",
+            starts_per_period="count",
+            law="option",
+        ),
+        _fit_lightcurve,
+        call=None,
+    ),
 }
 # Spoilers of the attitude record: its times and quaternions, each named by the message.
 FIT_DATA = {
-    "times": ("distinct_times", 0), "quaternions": ("unit_quaternion", 1),
+    "times": ("distinct_times", 0),
+    "quaternions": ("unit_quaternion", 1),
 }
 # Which kinds a fit refuses within a record (the fits see rows, not shapes of one vector).
-ROW_SPOILERS = {"unit_quaternion": ("nan", "inf", "zero", "scaled", "complex"),
-                "distinct_times": KINDS["distinct_times"]}
+ROW_SPOILERS = {
+    "unit_quaternion": ("nan", "inf", "zero", "scaled", "complex"),
+    "distinct_times": KINDS["distinct_times"],
+}
 
 # What a spoiled argument's message names when it is not the argument itself.
 NAMES = {"t": "t", "data": None}
@@ -319,8 +409,13 @@ SPECIAL = {
 # Arguments outside each function's domain: NaN wherever scipy.special gives NaN (the independent
 # reference for the functions it has).
 OUT_OF_DOMAIN = {
-    "ellipk": (2.0,), "ellipkm1": (-1.0,), "ellipe": (1.5,), "elliprf": (-1.0, 1.0, 1.0),
-    "elliprd": (-1.0, 1.0, 1.0), "elliprc": (-1.0, 0.0), "elliprj": (-1.0, 1.0, 1.0, 1.0),
+    "ellipk": (2.0,),
+    "ellipkm1": (-1.0,),
+    "ellipe": (1.5,),
+    "elliprf": (-1.0, 1.0, 1.0),
+    "elliprd": (-1.0, 1.0, 1.0),
+    "elliprc": (-1.0, 0.0),
+    "elliprj": (-1.0, 1.0, 1.0, 1.0),
 }
 
 
@@ -359,7 +454,8 @@ def test_entry_point(name, data):
     message = str(error.value)
     assert re.search(rf"\b{re.escape(expected)}\b", message) or (
         # The fits refuse non-finite samples as rows: the message lists the argument among others.
-        expected in message), (name, choice, spoiler, message)
+        expected in message
+    ), (name, choice, spoiler, message)
 
 
 @pytest.mark.parametrize("name", SPECIAL)
@@ -382,9 +478,23 @@ def test_special_function(name, data):
 def test_every_public_callable_is_in_the_harness():
     """A new public function or class has to be added to the harness (or be a result type)."""
     # Result types, constants, namespaces and the base class of torques: nothing to call with data.
-    results = {"AttitudeFit", "LightcurveFit", "FitError", "SPLITTING_METHODS", "LAWS", "special", "torques",
-               "lightcurve", "AbstractTorque"}
+    results = {
+        "AttitudeFit",
+        "LightcurveFit",
+        "FitError",
+        "SPLITTING_METHODS",
+        "LAWS",
+        "special",
+        "torques",
+        "lightcurve",
+        "AbstractTorque",
+    }
     covered = {name.split(".")[0] for name in ENTRIES} | set(SPECIAL) | results
-    public = set(frbjax.__all__) | set(lightcurve.__all__) | set(special.__all__) | set(torques.__all__) | {
-        "pad_batch", "batch_mesh", "shard_batch", "shard_bodies"}
+    public = (
+        set(frbjax.__all__)
+        | set(lightcurve.__all__)
+        | set(special.__all__)
+        | set(torques.__all__)
+        | {"pad_batch", "batch_mesh", "shard_batch", "shard_bodies"}
+    )
     assert public <= covered, sorted(public - covered)

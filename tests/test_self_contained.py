@@ -13,38 +13,46 @@ import re
 import shutil
 import subprocess
 
+
 REPOSITORY = pathlib.Path(__file__).resolve().parents[1]
 
 # Built from pieces so that this file does not match its own pattern: the folder's name preceded by
 # "../" or by anything that cannot continue an identifier, or the bare name quoted (a path component).
 FOLDER = "sha" + "red"
-SIBLING_REFERENCE = re.compile(
-    rf"(\.\./|[^a-z_]){FOLDER}/|[\"']{FOLDER}[\"']".encode()
-)
+SIBLING_REFERENCE = re.compile(rf"(\.\./|[^a-z_]){FOLDER}/|[\"']{FOLDER}[\"']".encode())
 
 # Without git: what .gitignore leaves out of the tree, and git's own folder.
-UNTRACKED_DIRECTORIES = {".git", ".venv", "__pycache__", ".pytest_cache", ".hypothesis", "build",
-                         "dist", "site", ".ipynb_checkpoints"}
+UNTRACKED_DIRECTORIES = {
+    ".git",
+    ".venv",
+    "__pycache__",
+    ".pytest_cache",
+    ".hypothesis",
+    "build",
+    "dist",
+    "site",
+    ".ipynb_checkpoints",
+}
 
 
 def tracked_files() -> list[pathlib.Path]:
     git = shutil.which("git")
     if git is not None and (REPOSITORY / ".git").exists():
-        listing = subprocess.run([git, "ls-files", "-z"], cwd=REPOSITORY, capture_output=True,
-                                 check=True).stdout
+        listing = subprocess.run([git, "ls-files", "-z"], cwd=REPOSITORY, capture_output=True, check=True).stdout
         return [REPOSITORY / name for name in listing.decode().split("\0") if name]
     return [
-        path for path in REPOSITORY.rglob("*")
+        path
+        for path in REPOSITORY.rglob("*")
         if path.is_file()
-        and not any(part in UNTRACKED_DIRECTORIES or part.endswith(".egg-info")
-                    for part in path.relative_to(REPOSITORY).parts)
+        and not any(
+            part in UNTRACKED_DIRECTORIES or part.endswith(".egg-info") for part in path.relative_to(REPOSITORY).parts
+        )
     ]
 
 
 def test_pattern_finds_what_it_looks_for():
     """The pattern catches the forms a sibling reference takes, and not a word that merely ends so."""
-    for text in (f"../{FOLDER}/reference", f"see {FOLDER}/design/x.md", f'parent / "{FOLDER}" / "x"',
-                 f"`{FOLDER}/x`"):
+    for text in (f"../{FOLDER}/reference", f"see {FOLDER}/design/x.md", f'parent / "{FOLDER}" / "x"', f"`{FOLDER}/x`"):
         assert SIBLING_REFERENCE.search(text.encode()), text
     for text in (f"un{FOLDER}/x", f"not_{FOLDER}/x", f"{FOLDER} memory"):
         assert not SIBLING_REFERENCE.search(text.encode()), text

@@ -21,13 +21,26 @@ import pytest
 
 from frbjax import _series
 
+
 jax.config.update("jax_enable_x64", True)
 mpmath.mp.dps = 40
 
 # (m, chi): both ends of the range of m the direct series serves, a symmetric body (m = 0), tiny and
 # extreme characteristics.
-CASES = [(0.5, -0.3), (0.2, -1.0), (0.9, -1.0), (0.9995, -1.0), (0.9995, -0.01), (0.3, -1e-8),
-         (0.0, -0.5), (1e-12, -0.7), (0.7, -1e-12), (0.5, -50.0), (0.9, -1e4), (0.0, -30.0)]
+CASES = [
+    (0.5, -0.3),
+    (0.2, -1.0),
+    (0.9, -1.0),
+    (0.9995, -1.0),
+    (0.9995, -0.01),
+    (0.3, -1e-8),
+    (0.0, -0.5),
+    (1e-12, -0.7),
+    (0.7, -1e-12),
+    (0.5, -50.0),
+    (0.9, -1e4),
+    (0.0, -30.0),
+]
 
 # Next to the separatrix: mc = 1 - m (exact in binary64) and characteristics over the whole range.
 COMPLEMENTS = [1e-3, 1e-4, 7e-5, 1e-5, 1e-8, 1e-12, 1e-16, 1e-30]
@@ -141,8 +154,12 @@ def test_complementary_series_against_mpmath(mc, forced, monkeypatch):
             data = _series.coefficients(jnp.float64(m), jnp.float64(mc), jnp.float64(chi))
             assert bool(data.complementary) == (forced or mc < 7e-5)
             quarter = float(data.quarter)
-            u = np.concatenate([np.linspace(-2.6, 2.6, 13) * quarter,
-                                [1e-9, -3e-4, 0.3, quarter - 1e-9, quarter * (1 - 1e-5), -0.7 * quarter]])
+            u = np.concatenate(
+                [
+                    np.linspace(-2.6, 2.6, 13) * quarter,
+                    [1e-9, -3e-4, 0.3, quarter - 1e-9, quarter * (1 - 1e-5), -0.7 * quarter],
+                ]
+            )
             theirs = np.array([reference(mc, chi, x) for x in u])
             for k, error in enumerate(errors(mc, chi, data, u, theirs)):
                 worst[k] = max(worst[k], error)
@@ -165,10 +182,17 @@ def test_separatrix_limit_against_mpmath(chi):
     removed = chi >= -1
     separatrix = jnp.asarray(True)
     data = _series.at_separatrix(
-        data, separatrix, jnp.float64(mpmath.sqrt(minus_chi / gap)), jnp.float64(1 / mpmath.sqrt(gap)),
-        jnp.float64(mpmath.sqrt(minus_chi) / gap), jnp.float64((-minus_chi if removed else 1) / gap))
+        data,
+        separatrix,
+        jnp.float64(mpmath.sqrt(minus_chi / gap)),
+        jnp.float64(1 / mpmath.sqrt(gap)),
+        jnp.float64(mpmath.sqrt(minus_chi) / gap),
+        jnp.float64((-minus_chi if removed else 1) / gap),
+    )
     u = np.array([0.0, 1e-9, -3e-4, 0.2, -1.0, 3.0, 17.0, -40.0, 350.0, 800.0])
-    sn, cn, dn, reduced, turns = (np.asarray(v) for v in _series.evaluate_series(data, jnp.float64(0.0), jnp.asarray(u)))
+    sn, cn, dn, reduced, turns = (
+        np.asarray(v) for v in _series.evaluate_series(data, jnp.float64(0.0), jnp.asarray(u))
+    )
     assert np.all(turns == 0)
     theirs = []
     for x in u:
@@ -212,8 +236,17 @@ def test_coefficient_gradients_are_finite():
         data = _series.coefficients(m, mc, chi)
         data = _series.at_separatrix(data, separatrix, 0.6 + 0 * m, 0.8 + 0 * m, 2.0 + 0 * m, 0.1 * chi)
         values = _series.evaluate_series(data, mc, jnp.asarray([0.0, 1e-3, 0.7, -3.0, 40.0, 900.0]) * (1 + m))
-        return (jnp.sum(data.rows) + jnp.sum(data.complementary_rows) + data.amplitude + data.origin + data.quarter
-                + data.nome + data.slope + data.complementary_cn_factor + sum(jnp.sum(v) for v in values[:4]))
+        return (
+            jnp.sum(data.rows)
+            + jnp.sum(data.complementary_rows)
+            + data.amplitude
+            + data.origin
+            + data.quarter
+            + data.nome
+            + data.slope
+            + data.complementary_cn_factor
+            + sum(jnp.sum(v) for v in values[:4])
+        )
 
     gradient = jax.jit(jax.grad(total, argnums=(0, 1)))
     for m, chi in [(0.0, -0.5), (0.3, -1e-12), (0.9, -1.0), (0.0, -30.0), (1 - 1e-10, -1e-12), (1 - 1e-16, -1e6)]:

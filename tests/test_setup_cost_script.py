@@ -13,8 +13,10 @@ import pytest
 from _benchmark_runs import finite_positive, run_quick
 
 
-@pytest.mark.slow(reason="140 s CPU on one pinned core: every row compiles its programs, diffrax's value_and_grad "
-                         "and fit_attitude's first call among them, and two latency subprocesses")
+@pytest.mark.slow(
+    reason="140 s CPU on one pinned core: every row compiles its programs, diffrax's value_and_grad "
+    "and fit_attitude's first call among them, and two latency subprocesses"
+)
 def test_setup_cost_quick(tmp_path):
     run_quick("setup_cost.py", tmp_path)
     result = json.loads((tmp_path / "setup_cost.json").read_text())

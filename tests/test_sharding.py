@@ -14,6 +14,7 @@ import sys
 import textwrap
 from pathlib import Path
 
+
 ROOT = Path(__file__).resolve().parent.parent
 
 SCRIPT = textwrap.dedent(
@@ -92,11 +93,12 @@ def test_sharded_over_4_devices_equals_one_device(tmp_path):
     script.write_text(SCRIPT)
     env = dict(os.environ)
     env.update(XLA_FLAGS="--xla_force_host_platform_device_count=4", JAX_ENABLE_X64="1", JAX_PLATFORMS="cpu")
-    process = subprocess.run([sys.executable, str(script)], cwd=ROOT, env=env, capture_output=True, text=True,
-                             timeout=900)
+    process = subprocess.run(
+        [sys.executable, str(script)], cwd=ROOT, env=env, capture_output=True, text=True, timeout=900
+    )
     assert process.returncode == 0, process.stderr[-4000:]
     line = [row for row in process.stdout.splitlines() if row.startswith("RESULT ")][-1]
-    results = json.loads(line[len("RESULT "):])
+    results = json.loads(line[len("RESULT ") :])
 
     body = results["body"]
     assert body["devices"] == 4

@@ -34,6 +34,7 @@ import pytest
 import frbjax
 from frbjax import _calgo903 as calgo
 
+
 REPOSITORY = pathlib.Path(__file__).resolve().parents[1]
 DATA = REPOSITORY / "tests" / "data" / "calgo903"
 
@@ -41,8 +42,7 @@ INERTIA = np.array([1.0, 1.6, 2.3])
 ARGS = {"weight": 1.0, "chi": np.array([0.05, 0.1, 0.4])}
 _Q0 = np.array([0.9, 0.3, -0.2, 0.1])
 Y0 = (np.array([0.3, 0.8, 2.0]), _Q0 / np.linalg.norm(_Q0))
-ORDERS = {"leapfrog": 2, "strang": 2, "yoshida4": 4, "blanes_moan4": 4, "blanes_moan6": 6, "aba864": 4,
-          "aba1064": 4}
+ORDERS = {"leapfrog": 2, "strang": 2, "yoshida4": 4, "blanes_moan4": 4, "blanes_moan6": 6, "aba864": 4, "aba1064": 4}
 
 
 def heavy_top_potential(t, q, args):
@@ -53,8 +53,12 @@ TERM = frbjax.RigidBodyTerm(INERTIA, potential=heavy_top_potential)
 
 
 def state_error(y, reference):
-    return float(max(np.abs(np.asarray(y[0]) - np.asarray(reference[0])).max(),
-                     np.abs(np.asarray(y[1]) - np.asarray(reference[1])).max()))
+    return float(
+        max(
+            np.abs(np.asarray(y[0]) - np.asarray(reference[0])).max(),
+            np.abs(np.asarray(y[1]) - np.asarray(reference[1])).max(),
+        )
+    )
 
 
 # One compiled program per solver, shared by the tests: everything but the solver and the shapes is an
@@ -66,8 +70,9 @@ MAX_STEPS = 50_010
 def runner(solver):
     @jax.jit
     def run(y0, args, t0, t1, step):
-        solution = diffrax.diffeqsolve(TERM, solver, t0, t1, step, y0, args=args,
-                                       saveat=diffrax.SaveAt(steps=True), max_steps=MAX_STEPS)
+        solution = diffrax.diffeqsolve(
+            TERM, solver, t0, t1, step, y0, args=args, saveat=diffrax.SaveAt(steps=True), max_steps=MAX_STEPS
+        )
         return solution.ts, solution.ys, solution.stats["num_steps"]
 
     return run
@@ -89,8 +94,16 @@ def final(method, t1, step, **kwargs):
 @functools.cache
 def dopri8(final_time, tolerance, weight=ARGS["weight"]):
     solution = diffrax.diffeqsolve(
-        TERM, diffrax.Dopri8(), 0.0, final_time, 0.01, Y0, args=dict(ARGS, weight=weight), max_steps=1_000_000,
-        stepsize_controller=diffrax.PIDController(rtol=tolerance, atol=tolerance))
+        TERM,
+        diffrax.Dopri8(),
+        0.0,
+        final_time,
+        0.01,
+        Y0,
+        args=dict(ARGS, weight=weight),
+        max_steps=1_000_000,
+        stepsize_controller=diffrax.PIDController(rtol=tolerance, atol=tolerance),
+    )
     return solution.ys[0][-1], solution.ys[1][-1]
 
 
@@ -101,9 +114,15 @@ def errors(method, steps, final_time, reference):
 # ------------------------------------------------------------------------------------- orders
 
 # Steps where the error lies well above the reference's uncertainty and in the asymptotic regime.
-ORDER_STEPS = {"leapfrog": (0.04, 0.02, 0.01), "strang": (0.04, 0.02, 0.01),
-               "yoshida4": (0.08, 0.04, 0.02), "blanes_moan4": (0.2, 0.1, 0.05),
-               "blanes_moan6": (0.5, 0.35, 0.25), "aba864": (0.2, 0.1, 0.05), "aba1064": (0.2, 0.1, 0.05)}
+ORDER_STEPS = {
+    "leapfrog": (0.04, 0.02, 0.01),
+    "strang": (0.04, 0.02, 0.01),
+    "yoshida4": (0.08, 0.04, 0.02),
+    "blanes_moan4": (0.2, 0.1, 0.05),
+    "blanes_moan6": (0.5, 0.35, 0.25),
+    "aba864": (0.2, 0.1, 0.05),
+    "aba1064": (0.2, 0.1, 0.05),
+}
 
 
 @pytest.mark.parametrize("method", ORDERS)
@@ -124,8 +143,15 @@ def test_order_against_dopri8(method):
 
 # (h, h/2) at T = 100.  Dopri8 at 1e-13 is itself good to ~3.5e-11 there (against 1e-14), which is the
 # size of blanes_moan6's error at h = 0.25 (measured 2.4e-9 at 0.5, 7.8e-11 at 0.25).
-LONG_STEPS = {"leapfrog": 0.02, "strang": 0.02, "yoshida4": 0.08, "blanes_moan4": 0.2, "blanes_moan6": 0.5,
-              "aba864": 0.2, "aba1064": 0.2}
+LONG_STEPS = {
+    "leapfrog": 0.02,
+    "strang": 0.02,
+    "yoshida4": 0.08,
+    "blanes_moan4": 0.2,
+    "blanes_moan6": 0.5,
+    "aba864": 0.2,
+    "aba1064": 0.2,
+}
 
 
 @pytest.mark.parametrize("method", ORDERS)
@@ -139,7 +165,11 @@ def test_agreement_with_dopri8_at_t100(method):
     coarse, fine = errors(method, [step, step / 2], 100.0, reference)
     assert coarse > 1e-9
     assert coarse * 2.0 ** -(order + 0.3) <= fine <= coarse * 2.0 ** -(order - 0.3) + 2 * uncertainty, (
-        method, coarse, fine, uncertainty)
+        method,
+        coarse,
+        fine,
+        uncertainty,
+    )
 
 
 @pytest.mark.parametrize("method", ["aba864", "aba1064"])
@@ -156,8 +186,9 @@ def test_near_integrable_error_is_second_order_in_the_torque(method):
     measured = {}
     for weight, steps in ((0.01, (1.0, 0.8, 0.63)), (0.001, (1.0,))):
         reference = dopri8(20.0, 1e-14, weight)
-        measured[weight] = np.array([state_error(final(method, 20.0, h, args=dict(ARGS, weight=weight)), reference)
-                                     for h in steps])
+        measured[weight] = np.array(
+            [state_error(final(method, 20.0, h, args=dict(ARGS, weight=weight)), reference) for h in steps]
+        )
     assert measured[0.001][0] > 2e-12, measured
     slope = np.polyfit(np.log([1.0, 0.8, 0.63]), np.log(measured[0.01]), 1)[0]
     assert abs(slope - 6) <= 0.3, (method, measured, slope)
@@ -188,13 +219,22 @@ def test_calgo903_example1_all_steps_through_diffeqsolve():
     momentum, matrix = problem["Pi"], problem["Q"].reshape(3, 3).T
     y0 = (jnp.asarray(momentum), frbjax.quaternion_from_matrix(jnp.asarray(matrix)))
     solution = diffrax.diffeqsolve(
-        term, frbjax.RigidBodySplitting("blanes_moan6"), 0.0, problem["T"], jnp.asarray(problem.step),
-        y0, args=u0, saveat=diffrax.SaveAt(steps=True), max_steps=problem.steps)
+        term,
+        frbjax.RigidBodySplitting("blanes_moan6"),
+        0.0,
+        problem["T"],
+        jnp.asarray(problem.step),
+        y0,
+        args=u0,
+        saveat=diffrax.SaveAt(steps=True),
+        max_steps=problem.steps,
+    )
     assert solution.ys[0].shape == (problem.steps, 3)
     np.testing.assert_allclose(solution.ts, expected.time[1:], rtol=0, atol=1e-9)
     matrices = np.asarray(frbjax.quaternion_to_matrix(solution.ys[1]))
-    difference = max(np.abs(np.asarray(solution.ys[0]) - expected.momentum[1:]).max(),
-                     np.abs(matrices - expected.attitude[1:]).max())
+    difference = max(
+        np.abs(np.asarray(solution.ys[0]) - expected.momentum[1:]).max(), np.abs(matrices - expected.attitude[1:]).max()
+    )
     assert difference <= 3e-10
 
 
@@ -203,8 +243,9 @@ def test_calgo903_example1_all_steps_through_the_cli_path():
     problem, expected = example1_problem()
     trajectory = calgo.solve(problem)
     assert len(trajectory.time) == problem.steps + 1
-    difference = max(np.abs(trajectory.momentum - expected.momentum).max(),
-                     np.abs(trajectory.attitude - expected.attitude).max())
+    difference = max(
+        np.abs(trajectory.momentum - expected.momentum).max(), np.abs(trajectory.attitude - expected.attitude).max()
+    )
     assert difference <= 3e-10
 
 
@@ -229,8 +270,9 @@ def test_float32():
     y32 = tuple(x.astype(np.float32) for x in Y0)
     term32 = frbjax.RigidBodyTerm(INERTIA.astype(np.float32), potential=heavy_top_potential)
     args32 = jax.tree_util.tree_map(lambda x: np.asarray(x, np.float32), ARGS)
-    _, single = jax.jit(lambda y0, args: frbjax.splitting_trajectory(
-        term32, y0, dt=0.05, steps=2000, args=args, method="blanes_moan4"))(y32, args32)
+    _, single = jax.jit(
+        lambda y0, args: frbjax.splitting_trajectory(term32, y0, dt=0.05, steps=2000, args=args, method="blanes_moan4")
+    )(y32, args32)
     assert single[0].dtype == np.float32 and single[1].dtype == np.float32
     norms = np.linalg.norm(np.asarray(single[1], np.float64), axis=-1)
     assert np.abs(norms - 1).max() <= 4 * np.finfo(np.float32).eps
@@ -240,8 +282,9 @@ def test_float32():
     assert state_error((single[0][1:201], single[1][1:201]), (momenta[:200], attitudes[:200])) < 6e-5
     # diffeqsolve keeps float32 given float32 times (diffrax promotes the state to the times' dtype).
     times = [np.float32(x) for x in (0.0, 10.0, 0.05)]
-    solution = diffrax.diffeqsolve(term32, frbjax.RigidBodySplitting("blanes_moan4"), *times, y32,
-                                   args=args32, max_steps=250)
+    solution = diffrax.diffeqsolve(
+        term32, frbjax.RigidBodySplitting("blanes_moan4"), *times, y32, args=args32, max_steps=250
+    )
     assert solution.ys[0].dtype == np.float32 and solution.ys[1].dtype == np.float32
     assert state_error((solution.ys[0][-1], solution.ys[1][-1]), (momenta[199], attitudes[199])) < 6e-5
 
@@ -289,8 +332,10 @@ def test_torque_of_the_potential():
     epsilon = 1e-6
     numeric = []
     for axis in np.eye(3):
-        turned = [frbjax.quaternion_from_matrix(
-            frbjax.quaternion_to_matrix(q) @ _rotation(sign * epsilon * axis)) for sign in (1, -1)]
+        turned = [
+            frbjax.quaternion_from_matrix(frbjax.quaternion_to_matrix(q) @ _rotation(sign * epsilon * axis))
+            for sign in (1, -1)
+        ]
         values = [float(heavy_top_potential(0.0, x, ARGS)) for x in turned]
         numeric.append(-(values[0] - values[1]) / (2 * epsilon))
     np.testing.assert_allclose(torque, numeric, rtol=0, atol=5e-11)  # measured 1.1e-11
@@ -309,15 +354,30 @@ def _rotation(vector):
 def test_time_dependent_torque_keeps_the_order():
     """A body-frame torque that turns with time: Yoshida's order 4 holds against Dopri8 (the kicks see
     the time advanced by the free flows; kicks at the step's start would give order 1)."""
+
     def torque(t, q, args):
         return 0.3 * jnp.stack([jnp.cos(2 * t), jnp.sin(2 * t), 0.5 + 0 * t]) - args * q[1:]
 
     term = frbjax.RigidBodyTerm(INERTIA, torque=torque)
-    reference = diffrax.diffeqsolve(term, diffrax.Dopri8(), 0.0, 5.0, 0.01, Y0, args=0.1, max_steps=100_000,
-                                    stepsize_controller=diffrax.PIDController(rtol=1e-13, atol=1e-13))
+    reference = diffrax.diffeqsolve(
+        term,
+        diffrax.Dopri8(),
+        0.0,
+        5.0,
+        0.01,
+        Y0,
+        args=0.1,
+        max_steps=100_000,
+        stepsize_controller=diffrax.PIDController(rtol=1e-13, atol=1e-13),
+    )
     reference = (reference.ys[0][-1], reference.ys[1][-1])
-    run = jax.jit(lambda h: diffrax.diffeqsolve(term, frbjax.RigidBodySplitting("yoshida4"), 0.0, 5.0, h, Y0,
-                                                args=0.1, max_steps=10_000).ys)
+    run = jax.jit(
+        lambda h: (
+            diffrax.diffeqsolve(
+                term, frbjax.RigidBodySplitting("yoshida4"), 0.0, 5.0, h, Y0, args=0.1, max_steps=10_000
+            ).ys
+        )
+    )
     measured = [state_error(tuple(y[-1] for y in run(jnp.asarray(h))), reference) for h in (0.1, 0.05)]
     assert abs(np.log2(measured[0] / measured[1]) - 4) <= 0.3, measured
 
@@ -331,16 +391,23 @@ def test_batch_of_bodies_and_vmap():
     momenta = rng.normal(size=(2, 2, 3))
     attitudes = rng.normal(size=(2, 2, 4))
     attitudes /= np.linalg.norm(attitudes, axis=-1, keepdims=True)
-    _, (batched_momenta, batched_attitudes) = jax.jit(lambda y0: frbjax.splitting_trajectory(
-        TERM, y0, dt=0.1, steps=20, args=ARGS, method="leapfrog"))((momenta, attitudes))
+    _, (batched_momenta, batched_attitudes) = jax.jit(
+        lambda y0: frbjax.splitting_trajectory(TERM, y0, dt=0.1, steps=20, args=ARGS, method="leapfrog")
+    )((momenta, attitudes))
     assert batched_momenta.shape == (21, 2, 2, 3) and batched_attitudes.shape == (21, 2, 2, 4)
     _, alone = solve("leapfrog", 2.0, 0.1, y0=(momenta[1, 0], attitudes[1, 0]))
     assert state_error((batched_momenta[1:, 1, 0], batched_attitudes[1:, 1, 0]), alone) < 3e-15  # 8.9e-16
     run = runner(frbjax.RigidBodySplitting("leapfrog"))
     _, mapped, _ = jax.vmap(run, in_axes=(0, None, None, None, None))(
-        (momenta.reshape(4, 3), attitudes.reshape(4, 4)), ARGS, 0.0, 2.0, 0.1)
-    assert state_error((mapped[0][:, 19], mapped[1][:, 19]),
-                       (batched_momenta[-1].reshape(4, 3), batched_attitudes[-1].reshape(4, 4))) < 1e-14  # 2.7e-15
+        (momenta.reshape(4, 3), attitudes.reshape(4, 4)), ARGS, 0.0, 2.0, 0.1
+    )
+    assert (
+        state_error(
+            (mapped[0][:, 19], mapped[1][:, 19]),
+            (batched_momenta[-1].reshape(4, 3), batched_attitudes[-1].reshape(4, 4)),
+        )
+        < 1e-14
+    )  # 2.7e-15
 
 
 @pytest.mark.parametrize("method", ["aba1064", "strang", "blanes_moan4"])
@@ -351,10 +418,12 @@ def test_saving_every_few_steps_joins_the_free_flows(method):
     (blanes_moan4), where the methods err by 1.4e-9, 1.7e-3 and 5.3e-9.  The last state alone against
     diffeqsolve's: 6.3e-14, 3.2e-14, 5.4e-15 (every step saved: 4.9e-14, 3.8e-15, 5.4e-15: diffrax
     advances the time by sums, the scan by t0 + n dt)."""
-    ts, every = jax.jit(lambda y0: frbjax.splitting_trajectory(TERM, y0, dt=0.1, steps=100, args=ARGS,
-                                                               method=method))(Y0)
-    ts_saved, saved = jax.jit(lambda y0: frbjax.splitting_trajectory(TERM, y0, dt=0.1, steps=100, args=ARGS,
-                                                                     method=method, save_every=10))(Y0)
+    ts, every = jax.jit(lambda y0: frbjax.splitting_trajectory(TERM, y0, dt=0.1, steps=100, args=ARGS, method=method))(
+        Y0
+    )
+    ts_saved, saved = jax.jit(
+        lambda y0: frbjax.splitting_trajectory(TERM, y0, dt=0.1, steps=100, args=ARGS, method=method, save_every=10)
+    )(Y0)
     assert saved[0].shape == (11, 3) and saved[1].shape == (11, 4)
     np.testing.assert_allclose(ts_saved, ts[::10], rtol=1e-15)
     assert state_error(saved, (every[0][::10], every[1][::10])) < 1e-13
@@ -419,11 +488,15 @@ _SAVED_STATES_SCRIPT = textwrap.dedent("""
 
 
 # One body eager: the methods in two processes of about 30 s each (one process was 75 s of CPU).
-@pytest.mark.parametrize("bodies, jitted, methods, cases", [
-    (1, False, ("leapfrog", "strang", "yoshida4", "blanes_moan4"), ((1, 1), (4, 2))),
-    (1, False, ("blanes_moan6", "aba864", "aba1064"), ((1, 1), (4, 2))),
-    (100, True, ("leapfrog", "aba1064"), ((1, 1), (4, 2), (10, 5)))],
-    ids=["one body eager, 2nd and 4th order", "one body eager, 6th order and aba", "100 bodies jit"])
+@pytest.mark.parametrize(
+    "bodies, jitted, methods, cases",
+    [
+        (1, False, ("leapfrog", "strang", "yoshida4", "blanes_moan4"), ((1, 1), (4, 2))),
+        (1, False, ("blanes_moan6", "aba864", "aba1064"), ((1, 1), (4, 2))),
+        (100, True, ("leapfrog", "aba1064"), ((1, 1), (4, 2), (10, 5))),
+    ],
+    ids=["one body eager, 2nd and 4th order", "one body eager, 6th order and aba", "100 bodies jit"],
+)
 def test_saved_states_compile_for_every_method(bodies, jitted, methods, cases):
     """Every method compiles and saves the states of every step (one step, every 2nd of 4, and for
     100 bodies every 5th of 10): one body called eagerly (one-kernel regions: XLA:CPU, jaxlib 0.10.2,
@@ -437,11 +510,18 @@ def test_saved_states_compile_for_every_method(bodies, jitted, methods, cases):
     2.1e-15.  One body eager also calls each method's ``RigidBodySplitting.step`` on its own
     (leapfrog's aborted the process too)."""
     env = dict(os.environ, JAX_PLATFORMS="cpu")
-    process = subprocess.run([sys.executable, "-c", _SAVED_STATES_SCRIPT, json.dumps([methods, cases, bodies, jitted])],
-                             check=False, cwd=REPOSITORY, env=env, capture_output=True, text=True, timeout=600)
+    process = subprocess.run(
+        [sys.executable, "-c", _SAVED_STATES_SCRIPT, json.dumps([methods, cases, bodies, jitted])],
+        check=False,
+        cwd=REPOSITORY,
+        env=env,
+        capture_output=True,
+        text=True,
+        timeout=600,
+    )
     started = [line for line in process.stdout.splitlines() if line.startswith("CASE ")]
     assert process.returncode == 0, f"{started[-1:]} exit {process.returncode}: {process.stderr[-2000:]}"
-    errors = json.loads(process.stdout.splitlines()[-1][len("RESULT "):])
+    errors = json.loads(process.stdout.splitlines()[-1][len("RESULT ") :])
     assert len(errors) == len(methods) * (len(cases) + (not jitted))
     assert max(errors.values()) < 1e-13, errors
 
@@ -453,16 +533,26 @@ def _final_value(inertia, momentum, attitude, chi, step, steps=1000):
     """A scalar of the state after ``steps`` leapfrog steps: what the derivatives are taken of."""
     term = frbjax.RigidBodyTerm(inertia, potential=heavy_top_potential)
     args = {"weight": 1.0, "chi": chi}
-    solution = diffrax.diffeqsolve(term, frbjax.RigidBodySplitting("leapfrog"), 0.0, steps * step, step,
-                                   (momentum, attitude), args=args, max_steps=steps + 10)
+    solution = diffrax.diffeqsolve(
+        term,
+        frbjax.RigidBodySplitting("leapfrog"),
+        0.0,
+        steps * step,
+        step,
+        (momentum, attitude),
+        args=args,
+        max_steps=steps + 10,
+    )
     momentum, attitude = solution.ys[0][-1], solution.ys[1][-1]
     return momentum @ jnp.array([0.3, -0.5, 0.7]) + attitude @ jnp.array([0.2, 0.4, -0.1, 0.6])
 
 
 def _central_difference(function, x, direction, epsilon=1e-4):
     """(4 D(eps/2) - D(eps)) / 3 with D the central difference: error O(eps^4)."""
+
     def difference(e):
         return (function(x + e * direction) - function(x - e * direction)) / (2 * e)
+
     return (4 * difference(epsilon / 2) - difference(epsilon)) / 3
 
 
@@ -470,8 +560,7 @@ def test_gradients_through_1000_steps():
     """Reverse mode (diffeqsolve, RecursiveCheckpointAdjoint) and forward mode (splitting_trajectory)
     against Richardson-extrapolated central differences, in every input: moments, initial L and q,
     the potential's parameter chi, the step."""
-    inputs = [jnp.asarray(INERTIA), jnp.asarray(Y0[0]), jnp.asarray(Y0[1]), jnp.asarray(ARGS["chi"]),
-              jnp.asarray(0.01)]
+    inputs = [jnp.asarray(INERTIA), jnp.asarray(Y0[0]), jnp.asarray(Y0[1]), jnp.asarray(ARGS["chi"]), jnp.asarray(0.01)]
     value = jax.jit(_final_value)
     gradients = jax.jit(jax.grad(_final_value, argnums=(0, 1, 2, 3, 4)))(*inputs)
     rng = np.random.default_rng(0)
@@ -492,8 +581,13 @@ def test_gradients_through_1000_steps():
     # Forward mode through the lean scan: the same directional derivative in chi.
     def final_lean(chi):
         _, (momenta, attitudes) = frbjax.splitting_trajectory(
-            frbjax.RigidBodyTerm(inputs[0], potential=heavy_top_potential), (inputs[1], inputs[2]),
-            dt=0.01, steps=1000, args={"weight": 1.0, "chi": chi}, method="leapfrog")
+            frbjax.RigidBodyTerm(inputs[0], potential=heavy_top_potential),
+            (inputs[1], inputs[2]),
+            dt=0.01,
+            steps=1000,
+            args={"weight": 1.0, "chi": chi},
+            method="leapfrog",
+        )
         return momenta[-1] @ jnp.array([0.3, -0.5, 0.7]) + attitudes[-1] @ jnp.array([0.2, 0.4, -0.1, 0.6])
 
     direction = jnp.array([0.6, 0.0, -0.8])
@@ -514,13 +608,15 @@ def test_potential_must_return_a_scalar():
 
 def test_torque_must_have_shape_3():
     term = frbjax.RigidBodyTerm(INERTIA, torque=lambda t, q, args: q)
-    with pytest.raises(ValueError, match=re.escape("torque must return the body-frame torque of one body, "
-                                                   "shape (3,), got shape (4,)")):
+    with pytest.raises(
+        ValueError, match=re.escape("torque must return the body-frame torque of one body, shape (3,), got shape (4,)")
+    ):
         frbjax.splitting_trajectory(term, Y0, dt=0.1, steps=2)
 
 
-three_steps = jax.jit(lambda y0, step: frbjax.splitting_trajectory(TERM, y0, dt=step, steps=3, args=ARGS,
-                                                                    method="leapfrog"))
+three_steps = jax.jit(
+    lambda y0, step: frbjax.splitting_trajectory(TERM, y0, dt=step, steps=3, args=ARGS, method="leapfrog")
+)
 
 
 @pytest.mark.parametrize("step", [0.0, -0.1, np.nan, np.inf])
@@ -559,8 +655,16 @@ def test_bad_term_and_method():
     with pytest.raises(ValueError, match="one coefficient more"):
         frbjax.RigidBodySplitting(kicks=[0.5, 0.5], flows=[0.5, 0.5])
     with pytest.raises(RuntimeError, match="error estimates"):
-        diffrax.diffeqsolve(TERM, frbjax.RigidBodySplitting(), 0.0, 1.0, 0.1, Y0, args=ARGS,
-                            stepsize_controller=diffrax.PIDController(rtol=1e-6, atol=1e-6))
+        diffrax.diffeqsolve(
+            TERM,
+            frbjax.RigidBodySplitting(),
+            0.0,
+            1.0,
+            0.1,
+            Y0,
+            args=ARGS,
+            stepsize_controller=diffrax.PIDController(rtol=1e-6, atol=1e-6),
+        )
 
 
 def test_user_coefficients():
@@ -580,8 +684,8 @@ def test_matrix_helpers_round_trip():
     q = rng.normal(size=(5, 4))
     q /= np.linalg.norm(q, axis=-1, keepdims=True)
     matrices = np.asarray(frbjax.quaternion_to_matrix(q))
-    np.testing.assert_allclose(np.einsum("nij,nkj->nik", matrices, matrices),
-                               np.broadcast_to(np.eye(3), (5, 3, 3)), atol=1e-15)
+    np.testing.assert_allclose(
+        np.einsum("nij,nkj->nik", matrices, matrices), np.broadcast_to(np.eye(3), (5, 3, 3)), atol=1e-15
+    )
     back = np.asarray(frbjax.quaternion_from_matrix(matrices))
     np.testing.assert_allclose(np.abs(np.einsum("ni,ni->n", back, q)), 1, atol=1e-15)
-

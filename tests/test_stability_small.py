@@ -16,6 +16,7 @@ from pathlib import Path
 
 import numpy as np
 
+
 STABILITY = Path(__file__).resolve().parent.parent / "benchmarks" / "stability.py"
 EPS = float(np.finfo(np.float64).eps)
 # Measured on these points (3 perturbations, jit, float64): worst error / max(floor, eps) per sweep
@@ -43,36 +44,58 @@ def _cases():
     def add(sweep, label, inertia, momentum, taus):
         momentum = np.asarray(momentum, np.float64)
         norm = float(np.linalg.norm(momentum))
-        cases.append(dict(sweep=sweep, label=label, inertia=np.array(inertia, np.float64), momentum=momentum,
-                          attitude=stability._unit(rng.normal(size=4)),
-                          times=np.array([tau / norm for tau in taus])))
+        cases.append(
+            dict(
+                sweep=sweep,
+                label=label,
+                inertia=np.array(inertia, np.float64),
+                momentum=momentum,
+                attitude=stability._unit(rng.normal(size=4)),
+                times=np.array([tau / norm for tau in taus]),
+            )
+        )
 
     taus = (3.0, -300.0)
     for exponent in (4, 12, 16):
         for side in (1, -1):
-            momentum = stability.near_separatrix((1.0, 2.0, 3.0), side * 10.0**-exponent, 0.3,
-                                                 tuple(rng.choice([-1, 1], 3)))
+            momentum = stability.near_separatrix(
+                (1.0, 2.0, 3.0), side * 10.0**-exponent, 0.3, tuple(rng.choice([-1, 1], 3))
+            )
             add("separatrix", f"d I2 - 1 = {side * 10.0**-exponent:g}", (1.0, 2.0, 3.0), momentum, taus)
     add("separatrix", "d I2 - 1 = 0", (1.0, 1.5, 3.0), (1.0, 0.3, 1.0), taus)
     for exponent in (8, 13, 15):
         for direction in ((0.6, 0.0, 0.8), (0.3, 0.0, 0.95)):
-            momentum = rng.choice([-1.0, 1.0], 3) * (np.array([0.0, 1.0, 0.0]) + 10.0**-exponent * stability._unit(direction))
-            add("saddle", f"L at 1e-{exponent} from the middle axis, direction {direction}", (1.0, 2.0, 3.0), momentum,
-                (0.1, -1.0))
-    for label, inertia in (("(I2-I1)/I1 = 1e-8", (1.0, 1 + 1e-8, 3.0)), ("(I2-I1)/I1 = 1 ulp", (1 - 2.0**-53, 1.0, 3.0)),
-                           ("(I3-I2)/I2 = 1 ulp", (1.0, 2 - 2.0**-52, 2.0))):
+            momentum = rng.choice([-1.0, 1.0], 3) * (
+                np.array([0.0, 1.0, 0.0]) + 10.0**-exponent * stability._unit(direction)
+            )
+            add(
+                "saddle",
+                f"L at 1e-{exponent} from the middle axis, direction {direction}",
+                (1.0, 2.0, 3.0),
+                momentum,
+                (0.1, -1.0),
+            )
+    for label, inertia in (
+        ("(I2-I1)/I1 = 1e-8", (1.0, 1 + 1e-8, 3.0)),
+        ("(I2-I1)/I1 = 1 ulp", (1 - 2.0**-53, 1.0, 3.0)),
+        ("(I3-I2)/I2 = 1 ulp", (1.0, 2 - 2.0**-52, 2.0)),
+    ):
         add("gaps", label + ", generic L", inertia, stability._unit(stability.GENERIC), taus)
         close = (0.6, 0.79, 0.12) if "I2-I1" in label else (0.12, 0.6, 0.79)
         add("gaps", label + ", L near the close pair", inertia, stability._unit(close), taus)
     add("time", "generic, |L| t to 1e6", (1.0, 2.0, 3.0), stability._unit((0.3, 0.2, 0.93)), (1e3, 1e6))
     add("time", "around I1, |L| t to 1e6", (1.0, 2.0, 3.0), stability._unit((0.93, 0.2, 0.3)), (-1e4, 1e6))
     for r in (1e3, 1e6):
-        add("ratios", f"I = (1, sqrt r, r), r = {r:g}", (1.0, math.sqrt(r), r), stability._unit(stability.GENERIC),
-            (1.0, -100.0))
+        add(
+            "ratios",
+            f"I = (1, sqrt r, r), r = {r:g}",
+            (1.0, math.sqrt(r), r),
+            stability._unit(stability.GENERIC),
+            (1.0, -100.0),
+        )
         add("ratios", f"I = (1, 2, r), r = {r:g}", (1.0, 2.0, r), stability._unit(stability.GENERIC), (1.0, -100.0))
     for scale in (1e-6, 1e6):
-        add("momentum", f"|L| = {scale:g}", (1.0, 2.0, 3.0), scale * stability._unit(stability.GENERIC),
-            (1.0, -100.0))
+        add("momentum", f"|L| = {scale:g}", (1.0, 2.0, 3.0), scale * stability._unit(stability.GENERIC), (1.0, -100.0))
     return cases
 
 
@@ -86,7 +109,7 @@ SWEEPS = ("separatrix", "saddle", "gaps", "time", "ratios", "momentum")
 SADDLE_FACTOR = 60.0
 
 
-@functools.lru_cache(maxsize=None)
+@functools.cache
 def frbjax_values():
     """frbjax's (L, q) at every case's times, (N, K, 3) and (N, K, 4), once per test process: one batch
     of N bodies at times (K, N), jit-compiled as a user would run it (~35 s of compilation)."""
@@ -129,8 +152,9 @@ def test_error_within_conditioning():
                     ratio = error / max(floor, EPS)
                     worst[sweep] = max(worst.get(sweep, 0.0), ratio)
                     if not ratio <= factor:
-                        failures.append(f"{sweep}: {c['label']}, t = {t:g}: {quantity} error {error:.2e}, "
-                                        f"floor {floor:.2e}")
+                        failures.append(
+                            f"{sweep}: {c['label']}, t = {t:g}: {quantity} error {error:.2e}, floor {floor:.2e}"
+                        )
     assert not failures, "\n".join(failures)
     assert set(worst) == set(SWEEPS) and all(value > 0 for value in worst.values())
 

@@ -10,6 +10,7 @@ from pathlib import Path
 
 import pytest
 
+
 _LIMIT = 0.5
 
 _FILES = {
@@ -56,12 +57,34 @@ def suite(tmp_path_factory):
 
 def _run(directory, *arguments, slow_total):
     # Only the plugins the run needs (the others' imports would take most of its time).
-    environment = dict(os.environ, FRBJAX_TEST_TIME_LIMIT=str(_LIMIT), FRBJAX_SLOW_TOTAL_LIMIT=str(slow_total),
-                       PYTEST_DISABLE_PLUGIN_AUTOLOAD="1",
-                       PYTHONPATH=os.pathsep.join([str(Path(__file__).parent), os.environ.get("PYTHONPATH", "")]))
-    return subprocess.run([sys.executable, "-m", "pytest", "-p", "xdist.plugin", "-p", "_time_budget",
-                           "-p", "no:cacheprovider", "-rA", *arguments], check=False, cwd=directory, env=environment, capture_output=True, text=True,
-                          timeout=120)
+    environment = dict(
+        os.environ,
+        FRBJAX_TEST_TIME_LIMIT=str(_LIMIT),
+        FRBJAX_SLOW_TOTAL_LIMIT=str(slow_total),
+        PYTEST_DISABLE_PLUGIN_AUTOLOAD="1",
+        PYTHONPATH=os.pathsep.join([str(Path(__file__).parent), os.environ.get("PYTHONPATH", "")]),
+    )
+    return subprocess.run(
+        [
+            sys.executable,
+            "-m",
+            "pytest",
+            "-p",
+            "xdist.plugin",
+            "-p",
+            "_time_budget",
+            "-p",
+            "no:cacheprovider",
+            "-rA",
+            *arguments,
+        ],
+        check=False,
+        cwd=directory,
+        env=environment,
+        capture_output=True,
+        text=True,
+        timeout=120,
+    )
 
 
 def test_unmarked_test_over_the_limit_fails_with_its_setup_counted(suite):

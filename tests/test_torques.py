@@ -27,6 +27,7 @@ from scipy.spatial.transform import Rotation
 import frbjax
 from frbjax import torques
 
+
 INERTIA = np.array([1.0, 1.6, 2.3])
 _Q0 = np.array([0.9, 0.3, -0.2, 0.1])
 Y0 = (np.array([0.3, 0.8, 2.0]), _Q0 / np.linalg.norm(_Q0))
@@ -35,8 +36,10 @@ TARGET = _TARGET / np.linalg.norm(_TARGET)
 DAMPING = np.array([[0.2, 0.05, 0.0], [0.05, 0.1, 0.02], [0.0, 0.02, 0.15]])
 
 # A PD controller to TARGET with an extra damping tensor: a torque depending on q and L, affine in L.
-CONTROLLED = frbjax.RigidBodyTerm(INERTIA, momentum_torque=torques.PDController(INERTIA, 0.6, 0.1, target=TARGET)
-                                  + torques.LinearDamping(INERTIA, DAMPING))
+CONTROLLED = frbjax.RigidBodyTerm(
+    INERTIA,
+    momentum_torque=torques.PDController(INERTIA, 0.6, 0.1, target=TARGET) + torques.LinearDamping(INERTIA, DAMPING),
+)
 
 
 def nonlinear_torque(t, q, L, args):
@@ -50,15 +53,26 @@ TERMS = {"controlled": CONTROLLED, "nonlinear": NONLINEAR}
 
 
 def state_error(y, reference):
-    return float(max(np.abs(np.asarray(y[0]) - np.asarray(reference[0])).max(),
-                     np.abs(np.asarray(y[1]) - np.asarray(reference[1])).max()))
+    return float(
+        max(
+            np.abs(np.asarray(y[0]) - np.asarray(reference[0])).max(),
+            np.abs(np.asarray(y[1]) - np.asarray(reference[1])).max(),
+        )
+    )
 
 
 @functools.cache
 def dopri8(name, final_time, tolerance):
     solution = diffrax.diffeqsolve(
-        TERMS[name], diffrax.Dopri8(), 0.0, final_time, 0.01, Y0, max_steps=1_000_000,
-        stepsize_controller=diffrax.PIDController(rtol=tolerance, atol=tolerance))
+        TERMS[name],
+        diffrax.Dopri8(),
+        0.0,
+        final_time,
+        0.01,
+        Y0,
+        max_steps=1_000_000,
+        stepsize_controller=diffrax.PIDController(rtol=tolerance, atol=tolerance),
+    )
     return solution.ys[0][-1], solution.ys[1][-1]
 
 
@@ -68,8 +82,7 @@ def splitting_runner(name, method):
 
     @jax.jit
     def run(step):
-        solution = diffrax.diffeqsolve(term, frbjax.RigidBodySplitting(method), 0.0, 10.0, step, Y0,
-                                       max_steps=10_000)
+        solution = diffrax.diffeqsolve(term, frbjax.RigidBodySplitting(method), 0.0, 10.0, step, Y0, max_steps=10_000)
         return solution.ys[0][-1], solution.ys[1][-1]
 
     return run
@@ -80,15 +93,30 @@ def splitting_runner(name, method):
 # The orders kept with a torque that depends on L: blanes_moan6 (SRKN6a) keeps 4, its sixth order
 # needing kicks that depend on q only.  Steps in the asymptotic regime, errors far above the
 # reference's floor (measured 5.1e-14 for the controlled body, 4.4e-14 for the nonlinear one).
-KEPT_ORDERS = {"leapfrog": 2, "strang": 2, "yoshida4": 4, "blanes_moan4": 4, "blanes_moan6": 4, "aba864": 4,
-               "aba1064": 4}
-ORDER_STEPS = {"leapfrog": (0.04, 0.02, 0.01), "strang": (0.04, 0.02, 0.01), "yoshida4": (0.08, 0.04, 0.02),
-               "blanes_moan4": (0.2, 0.1, 0.05), "blanes_moan6": (0.5, 0.25, 0.125), "aba864": (0.2, 0.1, 0.05),
-               "aba1064": (0.2, 0.1, 0.05)}
+KEPT_ORDERS = {
+    "leapfrog": 2,
+    "strang": 2,
+    "yoshida4": 4,
+    "blanes_moan4": 4,
+    "blanes_moan6": 4,
+    "aba864": 4,
+    "aba1064": 4,
+}
+ORDER_STEPS = {
+    "leapfrog": (0.04, 0.02, 0.01),
+    "strang": (0.04, 0.02, 0.01),
+    "yoshida4": (0.08, 0.04, 0.02),
+    "blanes_moan4": (0.2, 0.1, 0.05),
+    "blanes_moan6": (0.5, 0.25, 0.125),
+    "aba864": (0.2, 0.1, 0.05),
+    "aba1064": (0.2, 0.1, 0.05),
+}
 
 
-@pytest.mark.parametrize("name,method", [("controlled", m) for m in KEPT_ORDERS]
-                         + [("nonlinear", m) for m in ("leapfrog", "yoshida4", "blanes_moan6")])
+@pytest.mark.parametrize(
+    "name,method",
+    [("controlled", m) for m in KEPT_ORDERS] + [("nonlinear", m) for m in ("leapfrog", "yoshida4", "blanes_moan6")],
+)
 def test_order_with_momentum_torques(name, method):
     """T = 10 against Dopri8 at 1e-13: slopes within 0.3 of the order kept.
 
@@ -113,11 +141,22 @@ def test_order_six_with_a_momentum_torque_free_of_momentum():
     gravity = torques.UniformGravity([0.05, 0.1, 0.4], [0.0, 0.0, -1.0])
     term = frbjax.RigidBodyTerm(INERTIA, momentum_torque=gravity)
     by_potential = frbjax.RigidBodyTerm(INERTIA, potential=gravity.potential)
-    solution = diffrax.diffeqsolve(by_potential, diffrax.Dopri8(), 0.0, 20.0, 0.01, Y0, max_steps=100_000,
-                                   stepsize_controller=diffrax.PIDController(rtol=1e-14, atol=1e-14))
+    solution = diffrax.diffeqsolve(
+        by_potential,
+        diffrax.Dopri8(),
+        0.0,
+        20.0,
+        0.01,
+        Y0,
+        max_steps=100_000,
+        stepsize_controller=diffrax.PIDController(rtol=1e-14, atol=1e-14),
+    )
     reference = (solution.ys[0][-1], solution.ys[1][-1])
-    run = jax.jit(lambda h: diffrax.diffeqsolve(term, frbjax.RigidBodySplitting("blanes_moan6"), 0.0, 20.0, h, Y0,
-                                                max_steps=1000).ys)
+    run = jax.jit(
+        lambda h: (
+            diffrax.diffeqsolve(term, frbjax.RigidBodySplitting("blanes_moan6"), 0.0, 20.0, h, Y0, max_steps=1000).ys
+        )
+    )
     steps = np.array([0.5, 0.35, 0.25])
     measured = [state_error(tuple(y[-1] for y in run(jnp.asarray(h))), reference) for h in steps]
     slope = np.polyfit(np.log(steps), np.log(measured), 1)[0]
@@ -138,20 +177,29 @@ def test_torques_free_of_momentum_kick_as_torques():
     assert (gradient + damping).depends_on_momentum and damping.depends_on_momentum
     term = frbjax.RigidBodyTerm(INERTIA, momentum_torque=gravity + gradient)
     assert term.momentum_torque is None and term.torque is not None
-    both = frbjax.RigidBodyTerm(INERTIA, potential=lambda t, q, args: gravity.potential(t, q, args)
-                                + gradient.potential(t, q, args))
+    both = frbjax.RigidBodyTerm(
+        INERTIA, potential=lambda t, q, args: gravity.potential(t, q, args) + gradient.potential(t, q, args)
+    )
     q = jnp.asarray(Y0[1]) / jnp.linalg.norm(jnp.asarray(Y0[1]))
     torque = term.body_torque(0.7, q, None, jnp.asarray(Y0[0]))
     np.testing.assert_allclose(torque, both.body_torque(0.7, q, None), rtol=0, atol=2e-16)
-    with_user = frbjax.RigidBodyTerm(INERTIA, torque=lambda t, q, args: jnp.array([0.0, 0.0, 0.2]),
-                                     momentum_torque=gradient)
-    np.testing.assert_allclose(with_user.body_torque(0.7, q, None),
-                               gradient(0.7, q, None, None) + jnp.array([0.0, 0.0, 0.2]), rtol=0, atol=1e-15)
+    with_user = frbjax.RigidBodyTerm(
+        INERTIA, torque=lambda t, q, args: jnp.array([0.0, 0.0, 0.2]), momentum_torque=gradient
+    )
+    np.testing.assert_allclose(
+        with_user.body_torque(0.7, q, None),
+        gradient(0.7, q, None, None) + jnp.array([0.0, 0.0, 0.2]),
+        rtol=0,
+        atol=1e-15,
+    )
     damped = frbjax.RigidBodyTerm(INERTIA, momentum_torque=gradient + damping)
     assert damped.momentum_torque is not None and damped.linear_in_momentum
-    steps = [jax.jit(lambda y0, term=term: frbjax.splitting_trajectory(term, y0, dt=0.1, steps=20,
-                                                                       method="blanes_moan4"))(Y0)[1]
-             for term in (term, both)]
+    steps = [
+        jax.jit(lambda y0, term=term: frbjax.splitting_trajectory(term, y0, dt=0.1, steps=20, method="blanes_moan4"))(
+            Y0
+        )[1]
+        for term in (term, both)
+    ]
     assert state_error((steps[0][0][-1], steps[0][1][-1]), (steps[1][0][-1], steps[1][1][-1])) < 1.5e-15
 
 
@@ -166,8 +214,9 @@ def test_damped_sphere_exact_damping_kick():
     term = frbjax.RigidBodyTerm(inertia, momentum_torque=torques.LinearDamping(inertia, c))
     momentum0 = np.array([0.3, -0.5, 1.1])
     q0 = np.array([0.6, 0.0, 0.8, 0.0])
-    ts, (momenta, attitudes) = frbjax.splitting_trajectory(term, (momentum0, q0), dt=0.1, steps=400,
-                                                           method="blanes_moan4")
+    ts, (momenta, attitudes) = frbjax.splitting_trajectory(
+        term, (momentum0, q0), dt=0.1, steps=400, method="blanes_moan4"
+    )
     ts = np.asarray(ts)
     expected = momentum0 * np.exp(-c * ts[:, None] / moment)
     eps = np.finfo(np.float64).eps
@@ -203,8 +252,9 @@ def _torque_by_differences(potential_of_matrix, q, epsilon=1e-5):
     matrix = _matrix(q)
     torque = []
     for axis in np.eye(3):
-        values = [potential_of_matrix(matrix @ Rotation.from_rotvec(sign * epsilon * axis).as_matrix())
-                  for sign in (1, -1)]
+        values = [
+            potential_of_matrix(matrix @ Rotation.from_rotvec(sign * epsilon * axis).as_matrix()) for sign in (1, -1)
+        ]
         torque.append(-(values[0] - values[1]) / (2 * epsilon))
     return np.array(torque)
 
@@ -213,6 +263,7 @@ def test_uniform_gravity_against_its_potential():
     centre, weight = np.array([0.05, 0.1, 0.4]), np.array([0.3, -0.2, -9.8])
     gravity = torques.UniformGravity(centre, weight)
     for momentum, q in zip(*_random_states(3, 0)):
+
         def potential(matrix):
             return -weight @ (matrix @ centre)  # the height of the centre of mass times the weight
 
@@ -270,11 +321,13 @@ def test_eddy_current_and_damping_in_the_space_frame():
         omega = matrix @ (momentum / inertia)
         field_space = np.asarray(field(t))
         space = np.cross(matrix @ tensor @ matrix.T @ np.cross(omega, field_space), field_space)
-        np.testing.assert_allclose(np.asarray(eddy(t, jnp.asarray(q), jnp.asarray(momentum), None)),
-                                   matrix.T @ space, rtol=0, atol=1e-14)
+        np.testing.assert_allclose(
+            np.asarray(eddy(t, jnp.asarray(q), jnp.asarray(momentum), None)), matrix.T @ space, rtol=0, atol=1e-14
+        )
         space = -(matrix @ DAMPING @ matrix.T) @ omega
-        np.testing.assert_allclose(np.asarray(damping(t, jnp.asarray(q), jnp.asarray(momentum), None)),
-                                   matrix.T @ space, rtol=0, atol=1e-14)
+        np.testing.assert_allclose(
+            np.asarray(damping(t, jnp.asarray(q), jnp.asarray(momentum), None)), matrix.T @ space, rtol=0, atol=1e-14
+        )
 
 
 def test_pd_controller_against_the_axis_angle_of_the_error():
@@ -318,8 +371,11 @@ def test_b_dot_against_the_field_rate_seen_by_the_body():
 
 def test_sums_and_constant_torque():
     inertia = np.array([3.0, 2.0, 1.5])
-    parts = [torques.ConstantTorque([0.1, -0.2, 0.3]), torques.LinearDamping(inertia, 0.4),
-             torques.EddyCurrent(inertia, 0.7, [0.0, 0.3, 1.0])]
+    parts = [
+        torques.ConstantTorque([0.1, -0.2, 0.3]),
+        torques.LinearDamping(inertia, 0.4),
+        torques.EddyCurrent(inertia, 0.7, [0.0, 0.3, 1.0]),
+    ]
     total = parts[0] + parts[1] + parts[2]
     assert isinstance(total, torques.SumOfTorques) and len(total.torques) == 3 and total.linear_in_momentum
     momentum, q = (x[0] for x in _random_states(1, 5))
@@ -339,8 +395,7 @@ def test_three_kinds_of_torque_add_up():
     turning = lambda t, q, args: jnp.stack([jnp.sin(t), 0.2 + 0 * t, -q[1]])  # noqa: E731
     damping = torques.LinearDamping(INERTIA, DAMPING)
     together = frbjax.RigidBodyTerm(INERTIA, potential=gravity.potential, torque=turning, momentum_torque=damping)
-    alone = [frbjax.RigidBodyTerm(INERTIA, potential=gravity.potential),
-             frbjax.RigidBodyTerm(INERTIA, torque=turning)]
+    alone = [frbjax.RigidBodyTerm(INERTIA, potential=gravity.potential), frbjax.RigidBodyTerm(INERTIA, torque=turning)]
     momentum, q = jnp.asarray(Y0[0]), jnp.asarray(Y0[1])
     expected = sum(np.asarray(term.body_torque(0.4, q, None)) for term in alone)
     expected = expected + np.asarray(damping(0.4, q, momentum, None))
@@ -354,14 +409,21 @@ def test_gradient_through_the_exact_damping_kick():
 
     def final_momentum(c):
         term = frbjax.RigidBodyTerm(jnp.full(3, moment), momentum_torque=torques.LinearDamping(jnp.full(3, moment), c))
-        solution = diffrax.diffeqsolve(term, frbjax.RigidBodySplitting("leapfrog"), 0.0, final_time, 0.1,
-                                       (momentum0, jnp.array([1.0, 0.0, 0.0, 0.0])))
+        solution = diffrax.diffeqsolve(
+            term,
+            frbjax.RigidBodySplitting("leapfrog"),
+            0.0,
+            final_time,
+            0.1,
+            (momentum0, jnp.array([1.0, 0.0, 0.0, 0.0])),
+        )
         return solution.ys[0][-1]
 
     def final_momentum_lean(c):
         term = frbjax.RigidBodyTerm(jnp.full(3, moment), momentum_torque=torques.LinearDamping(jnp.full(3, moment), c))
-        _, (momenta, _) = frbjax.splitting_trajectory(term, (momentum0, jnp.array([1.0, 0.0, 0.0, 0.0])), dt=0.1,
-                                                      steps=30, method="leapfrog")
+        _, (momenta, _) = frbjax.splitting_trajectory(
+            term, (momentum0, jnp.array([1.0, 0.0, 0.0, 0.0])), dt=0.1, steps=30, method="leapfrog"
+        )
         return momenta[-1]
 
     c = 0.3
@@ -393,11 +455,14 @@ def test_momentum_torque_returning_nan():
     assert np.all(np.isnan(np.asarray(states[0][1:])))
 
 
-@pytest.mark.parametrize("make", [
-    lambda matrix: torques.LinearDamping(INERTIA, matrix),
-    lambda matrix: torques.EddyCurrent(INERTIA, matrix, [0.0, 0.0, 1.0]),
-    lambda matrix: torques.PDController(INERTIA, 1.0, matrix),
-])
+@pytest.mark.parametrize(
+    "make",
+    [
+        lambda matrix: torques.LinearDamping(INERTIA, matrix),
+        lambda matrix: torques.EddyCurrent(INERTIA, matrix, [0.0, 0.0, 1.0]),
+        lambda matrix: torques.PDController(INERTIA, 1.0, matrix),
+    ],
+)
 def test_tensors_must_be_positive_semidefinite(make):
     with pytest.raises(ValueError, match="symmetric positive semidefinite matrix; its smallest eigenvalue is -0.5"):
         make(np.diag([1.0, -0.5, 2.0]))

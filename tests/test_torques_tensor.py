@@ -17,6 +17,7 @@ import numpy as np
 
 from frbjax import InertiaTensor, RigidBodyTerm, splitting_trajectory, torques
 
+
 TENSOR = np.array([[2.0, 0.15, -0.1], [0.15, 3.0, 0.2], [-0.1, 0.2, 4.0]])
 DAMPING = 0.05
 MOMENTUM = np.array([0.4, 1.0, -0.3])
@@ -39,23 +40,35 @@ def reference(momentum, attitude, final_time):
         momentum, attitude = y[:3], y[3:]
         omega = inverse @ momentum
         torque = -DAMPING * omega  # viscous damping tau = -c Omega
-        return jnp.concatenate([jnp.cross(momentum, omega) + torque,
-                                0.5 * _hamilton(attitude, jnp.concatenate([jnp.zeros(1), omega]))])
+        return jnp.concatenate(
+            [jnp.cross(momentum, omega) + torque, 0.5 * _hamilton(attitude, jnp.concatenate([jnp.zeros(1), omega]))]
+        )
 
-    solution = diffrax.diffeqsolve(diffrax.ODETerm(field), diffrax.Dopri8(), 0.0, final_time, 1e-3,
-                                   jnp.concatenate([jnp.asarray(momentum), jnp.asarray(attitude)]),
-                                   stepsize_controller=diffrax.PIDController(rtol=RTOL, atol=ATOL),
-                                   max_steps=100_000)
+    solution = diffrax.diffeqsolve(
+        diffrax.ODETerm(field),
+        diffrax.Dopri8(),
+        0.0,
+        final_time,
+        1e-3,
+        jnp.concatenate([jnp.asarray(momentum), jnp.asarray(attitude)]),
+        stepsize_controller=diffrax.PIDController(rtol=RTOL, atol=ATOL),
+        max_steps=100_000,
+    )
     return solution.ys[-1, :3], solution.ys[-1, 3:]
 
 
 def stored_reference():
     with np.load(DATA) as data:
         assert float(data["rtol"]) == RTOL and float(data["atol"]) == ATOL
-        for name, value in (("tensor", TENSOR), ("momentum", MOMENTUM), ("attitude", ATTITUDE),
-                            ("final_time", FINAL_TIME)):
-            np.testing.assert_array_equal(data[f"torqued_{name}"], value,
-                                          err_msg=f"{name}; rerun tests/data/make_tensor_references.py")
+        for name, value in (
+            ("tensor", TENSOR),
+            ("momentum", MOMENTUM),
+            ("attitude", ATTITUDE),
+            ("final_time", FINAL_TIME),
+        ):
+            np.testing.assert_array_equal(
+                data[f"torqued_{name}"], value, err_msg=f"{name}; rerun tests/data/make_tensor_references.py"
+            )
         return data["torqued_L"], data["torqued_q"]
 
 
@@ -67,8 +80,13 @@ def test_damped_tilted_body_against_dopri8():
     L_ref, q_ref = stored_reference()
     errors = []
     for steps in (10, 20):
-        _, (L, q) = splitting_trajectory(term, (jnp.asarray(MOMENTUM), jnp.asarray(ATTITUDE)),
-                                         dt=FINAL_TIME / steps, steps=steps, method="blanes_moan4")
+        _, (L, q) = splitting_trajectory(
+            term,
+            (jnp.asarray(MOMENTUM), jnp.asarray(ATTITUDE)),
+            dt=FINAL_TIME / steps,
+            steps=steps,
+            method="blanes_moan4",
+        )
         errors.append(max(float(jnp.max(jnp.abs(L[-1] - L_ref))), float(jnp.max(jnp.abs(q[-1] - q_ref)))))
     # Fourth order (the kicks and the free flows exact, their splitting not): measured errors 2.65e-9
     # and 1.65e-10 at 10 and 20 steps, slope 4.006.

@@ -19,6 +19,7 @@ from scipy.spatial.transform import Rotation
 from frbjax import FreeRigidBody
 from frbjax.lightcurve import tumbler_periods as _tumbler_periods
 
+
 # One compiled program each (eagerly, every operation of the periods and their gradient would compile).
 tumbler_periods = jax.jit(_tumbler_periods)
 psi_gradient = jax.jit(jax.grad(lambda inertia, momentum: _tumbler_periods(inertia, momentum)[0]))

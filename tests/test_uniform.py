@@ -15,9 +15,36 @@ import numpy as np
 
 from frbjax._uniform import response_functions
 
+
 # Both signs, both sides of the series limit |y| = 1, up to the overflow guard (sqrt(-y) = 700).
-ARGUMENTS = np.array([-4.0e5, -400.0, -9.0, -1.0000001, -1.0, -0.9999999, -0.5, -1e-3, -3.99, -4.01, -1e-20, 0.0,
-                      1e-20, 1e-3, 0.5, 3.99, 4.01, 0.9999999, 1.0, 1.0000001, 2.0, 30.0, 1e4, 1e8])
+ARGUMENTS = np.array(
+    [
+        -4.0e5,
+        -400.0,
+        -9.0,
+        -1.0000001,
+        -1.0,
+        -0.9999999,
+        -0.5,
+        -1e-3,
+        -3.99,
+        -4.01,
+        -1e-20,
+        0.0,
+        1e-20,
+        1e-3,
+        0.5,
+        3.99,
+        4.01,
+        0.9999999,
+        1.0,
+        1.0000001,
+        2.0,
+        30.0,
+        1e4,
+        1e8,
+    ]
+)
 # The error measure: |f - f_ref| / max(|f_ref|, envelope), envelope 1/x, 1/x^2, 1/x^2 for y > 1 (where
 # the functions oscillate through 0), in units of the conditioning of x = sqrt|y| itself,
 # eps max(1, x) (sin, cos, sinh of an x that carries an ulp of rounding).  Worst measured 0.88 units
@@ -45,8 +72,9 @@ def test_response_functions_match_mpmath():
     x = np.sqrt(np.abs(ARGUMENTS))
     oscillating = ARGUMENTS > 1
     inverse = 1 / np.maximum(x, 1)
-    envelope = np.stack([np.where(oscillating, inverse, 0), np.where(oscillating, inverse**2, 0),
-                         np.where(oscillating, inverse**2, 0)])
+    envelope = np.stack(
+        [np.where(oscillating, inverse, 0), np.where(oscillating, inverse**2, 0), np.where(oscillating, inverse**2, 0)]
+    )
     error = np.abs(values - expected) / np.maximum(np.abs(expected), envelope)
     units = error / (np.finfo(float).eps * np.maximum(1, x))
     print(f"\nworst error {units.max():.2f} units of eps max(1, sqrt|y|)")

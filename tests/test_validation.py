@@ -11,13 +11,14 @@ from __future__ import annotations
 
 import functools
 
+import _reference as ref
 import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
 
-import _reference as ref
 from frbjax import FreeRigidBody
+
 
 INERTIA = (1.0, 2.0, 3.0)
 MOMENTUM = (0.3, -0.5, 0.8)
@@ -157,7 +158,7 @@ def _evaluate(inertia, momentum, attitude, times):
     return tuple(getattr(body, name)(times) for name in OUTPUTS) + (body.momentum_norm,)
 
 
-@functools.lru_cache(maxsize=None)
+@functools.cache
 def traced_outputs():
     """The batch of VALID_ROWS + INVALID_ROWS evaluated eagerly (valid rows only) and under jit."""
     rows = VALID_ROWS + INVALID_ROWS
@@ -189,8 +190,9 @@ def test_valid_bodies_unaffected_under_jit():
     inertia = np.array([r[0] for r in VALID_ROWS], float)
     norm = np.linalg.norm(np.array([r[1] for r in VALID_ROWS], float), axis=-1)[:, None]
     phase = np.finfo(float).eps * (1 + norm * np.abs(TIMES)[None] / inertia.min(-1)[:, None])
-    magnitude = dict(angular_momentum=np.maximum(1, norm),
-                     angular_velocity=np.maximum(1, norm) / inertia.min(-1)[:, None])
+    magnitude = dict(
+        angular_momentum=np.maximum(1, norm), angular_velocity=np.maximum(1, norm) / inertia.min(-1)[:, None]
+    )
     for name, got, want in zip(OUTPUTS, jitted, eager):
         assert np.isfinite(got[:count]).all(), name
         difference = np.abs(got[:count] - want).reshape(count, len(TIMES), -1).max(-1)

@@ -30,26 +30,45 @@ import pytest
 from packaging.requirements import Requirement
 from packaging.utils import canonicalize_name
 
+
 REPOSITORY = pathlib.Path(__file__).resolve().parents[1]
-UNTRACKED_DIRECTORIES = {".git", ".venv", "__pycache__", ".pytest_cache", ".hypothesis", "build",
-                         "dist", "site", ".ipynb_checkpoints"}
+UNTRACKED_DIRECTORIES = {
+    ".git",
+    ".venv",
+    "__pycache__",
+    ".pytest_cache",
+    ".hypothesis",
+    "build",
+    "dist",
+    "site",
+    ".ipynb_checkpoints",
+}
 
 
 def tracked_files():
     git = shutil.which("git")
     if git is not None and (REPOSITORY / ".git").exists():
-        listing = subprocess.run([git, "ls-files", "-z"], cwd=REPOSITORY, capture_output=True,
-                                 check=True).stdout.decode()
+        listing = subprocess.run(
+            [git, "ls-files", "-z"], cwd=REPOSITORY, capture_output=True, check=True
+        ).stdout.decode()
         return [pathlib.Path(name) for name in listing.split("\0") if name]
-    return [path.relative_to(REPOSITORY) for path in REPOSITORY.rglob("*") if path.is_file()
-            and not any(part in UNTRACKED_DIRECTORIES or part.endswith(".egg-info")
-                        for part in path.relative_to(REPOSITORY).parts)]
+    return [
+        path.relative_to(REPOSITORY)
+        for path in REPOSITORY.rglob("*")
+        if path.is_file()
+        and not any(
+            part in UNTRACKED_DIRECTORIES or part.endswith(".egg-info") for part in path.relative_to(REPOSITORY).parts
+        )
+    ]
 
 
 def clean_environment(**extra):
     """The environment without this checkout on the path and without the test venv's settings."""
-    env = {key: value for key, value in os.environ.items()
-           if key not in ("PYTHONPATH", "VIRTUAL_ENV", "PYTHONHOME") and not key.startswith("JAX_")}
+    env = {
+        key: value
+        for key, value in os.environ.items()
+        if key not in ("PYTHONPATH", "VIRTUAL_ENV", "PYTHONHOME") and not key.startswith("JAX_")
+    }
     env.update(extra)
     return env
 
@@ -85,8 +104,14 @@ def link_distributions(distributions, folder):
 
 
 def run(command, cwd, timeout, env=None):
-    result = subprocess.run(command, cwd=cwd, capture_output=True, text=True, timeout=timeout,
-                            env=clean_environment() if env is None else env)
+    result = subprocess.run(
+        command,
+        cwd=cwd,
+        capture_output=True,
+        text=True,
+        timeout=timeout,
+        env=clean_environment() if env is None else env,
+    )
     assert result.returncode == 0, f"{command}:\n{result.stdout[-4000:]}\n{result.stderr[-4000:]}"
     return result
 
@@ -103,28 +128,50 @@ def test_wheel_installs_and_runs_from_another_folder(tmp_path):
     wheels = list(dist.glob("frbjax-*.whl"))
     assert len(wheels) == 1, wheels
 
-    version = re.search(r'^__version__ = "([^"]+)"', (REPOSITORY / "frbjax" / "__init__.py").read_text(),
-                        re.MULTILINE)[1]
+    version = re.search(r'^__version__ = "([^"]+)"', (REPOSITORY / "frbjax" / "__init__.py").read_text(), re.MULTILINE)[
+        1
+    ]
     assert wheels[0].name.startswith(f"frbjax-{version}-")
 
     venv = tmp_path / "venv"
     run([sys.executable, "-m", "venv", "--without-pip", str(venv)], tmp_path, 300)
     python = venv / "bin" / "python"
-    run([sys.executable, "-m", "pip", "--python", str(python), "install", "--quiet", "--no-deps", "--no-index",
-         str(wheels[0])], tmp_path, 300)
+    run(
+        [
+            sys.executable,
+            "-m",
+            "pip",
+            "--python",
+            str(python),
+            "install",
+            "--quiet",
+            "--no-deps",
+            "--no-index",
+            str(wheels[0]),
+        ],
+        tmp_path,
+        300,
+    )
     dependencies = dependency_closure(wheels[0])
     assert {"jax", "jaxlib", "numpy", "diffrax"} <= set(dependencies) and "matplotlib" not in dependencies
-    site_packages = pathlib.Path(run([str(python), "-c", "import sysconfig; print(sysconfig.get_path('purelib'))"],
-                                     tmp_path, 60).stdout.strip())
+    site_packages = pathlib.Path(
+        run([str(python), "-c", "import sysconfig; print(sysconfig.get_path('purelib'))"], tmp_path, 60).stdout.strip()
+    )
     linked = link_distributions(dependencies, tmp_path / "dependencies")
     (site_packages / "frbjax_test_dependencies.pth").write_text(f"{linked}\n")
 
     elsewhere = tmp_path / "elsewhere"
     elsewhere.mkdir()
     shutil.rmtree(source)  # no source tree anywhere near
-    check = run([str(python), "-c",
-                 "import pathlib, frbjax; "
-                 "print(frbjax.__version__); print(pathlib.Path(frbjax.__file__).parent)"], elsewhere, 300)
+    check = run(
+        [
+            str(python),
+            "-c",
+            "import pathlib, frbjax; print(frbjax.__version__); print(pathlib.Path(frbjax.__file__).parent)",
+        ],
+        elsewhere,
+        300,
+    )
     installed_version, package = check.stdout.split()
     assert installed_version == version
     assert pathlib.Path(package).is_relative_to(venv)

@@ -13,8 +13,9 @@ import sys
 import jax
 import numpy as np
 import pytest
+from _benchmark_runs import finite_positive, ROOT, run_quick  # noqa: E402
 
-from _benchmark_runs import ROOT, finite_positive, run_quick  # noqa: E402
+
 sys.path.insert(0, str(ROOT / "benchmarks"))
 
 from _scipy_closed_form import ScipyFreeRigidBody  # noqa: E402
@@ -27,13 +28,23 @@ def test_work_precision_quick(tmp_path):
     result = json.loads((tmp_path / "work_precision.json").read_text())
     assert (tmp_path / "work_precision.png").stat().st_size > 0
     assert {(c["T"], c["kind"]) for c in result["cases"]} == {
-        (10.0, "state"), (10.0, "dense"), (1000.0, "state"), (1000.0, "dense")}
+        (10.0, "state"),
+        (10.0, "dense"),
+        (1000.0, "state"),
+        (1000.0, "dense"),
+    }
     for case in result["cases"]:
         reference = case["reference"]
         assert finite_positive(reference["floor"]) and reference["floor"] < 1e-9, reference
         methods = {r["method"] for r in case["methods"]}
-        assert methods == {"frbjax float64", "frbjax float32", "scipy closed form", "diffrax Tsit5",
-                           "diffrax Dopri5", "diffrax Dopri8"}
+        assert methods == {
+            "frbjax float64",
+            "frbjax float32",
+            "scipy closed form",
+            "diffrax Tsit5",
+            "diffrax Dopri5",
+            "diffrax Dopri8",
+        }
         for row in case["methods"]:
             assert not row.get("skipped"), row
             assert finite_positive(row["time_s"]), row
@@ -78,8 +89,13 @@ def test_throughput_quick(tmp_path):
     assert "--xla_cpu_multi_thread_eigen=false" in result["one_core"]["xla_flags"]
     gradient = result["gradient"]
     assert gradient["gradient_finite"]
-    for key in ("forward_s", "value_and_grad_s", "ratio_value_and_grad_over_forward", "forward_compile_s",
-                "value_and_grad_compile_s"):
+    for key in (
+        "forward_s",
+        "value_and_grad_s",
+        "ratio_value_and_grad_over_forward",
+        "forward_compile_s",
+        "value_and_grad_compile_s",
+    ):
         assert finite_positive(gradient[key]), gradient
     # The smoke run skips the compilations with the fusion emitters off (the full run measures them).
     assert gradient["fusion_emitters_off"] is None

@@ -10,10 +10,11 @@
 Imported on first use (``frbjax.lightcurve``); it needs optimistix and scipy.
 """
 
-from ._brightness import LAWS, brightness, facet_brightness
-from ._fit import LightcurveFit, fit_lightcurve
+from ._brightness import brightness, facet_brightness, LAWS
+from ._fit import fit_lightcurve, LightcurveFit
 from ._periods import tumbler_periods
 from ._shape import ConvexShape, icosphere, mesh_inertia
+
 
 __all__ = [
     "LAWS",

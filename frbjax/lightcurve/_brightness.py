@@ -28,14 +28,13 @@ the gradient of the masked branch.
 
 from __future__ import annotations
 
-import jax
 import jax.numpy as jnp
-import numpy as np
 from jaxtyping import Array, Float
 
 from .. import _checks as checks
 from .._body import FreeRigidBody
 from ._shape import ConvexShape
+
 
 __all__ = ["LAWS", "brightness", "facet_brightness"]
 
@@ -72,10 +71,14 @@ def facet_brightness(normals, sun_body, observer_body, law="lommel_seeliger_lamb
 
 def check_directions(name, directions, n_times):
     """Raise ValueError unless ``directions`` is (T, 3) (or (3,)), finite, unit (concrete inputs)."""
-    if directions.shape[-1:] != (3,) or directions.ndim > 2 or (directions.ndim == 2 and n_times is not None
-                                                               and directions.shape[0] != n_times):
-        raise ValueError(f"{name} must have shape (T, 3) with T = len(times) = {n_times}, or (3,), "
-                         f"got {directions.shape}")
+    if (
+        directions.shape[-1:] != (3,)
+        or directions.ndim > 2
+        or (directions.ndim == 2 and n_times is not None and directions.shape[0] != n_times)
+    ):
+        raise ValueError(
+            f"{name} must have shape (T, 3) with T = len(times) = {n_times}, or (3,), got {directions.shape}"
+        )
     if checks.is_concrete(directions):
         values = checks.real_array(name, directions)
         checks.check_finite(name, values)

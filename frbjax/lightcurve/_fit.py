@@ -68,16 +68,15 @@ import numpy as np
 import optimistix as optx
 from jaxtyping import Array, Float
 
-from .. import _checks as checks
-from .. import _quaternion as quaternion
+from .. import _checks as checks, _quaternion as quaternion
 from .._body import FreeRigidBody, quaternion_with_elliptic_derivatives
 from .._errors import FitError
 from .._multistart import solve_each
 from .._trace_once import traced_once
-from ._brightness import LAWS, facet_brightness
-from ._brightness import brightness as _forward
+from ._brightness import brightness as _forward, facet_brightness, LAWS
 from ._periods import momentum_from_periods, tumbler_periods
 from ._shape import ConvexShape, icosphere
+
 
 __all__ = ["LightcurveFit", "fit_lightcurve"]
 
@@ -222,8 +221,13 @@ def _residuals_and_jacobian(parameters, reference, data, window, config):
         gauge = jnp.mean(shape_parameters, keepdims=True)
         weights_reg = data["regularisation"]
         reg = jnp.concatenate([weights_reg[0] * closure, weights_reg[1] * smooth, gauge])
-        d_reg = jnp.concatenate([weights_reg[0] * d_closure, weights_reg[1] * data["laplacian"],
-                                 jnp.full((1, areas.size), 1.0 / areas.size, areas.dtype)])
+        d_reg = jnp.concatenate(
+            [
+                weights_reg[0] * d_closure,
+                weights_reg[1] * data["laplacian"],
+                jnp.full((1, areas.size), 1.0 / areas.size, areas.dtype),
+            ]
+        )
         d_reg = jnp.concatenate([jnp.zeros((d_reg.shape[0], 8), d_reg.dtype), d_reg], 1)
         residual = jnp.concatenate([residual, reg])
         jacobian = jnp.concatenate([jacobian, d_reg])
@@ -265,8 +269,7 @@ def _solve_start(parameters, reference, prior, data, masks, prior_weights, confi
     def stage(current, window):
         mask, prior_weight = window
         args = (reference, data, (mask, prior, prior_weight))
-        solution = optx.least_squares(fn, solver, current, args=args, has_aux=True, max_steps=max_steps,
-                                      throw=False)
+        solution = optx.least_squares(fn, solver, current, args=args, has_aux=True, max_steps=max_steps, throw=False)
         finite = jnp.all(jnp.isfinite(solution.value))
         value = jnp.where(finite, solution.value, current)
         return value, solution.result == optx.RESULTS.successful
@@ -282,6 +285,7 @@ def _solve_start(parameters, reference, prior, data, masks, prior_weights, confi
 def _refine(parameters, references, priors, data, masks, prior_weights, config, rtol, atol, max_steps):
     """Each start (parameters, reference, prior, masks (W, N): its windows) solved by _solve_start,
     one after another or batched (``frbjax._multistart``)."""
+
     def solve(p, reference, prior, start_masks):
         return _solve_start(p, reference, prior, data, start_masks, prior_weights, config, rtol, atol, max_steps)
 
@@ -307,6 +311,7 @@ def _search_costs(parameters, references, start_areas, data, mask, config, chunk
 @functools.partial(jax.jit, static_argnames="principal_axis")
 def _periods_and_jacobian(theta, reference, principal_axis):
     """((P_psi, P_phi), LAM, their Jacobian in theta)."""
+
     def periods(theta):
         values, long_axis = _periods(theta, reference, principal_axis)
         return values, (values, long_axis)
@@ -345,13 +350,13 @@ class LightcurveFit(eqx.Module):
     epoch: float
     law: str = eqx.field(static=True)
     c: float
-    periods: Float[Array, "2"]
-    period_sigma: Float[Array, "2"]
+    periods: Float[Array, 2]
+    period_sigma: Float[Array, 2]
     long_axis_mode: bool
     energy_ratio: float
-    inertia: Float[Array, "3"]
-    inertia_sigma: Float[Array, "3"]
-    momentum_direction: Float[Array, "3"]
+    inertia: Float[Array, 3]
+    inertia_sigma: Float[Array, 3]
+    momentum_direction: Float[Array, 3]
     parameters: Float[Array, " P"]
     covariance: Float[Array, "P P"]
     scales: Float[Array, " C"]
@@ -392,9 +397,14 @@ def _rotate(q, v):
 def _ellipsoid_axes(inertia):
     """Semi-axes of the uniform ellipsoid with principal moments ``inertia`` (..., 3) (up to scale):
     I1 ∝ b^2 + c^2, ... => a^2 ∝ I2 + I3 - I1, ..."""
-    squares = np.stack([inertia[..., 1] + inertia[..., 2] - inertia[..., 0],
-                        inertia[..., 0] + inertia[..., 2] - inertia[..., 1],
-                        inertia[..., 0] + inertia[..., 1] - inertia[..., 2]], -1)
+    squares = np.stack(
+        [
+            inertia[..., 1] + inertia[..., 2] - inertia[..., 0],
+            inertia[..., 0] + inertia[..., 2] - inertia[..., 1],
+            inertia[..., 0] + inertia[..., 1] - inertia[..., 2],
+        ],
+        -1,
+    )
     return np.sqrt(np.maximum(squares, 1e-6))
 
 
@@ -478,48 +488,78 @@ def _validate(times, flux, sun, observer, lightcurve, magnitudes, nan_policy):
         raise ValueError(f"lightcurve must have shape (N,) = ({n},) like times, got {lightcurve.shape}")
     omitted = checks.nonfinite_rows(times, flux, directions["sun"], directions["observer"])
     if np.any(omitted) and nan_policy == "raise":
-        raise ValueError(f"samples {checks.describe_rows(omitted)} have non-finite times, brightness, sun or "
-                         "observer; pass nan_policy='omit' to leave them out")
+        raise ValueError(
+            f"samples {checks.describe_rows(omitted)} have non-finite times, brightness, sun or "
+            "observer; pass nan_policy='omit' to leave them out"
+        )
     kept = np.flatnonzero(~omitted)
     if len(kept) == 0:
         raise ValueError("times: no sample to fit" + (f" after leaving out {n}" if n else ""))
     for name, value in directions.items():
         # The kept rows under their input indices (rows left out read as valid).
-        checks.check_unit_rows(name, np.where(omitted[:, None], np.array([1.0, 0.0, 0.0]), value).astype(value.dtype),
-                               what="unit vectors")
+        checks.check_unit_rows(
+            name, np.where(omitted[:, None], np.array([1.0, 0.0, 0.0]), value).astype(value.dtype), what="unit vectors"
+        )
     if not magnitudes:
         checks.check_positive("brightness", np.where(omitted, 1.0, flux))
     sun, observer = (directions[name][kept].astype(float) for name in ("sun", "observer"))
     opposite = np.sum(sun * observer, -1) <= -1 + 1e-9
     if np.any(opposite):
-        raise ValueError(f"sun and observer are opposite at sample {kept[np.argmax(opposite)]} (phase angle "
-                         "180 degrees): no facet is both lit and seen")
+        raise ValueError(
+            f"sun and observer are opposite at sample {kept[np.argmax(opposite)]} (phase angle "
+            "180 degrees): no facet is both lit and seen"
+        )
     return times[kept].astype(float), flux[kept].astype(float), sun, observer, lightcurve[kept], omitted
 
 
-def _check_options(*, periods, principal_axis, period_grid, inertia_range, shape, convex_subdivisions, law, c,
-                   sigma, regularisation, epoch, starts_per_period, n_refine, seed, rtol, atol, max_steps,
-                   search_chunk, mode, initial):
+def _check_options(
+    *,
+    periods,
+    principal_axis,
+    period_grid,
+    inertia_range,
+    shape,
+    convex_subdivisions,
+    law,
+    c,
+    sigma,
+    regularisation,
+    epoch,
+    starts_per_period,
+    n_refine,
+    seed,
+    rtol,
+    atol,
+    max_steps,
+    search_chunk,
+    mode,
+    initial,
+):
     """The search's options, as (periods, period_grid) arrays; ValueError naming a bad option."""
     checks.choice("shape", shape, ("convex", "ellipsoid"))
     checks.choice("law", law, LAWS)
     checks.choice("mode", mode, ("SAM", "LAM", "both"))
     if periods is None:
-        raise ValueError("periods: give the search ranges ((P_psi_min, P_psi_max), (P_phi_min, P_phi_max)), "
-                         "or (P_min, P_max) with principal_axis=True")
+        raise ValueError(
+            "periods: give the search ranges ((P_psi_min, P_psi_max), (P_phi_min, P_phi_max)), "
+            "or (P_min, P_max) with principal_axis=True"
+        )
     period_array = checks.real_array("periods", periods)
     if principal_axis:
         ranges = [checks.interval("periods", period_array)]
     else:
         if period_array.shape != (2, 2):
-            raise ValueError("periods must be the ranges ((P_psi_min, P_psi_max), (P_phi_min, P_phi_max)) "
-                             f"(shape (2, 2); (P_min, P_max) with principal_axis=True), got shape {period_array.shape}")
+            raise ValueError(
+                "periods must be the ranges ((P_psi_min, P_psi_max), (P_phi_min, P_phi_max)) "
+                f"(shape (2, 2); (P_min, P_max) with principal_axis=True), got shape {period_array.shape}"
+            )
         ranges = [checks.interval(f"periods[{k}]", period_array[k]) for k in range(2)]
     grid = np.atleast_1d(np.asarray(period_grid, dtype=object))
     expected = 1 if principal_axis else 2
     if grid.shape not in ((expected,),) + (((2,),) if principal_axis else ()):
-        raise ValueError(f"period_grid must be {expected} number{'s' if expected > 1 else ''} of grid points, "
-                         f"got {period_grid!r}")
+        raise ValueError(
+            f"period_grid must be {expected} number{'s' if expected > 1 else ''} of grid points, got {period_grid!r}"
+        )
     grid = [checks.integer(f"period_grid[{k}]", value, minimum=1) for k, value in enumerate(grid)]
     if not principal_axis:
         checks.interval("inertia_range", inertia_range, upper=1.0)
@@ -541,7 +581,9 @@ def _check_options(*, periods, principal_axis, period_grid, inertia_range, shape
     checks.integer("search_chunk", search_chunk, minimum=1)
     if initial is not None:
         if not isinstance(initial, FreeRigidBody):
-            raise ValueError(f"initial must be a FreeRigidBody (e.g. an earlier fit's body), got {type(initial).__name__}")
+            raise ValueError(
+                f"initial must be a FreeRigidBody (e.g. an earlier fit's body), got {type(initial).__name__}"
+            )
         if initial.inertia.shape != (3,):
             raise ValueError(f"initial must be one body, got a batch of shape {initial.inertia.shape[:-1]}")
     return ranges, grid
@@ -617,13 +659,30 @@ def fit_lightcurve(
     residuals and the search.
     """
     _check_options(
-        periods=periods, principal_axis=principal_axis, period_grid=period_grid, inertia_range=inertia_range,
-        shape=shape, convex_subdivisions=convex_subdivisions, law=law, c=c, sigma=sigma,
-        regularisation=regularisation, epoch=epoch, starts_per_period=starts_per_period, n_refine=n_refine,
-        seed=seed, rtol=rtol, atol=atol, max_steps=max_steps, search_chunk=search_chunk, mode=mode,
-        initial=initial)
+        periods=periods,
+        principal_axis=principal_axis,
+        period_grid=period_grid,
+        inertia_range=inertia_range,
+        shape=shape,
+        convex_subdivisions=convex_subdivisions,
+        law=law,
+        c=c,
+        sigma=sigma,
+        regularisation=regularisation,
+        epoch=epoch,
+        starts_per_period=starts_per_period,
+        n_refine=n_refine,
+        seed=seed,
+        rtol=rtol,
+        atol=atol,
+        max_steps=max_steps,
+        search_chunk=search_chunk,
+        mode=mode,
+        initial=initial,
+    )
     times, flux, sun, observer, lightcurve, omitted = _validate(
-        times, brightness, sun, observer, lightcurve, magnitudes, nan_policy)
+        times, brightness, sun, observer, lightcurve, magnitudes, nan_policy
+    )
     log_brightness = -0.4 * np.log(10.0) * flux if magnitudes else np.log(flux)
     n = len(times)
     dtype = jnp.result_type(float)
@@ -650,8 +709,9 @@ def fit_lightcurve(
         n_psi, n_phi = period_grid
         psi_grid = np.exp(np.linspace(np.log(psi_low), np.log(psi_high), n_psi))
         phi_grid = np.exp(np.linspace(np.log(phi_low), np.log(phi_high), n_phi))
-        period_psi, period_phi = (np.repeat(g.reshape(-1), starts_per_period)
-                                  for g in np.meshgrid(psi_grid, phi_grid, indexing="ij"))
+        period_psi, period_phi = (
+            np.repeat(g.reshape(-1), starts_per_period) for g in np.meshgrid(psi_grid, phi_grid, indexing="ij")
+        )
         count = len(period_psi)
         ratios = np.sort(rng.uniform(*inertia_range, size=(count, 2)), -1)
         inertia = np.concatenate([ratios, np.ones((count, 1))], -1)
@@ -660,9 +720,16 @@ def fit_lightcurve(
         else:
             long_axis = np.full(count, mode == "LAM")
         phase = rng.uniform(0, 2 * np.pi, count)
-        momentum, valid = (np.array(x) for x in jax.jit(jax.vmap(momentum_from_periods))(
-            jnp.asarray(inertia, dtype), jnp.asarray(period_psi, dtype), jnp.asarray(period_phi, dtype),
-            jnp.asarray(long_axis), jnp.asarray(phase, dtype)))
+        momentum, valid = (
+            np.array(x)
+            for x in jax.jit(jax.vmap(momentum_from_periods))(
+                jnp.asarray(inertia, dtype),
+                jnp.asarray(period_psi, dtype),
+                jnp.asarray(period_phi, dtype),
+                jnp.asarray(long_axis),
+                jnp.asarray(phase, dtype),
+            )
+        )
         valid &= np.all(np.isfinite(momentum), -1)
         momentum = np.where(valid[:, None], momentum, np.array([0.0, 0.0, 1.0]))
     attitudes = _random_rotations(rng, count)
@@ -716,16 +783,34 @@ def fit_lightcurve(
         free[[0, 1, 6, 7]] = 0.0
         ellipsoid_free[[0, 1, 6, 7]] = 0.0
     data = dict(
-        times=times - epoch, sun=sun, observer=observer, log_brightness=log_brightness, curves=curves,
-        sigma=np.asarray(sigma), normals=normals, search_normals=search_normals, laplacian=laplacian,
-        regularisation=np.asarray(regularisation, float), free=free)
+        times=times - epoch,
+        sun=sun,
+        observer=observer,
+        log_brightness=log_brightness,
+        curves=curves,
+        sigma=np.asarray(sigma),
+        normals=normals,
+        search_normals=search_normals,
+        laplacian=laplacian,
+        regularisation=np.asarray(regularisation, float),
+        free=free,
+    )
     data = {key: jnp.asarray(value, dtype) for key, value in data.items()}
     config = (shape, law, float(c), _SEARCH_SUBDIVISIONS, bool(principal_axis))
 
     # ---- the search: every start's cost on the first window
     as_jax = lambda tree: jax.tree.map(lambda x: jnp.asarray(x, dtype), tree)  # noqa: E731
-    costs = np.asarray(_search_costs(as_jax(theta), as_jax(references), as_jax(start_areas), data,
-                                     jnp.asarray(masks[0], dtype), config, int(search_chunk)))
+    costs = np.asarray(
+        _search_costs(
+            as_jax(theta),
+            as_jax(references),
+            as_jax(start_areas),
+            data,
+            jnp.asarray(masks[0], dtype),
+            config,
+            int(search_chunk),
+        )
+    )
     costs = np.where(valid, costs, np.inf)
     best = np.argsort(costs, kind="stable")[:n_refine]
     if initial is not None and 0 not in best:
@@ -748,8 +833,16 @@ def fit_lightcurve(
     ellipsoid_config = ("ellipsoid",) + config[1:]
     parameters0 = np.concatenate([theta[best], ellipsoid_start[best]], 1)
     solver_settings = dict(rtol=float(rtol), atol=float(atol), max_steps=int(max_steps))
-    out = _refine(as_jax(parameters0), as_jax(refs), as_jax(priors), ellipsoid_data, jnp.asarray(start_masks, dtype),
-                  jnp.asarray(prior_weights, dtype), ellipsoid_config, **solver_settings)
+    out = _refine(
+        as_jax(parameters0),
+        as_jax(refs),
+        as_jax(priors),
+        ellipsoid_data,
+        jnp.asarray(start_masks, dtype),
+        jnp.asarray(prior_weights, dtype),
+        ellipsoid_config,
+        **solver_settings,
+    )
     if shape == "convex":
         fitted = np.asarray(out[0])
         fitted_axes = np.concatenate([np.ones((len(best), 1)), np.exp(fitted[:, 8:])], 1)
@@ -757,8 +850,16 @@ def fit_lightcurve(
         log_areas -= log_areas.mean(-1, keepdims=True)
         parameters0 = np.concatenate([fitted[:, :8], log_areas], 1)
         # All the data, no prior.
-        out = _refine(as_jax(parameters0), as_jax(refs), None, data, jnp.asarray(start_masks[:, -1:], dtype),
-                      None, config, **solver_settings)
+        out = _refine(
+            as_jax(parameters0),
+            as_jax(refs),
+            None,
+            data,
+            jnp.asarray(start_masks[:, -1:], dtype),
+            None,
+            config,
+            **solver_settings,
+        )
     # A leader that stopped at max_steps still moving is solved on from where it stopped (all the data,
     # no prior), alone: Levenberg-Marquardt on a convex shape's hundreds of areas can take more than
     # max_steps to meet rtol (the LAM test's leader: three more solves).
@@ -769,9 +870,16 @@ def fit_lightcurve(
         if out[2][leader] or not np.isfinite(out[1][leader]):
             break
         alone = slice(leader, leader + 1)
-        continued = _refine(jnp.asarray(out[0][alone], dtype), tuple(jnp.asarray(r[alone], dtype) for r in refs),
-                            None, final_data, jnp.asarray(start_masks[alone, -1:], dtype), None, final_config,
-                            **solver_settings)
+        continued = _refine(
+            jnp.asarray(out[0][alone], dtype),
+            tuple(jnp.asarray(r[alone], dtype) for r in refs),
+            None,
+            final_data,
+            jnp.asarray(start_masks[alone, -1:], dtype),
+            None,
+            final_config,
+            **solver_settings,
+        )
         for full, part in zip(out, continued):
             full[leader] = np.asarray(part)[0]
     fitted, refine_costs, oks, residual_rows, jacobians = out
@@ -796,8 +904,9 @@ def fit_lightcurve(
 
     # Periods, energy and their uncertainties (first order in the covariance).
     theta_fit = jnp.asarray(p[:8], dtype)
-    period_values, lam, period_jacobian = (np.asarray(x) for x in _periods_and_jacobian(
-        theta_fit, reference, principal_axis))
+    period_values, lam, period_jacobian = (
+        np.asarray(x) for x in _periods_and_jacobian(theta_fit, reference, principal_axis)
+    )
     period_jacobian = np.nan_to_num(period_jacobian, posinf=0.0, neginf=0.0)
     period_sigma = np.sqrt(np.maximum(np.diag(period_jacobian @ covariance[:8, :8] @ period_jacobian.T), 0))
     inertia_fit = np.exp(np.concatenate([p[:2], [0.0]]))
@@ -812,27 +921,44 @@ def fit_lightcurve(
     energy_ratio = float(np.sum(l_body**2 / inertia_fit) * inertia_fit.max() / np.sum(l_body**2))
 
     # Scales and residuals of the fitted model, per curve.
-    log_model = np.log(np.maximum(np.asarray(
-        _forward(body, fitted_shape, data["times"], data["sun"], data["observer"], law, c)), 1e-300))
+    log_model = np.log(
+        np.maximum(
+            np.asarray(_forward(body, fitted_shape, data["times"], data["sun"], data["observer"], law, c)), 1e-300
+        )
+    )
     difference = log_brightness - log_model
     offsets = (curves.T @ difference) / curves.sum(0)
     residuals = difference - curves @ offsets
 
     result = LightcurveFit(
-        body=body, shape=fitted_shape, epoch=epoch, law=law, c=float(c),
-        periods=jnp.asarray(period_values), period_sigma=jnp.asarray(period_sigma),
-        long_axis_mode=bool(lam) and not principal_axis, energy_ratio=energy_ratio,
-        inertia=jnp.asarray(moments, dtype), inertia_sigma=jnp.asarray(inertia_sigma, dtype),
-        momentum_direction=jnp.asarray(momentum_direction, dtype), parameters=jnp.asarray(p, dtype),
-        covariance=jnp.asarray(covariance, dtype), scales=jnp.asarray(np.exp(offsets), dtype),
-        residuals=jnp.asarray(_with_omitted_rows(residuals, omitted), dtype), cost=float(refine_costs[winner]),
-        success=bool(oks[winner]), search_periods=jnp.asarray(np.stack([period_psi, period_phi], -1), dtype),
-        search_costs=jnp.asarray(costs, dtype), refine_costs=jnp.asarray(refine_costs, dtype))
+        body=body,
+        shape=fitted_shape,
+        epoch=epoch,
+        law=law,
+        c=float(c),
+        periods=jnp.asarray(period_values),
+        period_sigma=jnp.asarray(period_sigma),
+        long_axis_mode=bool(lam) and not principal_axis,
+        energy_ratio=energy_ratio,
+        inertia=jnp.asarray(moments, dtype),
+        inertia_sigma=jnp.asarray(inertia_sigma, dtype),
+        momentum_direction=jnp.asarray(momentum_direction, dtype),
+        parameters=jnp.asarray(p, dtype),
+        covariance=jnp.asarray(covariance, dtype),
+        scales=jnp.asarray(np.exp(offsets), dtype),
+        residuals=jnp.asarray(_with_omitted_rows(residuals, omitted), dtype),
+        cost=float(refine_costs[winner]),
+        success=bool(oks[winner]),
+        search_periods=jnp.asarray(np.stack([period_psi, period_phi], -1), dtype),
+        search_costs=jnp.asarray(costs, dtype),
+        refine_costs=jnp.asarray(refine_costs, dtype),
+    )
     if throw and not (bool(oks[winner]) and np.isfinite(refine_costs[winner])):
         raise FitError(
             f"fit_lightcurve did not converge: the best of {len(best)} refined starts stopped at cost "
             f"{refine_costs[winner]:.6g} without meeting rtol={rtol}, atol={atol} within max_steps={max_steps} "
             f"({int(np.sum(oks))} converged).  Check the data, widen or refine the period search, raise "
-            "max_steps, or pass throw=False for the unconverged result (FitError.result).", result)
+            "max_steps, or pass throw=False for the unconverged result (FitError.result).",
+            result,
+        )
     return result
-

@@ -34,7 +34,9 @@ from jaxtyping import Array, Float
 from .. import special
 from .._body import _validate
 
+
 __all__ = ["tumbler_periods"]
+
 
 def _mode_quantities(sorted_inertia, momentum_squared, twice_energy, long_axis):
     """(P_phi, <dpsi/dt> / M) for sorted moments; LAM exchanges I1 and I3."""
@@ -55,7 +57,8 @@ def _mode_quantities(sorted_inertia, momentum_squared, twice_energy, long_axis):
     delta = i2 / (last - i2) - gamma
     characteristic = -delta / gamma
     third_kind_over_k = special.elliprj(jnp.zeros_like(k2), 1 - k2, jnp.ones_like(k2), 1 - characteristic) / (
-        3 * quarter)
+        3 * quarter
+    )
     mean_rate = (alpha * (1 + characteristic * third_kind_over_k) + beta * third_kind_over_k) / gamma
     return period_phi, mean_rate
 

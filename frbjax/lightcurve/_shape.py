@@ -28,6 +28,7 @@ from jaxtyping import Array, Float, Int
 
 from .. import _checks as checks
 
+
 __all__ = ["ConvexShape", "mesh_inertia", "icosphere"]
 
 
@@ -40,12 +41,42 @@ def icosphere(subdivisions: int = 2) -> tuple[np.ndarray, np.ndarray]:
     """
     checks.integer("subdivisions", subdivisions, minimum=0)
     golden = (1 + 5**0.5) / 2
-    vertices = [(-1, golden, 0), (1, golden, 0), (-1, -golden, 0), (1, -golden, 0),
-                (0, -1, golden), (0, 1, golden), (0, -1, -golden), (0, 1, -golden),
-                (golden, 0, -1), (golden, 0, 1), (-golden, 0, -1), (-golden, 0, 1)]
-    faces = [(0, 11, 5), (0, 5, 1), (0, 1, 7), (0, 7, 10), (0, 10, 11), (1, 5, 9), (5, 11, 4),
-             (11, 10, 2), (10, 7, 6), (7, 1, 8), (3, 9, 4), (3, 4, 2), (3, 2, 6), (3, 6, 8),
-             (3, 8, 9), (4, 9, 5), (2, 4, 11), (6, 2, 10), (8, 6, 7), (9, 8, 1)]
+    vertices = [
+        (-1, golden, 0),
+        (1, golden, 0),
+        (-1, -golden, 0),
+        (1, -golden, 0),
+        (0, -1, golden),
+        (0, 1, golden),
+        (0, -1, -golden),
+        (0, 1, -golden),
+        (golden, 0, -1),
+        (golden, 0, 1),
+        (-golden, 0, -1),
+        (-golden, 0, 1),
+    ]
+    faces = [
+        (0, 11, 5),
+        (0, 5, 1),
+        (0, 1, 7),
+        (0, 7, 10),
+        (0, 10, 11),
+        (1, 5, 9),
+        (5, 11, 4),
+        (11, 10, 2),
+        (10, 7, 6),
+        (7, 1, 8),
+        (3, 9, 4),
+        (3, 4, 2),
+        (3, 2, 6),
+        (3, 6, 8),
+        (3, 8, 9),
+        (4, 9, 5),
+        (2, 4, 11),
+        (6, 2, 10),
+        (8, 6, 7),
+        (9, 8, 1),
+    ]
     vertices = [np.asarray(v, float) / np.linalg.norm(v) for v in vertices]
     for _ in range(subdivisions):
         midpoints: dict[tuple[int, int], int] = {}
@@ -77,14 +108,17 @@ def _checked_mesh(vertices, faces):
         raise ValueError(f"vertices must have shape (..., V, 3), got shape {vertices.shape}")
     faces = np.asarray(faces)
     if faces.dtype.kind not in "iu" or faces.ndim != 2 or faces.shape[1] != 3:
-        raise ValueError(f"faces must be integer vertex indices of shape (F, 3), got {faces.dtype} of shape {faces.shape}")
+        raise ValueError(
+            f"faces must be integer vertex indices of shape (F, 3), got {faces.dtype} of shape {faces.shape}"
+        )
     if len(faces) < 4:
         raise ValueError(f"faces: a closed surface has at least 4 triangles, got {len(faces)}")
     outside = (faces < 0) | (faces >= vertices.shape[-2])
     if np.any(outside):
         row, column = np.argwhere(outside)[0]
-        raise ValueError(f"faces must index the {vertices.shape[-2]} vertices: faces[{row}, {column}] is "
-                         f"{faces[row, column]}")
+        raise ValueError(
+            f"faces must index the {vertices.shape[-2]} vertices: faces[{row}, {column}] is {faces[row, column]}"
+        )
     return vertices, faces
 
 
@@ -119,8 +153,9 @@ def mesh_inertia(vertices: Float[Array, "... V 3"], faces: Int[Array, "F 3"]) ->
     total = jnp.sum(volumes, -1)
     corner_sum = jnp.sum(corners, -2)  # (..., F, 3)
     centroid = jnp.sum(volumes[..., None] * corner_sum / 4, -2) / total[..., None]
-    second = (jnp.einsum("...fi,...fj->...fij", corner_sum, corner_sum)
-              + jnp.einsum("...fki,...fkj->...fij", corners, corners))
+    second = jnp.einsum("...fi,...fj->...fij", corner_sum, corner_sum) + jnp.einsum(
+        "...fki,...fkj->...fij", corners, corners
+    )
     second_moment = jnp.sum(volumes[..., None, None] * second / 20, -3)
     # About the centre of mass (parallel axis theorem on the second moment).
     second_moment = second_moment - total[..., None, None] * jnp.einsum("...i,...j->...ij", centroid, centroid)
@@ -145,8 +180,10 @@ class ConvexShape(eqx.Module):
     def __check_init__(self):
         checks.check_trailing_shape("normals", self.normals, (3,))
         if tuple(np.shape(self.areas)) != tuple(np.shape(self.normals))[:-1]:
-            raise ValueError(f"areas must have the shape of normals without its last axis, "
-                             f"{tuple(np.shape(self.normals))[:-1]}, got {tuple(np.shape(self.areas))}")
+            raise ValueError(
+                f"areas must have the shape of normals without its last axis, "
+                f"{tuple(np.shape(self.normals))[:-1]}, got {tuple(np.shape(self.areas))}"
+            )
         if checks.is_concrete(self.normals, self.areas):
             normals, areas = checks.real_array("normals", self.normals), checks.real_array("areas", self.areas)
             checks.check_finite("normals", normals)
@@ -154,7 +191,7 @@ class ConvexShape(eqx.Module):
             checks.check_positive("areas", areas, allow_zero=True)
 
     @classmethod
-    def from_mesh(cls, vertices: Float[Array, "... V 3"], faces: Int[Array, "F 3"]) -> "ConvexShape":
+    def from_mesh(cls, vertices: Float[Array, "... V 3"], faces: Int[Array, "F 3"]) -> ConvexShape:
         """The Gaussian image of a closed convex triangulated surface (``faces`` index ``vertices``;
         either orientation): n = e1 x e2 / |e1 x e2|, A = |e1 x e2| / 2 per triangle.  Differentiable
         in the vertices.  Refused (ValueError): vertices not (..., V, 3) or not finite, faces not
@@ -164,7 +201,7 @@ class ConvexShape(eqx.Module):
         return cls(normals, areas)
 
     @classmethod
-    def ellipsoid(cls, a, b, c, subdivisions: int = 3) -> "ConvexShape":
+    def ellipsoid(cls, a, b, c, subdivisions: int = 3) -> ConvexShape:
         """The triaxial ellipsoid x^2/a^2 + y^2/b^2 + z^2/c^2 = 1 (semi-axes along principal axes 1, 2,
         3), triangulated: the icosphere of ``subdivisions`` (20 * 4**subdivisions facets) stretched by
         (a, b, c).  Differentiable in a, b, c; a batch of ellipsoids from arrays a, b, c.  Semi-axes
@@ -296,8 +333,7 @@ def _minkowski_solve(normals, weights, rtol, atol, max_steps):
 
     # At the minimum sum_i w_i h_i = sum_i a_i h_i / V = 3 (sum_i w_i = 1): start there, h_i = 3.
     start = jnp.full(weights.shape, jnp.log(3.0), weights.dtype)
-    solution = optx.minimise(objective, optx.BFGS(rtol=rtol, atol=atol), start, max_steps=max_steps,
-                             throw=False)
+    solution = optx.minimise(objective, optx.BFGS(rtol=rtol, atol=atol), start, max_steps=max_steps, throw=False)
     return solution.value
 
 

@@ -15,6 +15,7 @@ from ._carlson import elliprc, elliprd, elliprf, elliprj
 from ._jacobi import ellipj
 from ._legendre import ellipe, ellipk, ellipkinc, ellipkm1, ellippi, ellippiinc
 
+
 __all__ = [
     "ellipe",
     "ellipj",

@@ -32,7 +32,8 @@ Derivatives (custom JVP rules):
   identity (DLMF 19.26.18-19.26.20), so its derivative is exact, and the derivative of the truncated
   series converges at the same rate as the series.  The partial derivatives in each argument come out
   of one forward pass (``_value_and_partials``), so that the rule is linear in the tangents with no
-  loop in its linear part: reverse mode then never transposes a duplication loop.  A partial derivative with respect to an argument
+  loop in its linear part: reverse mode then never transposes a duplication loop.  A partial derivative with
+  respect to an argument
   that is exactly zero is infinite; there the tangent of that argument is ignored (documented
   convention), so no NaN reaches the caller.
 
@@ -51,14 +52,12 @@ import functools
 
 import jax
 import jax.numpy as jnp
-from jax import lax
+from jax import Array, lax
 from jax.custom_derivatives import SymbolicZero
-from jax import Array
 from jax.typing import ArrayLike
 
 from .._fusion import materialise, when_any
-from ._common import is_double, iterate, over_sqrt, promote
-from ._common import rolled as is_rolled
+from ._common import is_double, over_sqrt, promote, rolled as is_rolled
 
 
 def _plan(x):
@@ -226,8 +225,7 @@ def _rf_series(x, y, z, rolled=False):
         lam, _ = _lambda(x, y, z, _sqrt_for(rolled))
         return (x + lam) / 4, (y + lam) / 4, (z + lam) / 4, (mean + lam) / 4
 
-    (x, y, z, mean), quarter = _duplicate(step, (x, y, z, mean0), x, rolled,
-                                          lambda state: ((spread0, state[3]),))
+    (x, y, z, mean), quarter = _duplicate(step, (x, y, z, mean0), x, rolled, lambda state: ((spread0, state[3]),))
     # DLMF 19.36.1 with X = 1 - x_N/A_N computed without cancellation as (A_0 - x_0) / (4^N A_N).
     scale = quarter / mean
     return over_sqrt(_rf_polynomial(dx0 * scale, dy0 * scale), mean)
@@ -243,8 +241,12 @@ def _rf_tangent(x, y, z, dx, dy, dz):
     # one duplication loop, stacked on a new leading axis (a third of the compiled code).  R_D(x, y, z)
     # is infinite at z = 0: evaluated at z = 1 there and masked (``_masked``).
     x, y, z = (_frozen_at_zero(a) for a in jnp.broadcast_arrays(x, y, z))
-    rd_x, rd_y, rd_z = _rd(jnp.stack([y, z, x]), jnp.stack([z, x, y]),
-                           jnp.stack([_positive_or_one(x), _positive_or_one(y), _positive_or_one(z)]), True)
+    rd_x, rd_y, rd_z = _rd(
+        jnp.stack([y, z, x]),
+        jnp.stack([z, x, y]),
+        jnp.stack([_positive_or_one(x), _positive_or_one(y), _positive_or_one(z)]),
+        True,
+    )
     return -(_masked(dx, x, rd_x) + _masked(dy, y, rd_y) + _masked(dz, z, rd_z)) / 6
 
 
@@ -281,10 +283,22 @@ def _masked(tangent, argument, partial):
 # R_C(1, 1 + e) = 2F1(1/2, 1; 3/2; -e) for |e| <= 0.1716: the degree-15 Chebyshev interpolant on that
 # interval (mpmath), error 7e-19; highest degree first.
 _RC_POLYNOMIAL = (
-    -0.035845454157110504, 0.0382860515301367, -0.036861807914879065, 0.03981424818905601,
-    -0.043482670645682224, 0.04762372192420984, -0.052631517733447486, 0.05882346452803347,
-    -0.0666666671270696, 0.07692307741107116, -0.09090909090739277, 0.11111111110931124,
-    -0.14285714285714524, 0.20000000000000254, -0.3333333333333333, 1.0,
+    -0.035845454157110504,
+    0.0382860515301367,
+    -0.036861807914879065,
+    0.03981424818905601,
+    -0.043482670645682224,
+    0.04762372192420984,
+    -0.052631517733447486,
+    0.05882346452803347,
+    -0.0666666671270696,
+    0.07692307741107116,
+    -0.09090909090739277,
+    0.11111111110931124,
+    -0.14285714285714524,
+    0.20000000000000254,
+    -0.3333333333333333,
+    1.0,
 )
 
 
@@ -464,8 +478,7 @@ def _rd_series(x, y, z, rolled=False):
         return (x + lam) / 4, (y + lam) / 4, (z + lam) / 4, (mean + lam) / 4, correction
 
     state = (x, y, z, mean0, jnp.zeros_like(mean0))
-    (x, y, z, mean, correction), quarter = _duplicate(step, state, x, rolled,
-                                                      lambda state: ((spread0, state[3]),))
+    (x, y, z, mean, correction), quarter = _duplicate(step, state, x, rolled, lambda state: ((spread0, state[3]),))
     scale = quarter / mean
     big_x, big_y = dx0 * scale, dy0 * scale
     big_z = -(big_x + big_y) / 3
@@ -531,8 +544,10 @@ def _jvp_from_partials(function, primals, tangents, may_vanish):
     value, partials = _value_and_partials(function, primals, varying)
 
     def tangent(partial):
-        return sum(_masked(tangents[i], primals[i], partial[k]) if i in may_vanish
-                   else partial[k] * tangents[i] for k, i in enumerate(varying))
+        return sum(
+            _masked(tangents[i], primals[i], partial[k]) if i in may_vanish else partial[k] * tangents[i]
+            for k, i in enumerate(varying)
+        )
 
     return value, jax.tree.map(tangent, partials)
 
@@ -613,9 +628,7 @@ def _rc_closed(x, y):
     sx, sy = jnp.sqrt(x), jnp.sqrt(y)
     above = jnp.arctan(jnp.sqrt(magnitude / jnp.where(x > 0, x, 0)))
     below = jnp.log1p((root + magnitude / (sx + sy)) / sy)
-    series = 1 + e * (
-        -1 / 3 + e * (1 / 5 + e * (-1 / 7 + e * (1 / 9 + e * (-1 / 11 + e * (1 / 13 + e * (-1 / 15))))))
-    )
+    series = 1 + e * (-1 / 3 + e * (1 / 5 + e * (-1 / 7 + e * (1 / 9 + e * (-1 / 11 + e * (1 / 13 + e * (-1 / 15)))))))
     # Divisions by square roots as products (see ``over_sqrt``).
     closed = jnp.where(difference > 0, above, below) * root / magnitude
     return jnp.where(small, series * sx / jnp.where(small, x, 1), closed)

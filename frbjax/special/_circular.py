@@ -33,8 +33,11 @@ from ._common import is_double
 
 # pi/2 as three parts: the first two with 33 significant bits, so that k times each is exact for
 # |k| < 2^20, and the rest rounded (pi/2 - the three parts is 1e-37).
-_HALF_PI_PARTS = (float.fromhex("0x1.921fb54400000p+0"), float.fromhex("0x1.0b4611a600000p-34"),
-                  float.fromhex("0x1.3198a2e037073p-69"))
+_HALF_PI_PARTS = (
+    float.fromhex("0x1.921fb54400000p+0"),
+    float.fromhex("0x1.0b4611a600000p-34"),
+    float.fromhex("0x1.3198a2e037073p-69"),
+)
 _TWO_OVER_PI = float.fromhex("0x1.45f306dc9c883p-1")
 _REDUCTION_LIMIT = 2.0**19 * math.pi / 2
 

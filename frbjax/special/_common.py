@@ -76,7 +76,7 @@ def where_safe(condition, value, substitute):
 def complement(m, mc):
     """Return ``(m, mc)`` with ``mc = 1 - m`` when the caller did not pass the complement."""
     if mc is None:
-        m, = promote(m)
+        (m,) = promote(m)
         return m, 1 - m
     return tuple(promote(m, mc))
 

@@ -31,13 +31,12 @@ from __future__ import annotations
 
 import jax
 import jax.numpy as jnp
-from jax import lax
-from jax import Array
+from jax import Array, lax
 from jax.typing import ArrayLike
 
+from .._fusion import when_any
 from ._carlson import _rd
 from ._circular import cos_sin_near_zero
-from .._fusion import when_any
 from ._common import complement, is_double, over_sqrt, promote, rolled
 from ._legendre import _complete_first
 
@@ -105,6 +104,7 @@ def _agm_levels(mc):
         # that uses it.
         state, blocks = start, []
         for index, size in enumerate(_agm_blocks(mc)):
+
             def compute(state, size=size):
                 return lax.scan(descend, state, None, length=size, unroll=True)
 
@@ -165,7 +165,7 @@ def _jacobi_to_half_quarter(w, levels):
         state, end = start, _agm_steps(w)
         blocks = _agm_blocks(w)
         for index, size in reversed(list(enumerate(blocks))):
-            block = tuple(level[end - size:end] for level in levels)
+            block = tuple(level[end - size : end] for level in levels)
             # The top block ascends unmasked (docstring): masks in that long fused chain cost XLA a
             # kernel per level.
             top = index == len(blocks) - 1 and index > 0
@@ -173,8 +173,11 @@ def _jacobi_to_half_quarter(w, levels):
             def ascend_block(state, block, top=top):
                 return lax.scan(unmasked_ascend if top else ascend, state, block, reverse=True, unroll=True)[0]
 
-            state = (ascend_block(state, block) if index == 0
-                     else when_any(block[2][0], ascend_block, lambda state, block: state, state, block))
+            state = (
+                ascend_block(state, block)
+                if index == 0
+                else when_any(block[2][0], ascend_block, lambda state, block: state, state, block)
+            )
             end -= size
         _, cot_ratio, dn = state
     sn = over_sqrt(1, cot_ratio * cot_ratio + 1)
@@ -231,8 +234,9 @@ def _ellipj_primal(u, m, mc, quarter, levels):
     cn_reduced = jnp.where(limit, sech, cn_reduced)
     # am = j pi + atan2(sn_r, cn_r) with cn_r >= 0 (|u_r| <= K): an arctangent of the quotient.
     positive = cn_reduced > 0
-    angle = jnp.where(positive, jnp.arctan(sn_reduced / jnp.where(positive, cn_reduced, 1)),
-                      jnp.copysign(jnp.pi / 2, sn_reduced))
+    angle = jnp.where(
+        positive, jnp.arctan(sn_reduced / jnp.where(positive, cn_reduced, 1)), jnp.copysign(jnp.pi / 2, sn_reduced)
+    )
     am = turns * jnp.pi + angle
     sn = jnp.where(limit, sn_reduced, sign * sn_reduced)
     cn = jnp.where(limit, cn_reduced, sign * cn_reduced)
@@ -256,9 +260,10 @@ def _ellipj_tangents(u, m, mc, quarter, values, tangents):
     sn_reduced = jnp.abs(sn) * jnp.sign(jnp.sin(am - turns * jnp.pi))
     cn_reduced = jnp.abs(cn)
     safe_dn = jnp.where(limit, 1, dn)
-    df_dm = jnp.where(turns == 0, 0, 2 * turns * dk_dm) + sn_reduced**3 * _rd(
-        cn_reduced * cn_reduced, jnp.ones_like(cn_reduced), safe_dn * safe_dn, True
-    ) / 6
+    df_dm = (
+        jnp.where(turns == 0, 0, 2 * turns * dk_dm)
+        + sn_reduced**3 * _rd(cn_reduced * cn_reduced, jnp.ones_like(cn_reduced), safe_dn * safe_dn, True) / 6
+    )
     dam_dm_generic = -safe_dn * df_dm
     # m = 1 (DLMF 22.10.ii): d am/dm = -(sinh u - u sech u)/4.
     # The m-derivatives at m = 1 grow like e^|u|/8; |u| is capped where sinh would overflow, so that a
@@ -273,9 +278,7 @@ def _ellipj_tangents(u, m, mc, quarter, values, tangents):
     # dn^2 = 1 - m sn^2  =>  d dn = -(sn^2 dm + 2 m sn cn d am)/(2 dn)   (m < 1, dn >= sqrt(mc) > 0);
     # at m = 1, DLMF 22.10.ii: d dn/dm = -(tanh u)(sinh u + u sech u)/4.
     d_dn_generic = -(sn * sn * dparam + 2 * m * sn * cn * d_am) / (2 * safe_dn)
-    d_dn_limit = -m * sn * cn * du - jnp.tanh(safe_u) * (
-        jnp.sinh(safe_u) + safe_u / jnp.cosh(safe_u)
-    ) / 4 * dparam
+    d_dn_limit = -m * sn * cn * du - jnp.tanh(safe_u) * (jnp.sinh(safe_u) + safe_u / jnp.cosh(safe_u)) / 4 * dparam
     d_dn = jnp.where(limit, d_dn_limit, d_dn_generic)
     return d_sn, d_cn, d_dn, d_am
 

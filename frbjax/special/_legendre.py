@@ -79,24 +79,56 @@ def _rd_homogeneous(x, y, z):
 # iteration on 570 nodes, denser near mc = 0); highest degree first.  P(0) = ln 4, Q(0) = 1/2 (K) and
 # P(0) = 1, Q(0) = 1/4 (E) as in DLMF 19.12.1-19.12.2.  Taking mc itself keeps the accuracy near m = 1.
 _K_P = (
-    0.00012199461596300885, 0.0021024603629293606, 0.00770204240322226, 0.009983367158858069,
-    0.007129239803926991, 0.006267695510139254, 0.008798172870398203, 0.014938254688341316,
-    0.03088514797866006, 0.09657359028256746, 1.3862943611198906,
+    0.00012199461596300885,
+    0.0021024603629293606,
+    0.00770204240322226,
+    0.009983367158858069,
+    0.007129239803926991,
+    0.006267695510139254,
+    0.008798172870398203,
+    0.014938254688341316,
+    0.03088514797866006,
+    0.09657359028256746,
+    1.3862943611198906,
 )
 _K_Q = (
-    2.581298904233637e-05, 0.0008310182798070543, 0.0055946884717961946, 0.01504654773623327,
-    0.023707330763035973, 0.030085270466142393, 0.03737518215400317, 0.04882798830423169,
-    0.07031249945926299, 0.12499999999971124, 0.5,
+    2.581298904233637e-05,
+    0.0008310182798070543,
+    0.0055946884717961946,
+    0.01504654773623327,
+    0.023707330763035973,
+    0.030085270466142393,
+    0.03737518215400317,
+    0.04882798830423169,
+    0.07031249945926299,
+    0.12499999999971124,
+    0.5,
 )
 _E_P = (
-    0.0004658159445461919, 0.004139984767308233, 0.009645072330776574, 0.009259579205601939,
-    0.006600125381688035, 0.007348292367956787, 0.011553583076406864, 0.021831499990835144,
-    0.05680519316961054, 0.44314718056016633, 1.0,
+    0.0004658159445461919,
+    0.004139984767308233,
+    0.009645072330776574,
+    0.009259579205601939,
+    0.006600125381688035,
+    0.007348292367956787,
+    0.011553583076406864,
+    0.021831499990835144,
+    0.05680519316961054,
+    0.44314718056016633,
+    1.0,
 )
 _E_Q = (
-    -8.388796711600095e-07, 0.0001189148889893945, 0.0020338632158478005, 0.0091497733380019,
-    0.01915135739945433, 0.026910815567490375, 0.03357527163908704, 0.04272230510060842,
-    0.058593724843368215, 0.09374999993221704, 0.24999999999997663,
+    -8.388796711600095e-07,
+    0.0001189148889893945,
+    0.0020338632158478005,
+    0.0091497733380019,
+    0.01915135739945433,
+    0.026910815567490375,
+    0.03357527163908704,
+    0.04272230510060842,
+    0.058593724843368215,
+    0.09374999993221704,
+    0.24999999999997663,
 )
 
 
@@ -286,8 +318,9 @@ def _pi_reduced_terms(n, s, c, m, mc):
     first, third = _rf_rj(x, y, one, p)
     numerator, denominator = jnp.sqrt(kappa) * s, c * jnp.sqrt(y)
     positive = denominator > 0
-    angle = jnp.where(positive, jnp.arctan(numerator / jnp.where(positive, denominator, 1)),
-                      jnp.copysign(jnp.pi / 2, numerator))
+    angle = jnp.where(
+        positive, jnp.arctan(numerator / jnp.where(positive, denominator, 1)), jnp.copysign(jnp.pi / 2, numerator)
+    )
     head = jnp.where(transformed, over_sqrt(angle, kappa), s * first)
     coefficient = jnp.where(transformed, -characteristic, n)
     return head, coefficient * s**3 * third / 3
@@ -373,6 +406,7 @@ def _rj_complete(mc, p):
     root_p = jnp.sqrt(p)
     a, b = jnp.zeros_like(p), root_p / p  # b / sqrt(p) with b = 1, written without a quotient by a root
     qc = jnp.sqrt(mc)
+
     def step(_, state):
         a, b, p, e, em, qc = state
         inverse = 1 / p
@@ -438,8 +472,9 @@ def _pi_continued_stacked(n, turns, s, c, m, mc):
     """
     safe_mc = jnp.where(turns == 0, 1, mc)
     stack = lambda reduced, complete: jnp.stack(jnp.broadcast_arrays(reduced, complete))  # noqa: E731
-    values = _pi_reduced(stack(n, n), stack(s, jnp.ones_like(s)), stack(c, jnp.zeros_like(c)),
-                         stack(m, m), stack(mc, safe_mc))
+    values = _pi_reduced(
+        stack(n, n), stack(s, jnp.ones_like(s)), stack(c, jnp.zeros_like(c)), stack(m, m), stack(mc, safe_mc)
+    )
     return jnp.where(turns == 0, 0, 2 * turns * values[1]) + values[0]
 
 

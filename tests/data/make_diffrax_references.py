@@ -23,11 +23,13 @@ import time
 import jax
 import numpy as np
 
+
 HERE = os.path.dirname(os.path.abspath(__file__))
 sys.path.insert(0, os.path.dirname(HERE))
 
 import _reference as ref  # noqa: E402
 import test_body_diffrax as cases  # noqa: E402
+
 
 SEEDS = cases.STORED_SEEDS
 OUTPUT = cases.DATA
@@ -44,14 +46,22 @@ def references(seed):
 
 def main():
     jax.config.update("jax_enable_x64", True)  # as tests/conftest.py does
-    arrays = dict(rtol=np.float64(cases.RTOL), atol=np.float64(cases.ATOL), seeds=np.array(SEEDS),
-                  solver=np.array("diffrax.Dopri8, PIDController"), generator=np.array(os.path.basename(__file__)))
+    arrays = dict(
+        rtol=np.float64(cases.RTOL),
+        atol=np.float64(cases.ATOL),
+        seeds=np.array(SEEDS),
+        solver=np.array("diffrax.Dopri8, PIDController"),
+        generator=np.array(os.path.basename(__file__)),
+    )
     for seed in SEEDS:
         start = time.process_time()
         arrays.update(references(seed))
         steps = arrays[f"seed{seed}_steps_quaternion"]
-        print(f"seed {seed}: {len(steps)} bodies, {time.process_time() - start:.0f} s CPU, "
-              f"steps (L, q) up to {steps.max()}", flush=True)
+        print(
+            f"seed {seed}: {len(steps)} bodies, {time.process_time() - start:.0f} s CPU, "
+            f"steps (L, q) up to {steps.max()}",
+            flush=True,
+        )
     np.savez_compressed(OUTPUT, **arrays)
 
 

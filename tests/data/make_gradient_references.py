@@ -41,10 +41,12 @@ import time
 import mpmath
 import numpy as np
 
+
 HERE = os.path.dirname(os.path.abspath(__file__))
 sys.path.insert(0, os.path.dirname(HERE))
 
 import _reference as ref  # noqa: E402
+
 
 DPS = 32
 STEP = "1e-10"
@@ -124,8 +126,12 @@ def points():
 def _hamilton(p, q):
     pw, px, py, pz = p
     qw, qx, qy, qz = q
-    return [pw * qw - px * qx - py * qy - pz * qz, pw * qx + px * qw + py * qz - pz * qy,
-            pw * qy - px * qz + py * qw + pz * qx, pw * qz + px * qy - py * qx + pz * qw]
+    return [
+        pw * qw - px * qx - py * qy - pz * qz,
+        pw * qx + px * qw + py * qz - pz * qy,
+        pw * qy - px * qz + py * qw + pz * qx,
+        pw * qz + px * qy - py * qx + pz * qw,
+    ]
 
 
 def _matrix_bilinear(p, q):
@@ -133,9 +139,15 @@ def _matrix_bilinear(p, q):
     pw, px, py, pz = p
     qw, qx, qy, qz = q
     return [
-        pw * qw + px * qx - py * qy - pz * qz, px * qy + py * qx - pw * qz - pz * qw, px * qz + pz * qx + pw * qy + py * qw,
-        px * qy + py * qx + pw * qz + pz * qw, pw * qw - px * qx + py * qy - pz * qz, py * qz + pz * qy - pw * qx - px * qw,
-        px * qz + pz * qx - pw * qy - py * qw, py * qz + pz * qy + pw * qx + px * qw, pw * qw - px * qx - py * qy + pz * qz,
+        pw * qw + px * qx - py * qy - pz * qz,
+        px * qy + py * qx - pw * qz - pz * qw,
+        px * qz + pz * qx + pw * qy + py * qw,
+        px * qy + py * qx + pw * qz + pz * qw,
+        pw * qw - px * qx + py * qy - pz * qz,
+        py * qz + pz * qy - pw * qx - px * qw,
+        px * qz + pz * qx - pw * qy - py * qw,
+        py * qz + pz * qy + pw * qx + px * qw,
+        pw * qw - px * qx - py * qy + pz * qz,
     ]
 
 
@@ -186,8 +198,7 @@ def reference(x, dps=DPS, step=STEP):
             dR = [2 * v for v in _matrix_bilinear(q, dq)]
             columns.append([mpmath.mpf(0)] * 6 + dq + dR)
         # d/dt: the equations themselves.
-        dL = [L[1] * omega[2] - L[2] * omega[1], L[2] * omega[0] - L[0] * omega[2],
-              L[0] * omega[1] - L[1] * omega[0]]
+        dL = [L[1] * omega[2] - L[2] * omega[1], L[2] * omega[0] - L[0] * omega[2], L[0] * omega[1] - L[1] * omega[0]]
         dq = [v / 2 for v in _hamilton(q, [mpmath.mpf(0)] + omega)]
         dR = [2 * v for v in _matrix_bilinear(q, dq)]
         columns.append(dL + [a / b for a, b in zip(dL, inertia)] + dq + dR)
@@ -198,8 +209,13 @@ def reference(x, dps=DPS, step=STEP):
 def _task(item):
     name, kind, x = item
     values, jacobian = timed(name, reference, x, *precision(name))
-    return dict(name=name, kind=kind, x=x, values=[text(v) for v in values],
-                jacobian=[[text(v) for v in row] for row in jacobian])
+    return dict(
+        name=name,
+        kind=kind,
+        x=x,
+        values=[text(v) for v in values],
+        jacobian=[[text(v) for v in row] for row in jacobian],
+    )
 
 
 def text(value):
@@ -240,9 +256,18 @@ def write_references(description, task, items, output, default_processes, **meta
 
 
 def main():
-    write_references(__doc__.splitlines()[0], _task, points(), OUTPUT, 2, dps=DPS, step=STEP,
-                     fine=dict(dps=FINE_DPS, step=FINE_STEP, points="near plane"),
-                     outputs="L(3), Omega(3), q(4), R(9) row-major", inputs="I(3), L(3), q0(4), t")
+    write_references(
+        __doc__.splitlines()[0],
+        _task,
+        points(),
+        OUTPUT,
+        2,
+        dps=DPS,
+        step=STEP,
+        fine=dict(dps=FINE_DPS, step=FINE_STEP, points="near plane"),
+        outputs="L(3), Omega(3), q(4), R(9) row-major",
+        inputs="I(3), L(3), q0(4), t",
+    )
 
 
 if __name__ == "__main__":

@@ -29,12 +29,14 @@ import sys
 
 import mpmath
 
+
 HERE = os.path.dirname(os.path.abspath(__file__))
 sys.path.insert(0, os.path.dirname(HERE))
 sys.path.insert(0, HERE)
 
 import _reference as ref  # noqa: E402
-from make_gradient_references import ATTITUDE, _point, text, timed, write_references  # noqa: E402
+from make_gradient_references import _point, ATTITUDE, text, timed, write_references  # noqa: E402
+
 
 DPS = 32
 STEP = "1e-6"
@@ -48,8 +50,10 @@ def points():
     chosen = [
         ("major", _point([1.0, 2.0, 3.0], [0.9, 0.3, 0.2], t=1.3)),
         ("minor unsorted", _point([2.5, 0.7, 1.4], [-0.4, 0.7, 0.5], t=0.9)),
-        ("separatrix -1e-03", _point([1.0, 2.0, 3.0],
-                                     ref.separatrix_momentum((1.0, 2.0, 3.0), -1e-3, -0.5, (-1, 1, 1)), t=1.1)),
+        (
+            "separatrix -1e-03",
+            _point([1.0, 2.0, 3.0], ref.separatrix_momentum((1.0, 2.0, 3.0), -1e-3, -0.5, (-1, 1, 1)), t=1.1),
+        ),
         ("I1=I2 near plane 1e-02", _point([1.2, 1.2, 2.1], [0.6, 0.8, 1e-2], t=1.7)),
     ]
     return [(name, x[:6] + x[10:]) for name, x in chosen]
@@ -116,13 +120,28 @@ def reference(x, dps=DPS, step=STEP):
 def _task(item):
     name, x = item
     values, hessian = timed(name, reference, x, *((FINE_DPS, FINE_STEP) if "near plane" in name else (DPS, STEP)))
-    return dict(name=name, x=x, values=[text(v) for v in values],
-                hessian=[[[text(v) for v in row] for row in block] for block in hessian])
+    return dict(
+        name=name,
+        x=x,
+        values=[text(v) for v in values],
+        hessian=[[[text(v) for v in row] for row in block] for block in hessian],
+    )
 
 
 def main():
-    write_references(__doc__.splitlines()[0], _task, points(), OUTPUT, 1, dps=DPS, step=STEP,
-                     fine=dict(dps=FINE_DPS, step=FINE_STEP, points="near plane"), outputs="L(3), q(4)", inputs="I(3), L(3), t", attitude=[float(v) for v in ATTITUDE])
+    write_references(
+        __doc__.splitlines()[0],
+        _task,
+        points(),
+        OUTPUT,
+        1,
+        dps=DPS,
+        step=STEP,
+        fine=dict(dps=FINE_DPS, step=FINE_STEP, points="near plane"),
+        outputs="L(3), q(4)",
+        inputs="I(3), L(3), t",
+        attitude=[float(v) for v in ATTITUDE],
+    )
 
 
 if __name__ == "__main__":

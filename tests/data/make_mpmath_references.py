@@ -18,10 +18,12 @@ import time
 
 import numpy as np
 
+
 HERE = os.path.dirname(os.path.abspath(__file__))
 sys.path.insert(0, os.path.dirname(HERE))
 
 import _reference as ref  # noqa: E402
+
 
 DPS = 34
 DIGITS = 30

@@ -29,11 +29,13 @@ import time
 import jax
 import numpy as np
 
+
 HERE = os.path.dirname(os.path.abspath(__file__))
 sys.path.insert(0, os.path.dirname(HERE))
 
 import test_inertia_tensor as tensor_tests  # noqa: E402
 import test_torques_tensor as torque_tests  # noqa: E402
+
 
 OUTPUT = tensor_tests.DATA
 
@@ -59,15 +61,25 @@ def derivatives():
 
 def torqued():
     L, q = torque_tests.reference(torque_tests.MOMENTUM, torque_tests.ATTITUDE, torque_tests.FINAL_TIME)
-    return dict(tensor=torque_tests.TENSOR, momentum=torque_tests.MOMENTUM, attitude=torque_tests.ATTITUDE,
-                final_time=np.float64(torque_tests.FINAL_TIME), L=np.asarray(L), q=np.asarray(q))
+    return dict(
+        tensor=torque_tests.TENSOR,
+        momentum=torque_tests.MOMENTUM,
+        attitude=torque_tests.ATTITUDE,
+        final_time=np.float64(torque_tests.FINAL_TIME),
+        L=np.asarray(L),
+        q=np.asarray(q),
+    )
 
 
 def main():
     jax.config.update("jax_enable_x64", True)  # as tests/conftest.py does
-    arrays = dict(rtol=np.float64(tensor_tests.RTOL), atol=np.float64(tensor_tests.ATOL),
-                  step=np.float64(tensor_tests.STEP), solver=np.array("diffrax.Dopri8, PIDController"),
-                  generator=np.array(os.path.basename(__file__)))
+    arrays = dict(
+        rtol=np.float64(tensor_tests.RTOL),
+        atol=np.float64(tensor_tests.ATOL),
+        step=np.float64(tensor_tests.STEP),
+        solver=np.array("diffrax.Dopri8, PIDController"),
+        generator=np.array(os.path.basename(__file__)),
+    )
     for prefix, compute in (("torqued", torqued), ("motion", motion), ("derivative", derivatives)):
         start = time.process_time()
         arrays.update({f"{prefix}_{name}": value for name, value in compute().items()})

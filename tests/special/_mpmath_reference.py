@@ -30,6 +30,7 @@ import os
 import mpmath
 import numpy as np
 
+
 DPS = 40
 """Digits for reference values."""
 
@@ -225,7 +226,8 @@ def taylor(fn, point, steps, order=1, dps=STENCIL_DPS):
     condition numbers only); ``order=1`` central differences (~1e-30); ``order=2`` adds the Hessian.
 
     ``point``: mpf arguments; ``steps``: per-argument step scale (None: do not differentiate in
-    that argument).  The step is STEP times the scale, at ``dps`` digits (plus what x_i +- h_i needs).  Returns float64 arrays
+    that argument).  The step is STEP times the scale, at ``dps`` digits (plus what x_i +- h_i needs).  Returns
+    float64 arrays
     value_hi (ncomp,), value_lo (ncomp,), gradient (ncomp, nargs) and hessian (ncomp, nargs, nargs)
     (order 1: NaN); entries for undifferentiated arguments are NaN.
     """
@@ -390,15 +392,21 @@ def check(name, measure, tol, inputs, extra=None):
     if log:
         with open(log, "a") as handle:
             handle.write(
-                json.dumps({"check": name, "worst": worst_value, "tol": tol, "n": int(flat.size),
-                            "at": {k: float(v) if isinstance(v, (int, float)) else str(v)
-                                   for k, v in at.items()}}) + "\n"
+                json.dumps(
+                    {
+                        "check": name,
+                        "worst": worst_value,
+                        "tol": tol,
+                        "n": int(flat.size),
+                        "at": {k: float(v) if isinstance(v, (int, float)) else str(v) for k, v in at.items()},
+                    }
+                )
+                + "\n"
             )
     failing = int(np.sum(flat > tol))
     where = ", ".join(f"{k}={_fmt(v)}" for k, v in at.items())
     assert worst_value <= tol, (
-        f"{name}: worst {worst_value:.3e} > tolerance {tol:.1e} at {where} "
-        f"({failing} of {flat.size} points fail)"
+        f"{name}: worst {worst_value:.3e} > tolerance {tol:.1e} at {where} ({failing} of {flat.size} points fail)"
     )
     return worst_value
 

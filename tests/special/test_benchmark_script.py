@@ -7,6 +7,7 @@ import subprocess
 import sys
 from pathlib import Path
 
+
 ROOT = Path(__file__).resolve().parents[2]
 
 
@@ -14,13 +15,25 @@ def test_benchmark_quick(tmp_path):
     output = tmp_path / "special.json"
     proc = subprocess.run(
         [sys.executable, str(ROOT / "benchmarks" / "special.py"), "--quick", "--output", str(output)],
-        cwd=ROOT, capture_output=True, text=True, timeout=900,
+        cwd=ROOT,
+        capture_output=True,
+        text=True,
+        timeout=900,
     )
     assert proc.returncode == 0, proc.stdout + proc.stderr
     result = json.loads(output.read_text())
     names = {row["function"] for row in result["functions"]}
-    assert names == {"ellipj", "ellipk", "ellipe", "ellipkinc", "ellippiinc", "elliprf", "elliprd",
-                     "elliprj", "elliprc"}
+    assert names == {
+        "ellipj",
+        "ellipk",
+        "ellipe",
+        "ellipkinc",
+        "ellippiinc",
+        "elliprf",
+        "elliprd",
+        "elliprj",
+        "elliprc",
+    }
     for row in result["functions"]:
         assert row["frbjax_ns_per_point"] > 0 and row["scipy_ns_per_point"] > 0, row
         # Same function on the same points (scipy's ellipj is accurate on this moderate grid).

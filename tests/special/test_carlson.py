@@ -16,12 +16,12 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 import scipy.special
-from hypothesis import given, settings
-from hypothesis import strategies as st
+from hypothesis import given, settings, strategies as st
 
 import frbjax.special as special
 
 from . import _mpmath_reference as ref
+
 
 # Tolerances (relative).  Issue target: 5e-15 in float64, 1e-5 in float32.  Each is the measured
 # worst error on these grids (FRBJAX_ERROR_LOG, 2026-11-24) with a margin of about 2-3, far inside the
@@ -42,26 +42,68 @@ FUNCTIONS = list(ARGNAMES)
 # Edge cases: zero arguments, tiny/huge ratios, equal arguments, extreme magnitudes.
 EDGES = {
     "elliprf": [
-        (0.0, 1e-12, 1.0), (1e-12, 0.0, 1.0), (1.0, 0.0, 1e-12), (1.0, 1.0, 1.0), (0.0, 1.0, 1.0),
-        (0.0, 1e-300, 1.0), (1e-300, 1.0, 1.0), (1e-300, 1e-300, 1.0), (1.0, 1.0, 1e-300),
-        (1e300, 1e300, 1e300), (1e-300, 1e-300, 1e-300), (0.0, 1.0, 1e300), (1e-200, 1e100, 1.0),
-        (2.0, 3.0, 4.0), (0.5, 1.0, 1e12), (1e12, 1e12, 1e-12),
+        (0.0, 1e-12, 1.0),
+        (1e-12, 0.0, 1.0),
+        (1.0, 0.0, 1e-12),
+        (1.0, 1.0, 1.0),
+        (0.0, 1.0, 1.0),
+        (0.0, 1e-300, 1.0),
+        (1e-300, 1.0, 1.0),
+        (1e-300, 1e-300, 1.0),
+        (1.0, 1.0, 1e-300),
+        (1e300, 1e300, 1e300),
+        (1e-300, 1e-300, 1e-300),
+        (0.0, 1.0, 1e300),
+        (1e-200, 1e100, 1.0),
+        (2.0, 3.0, 4.0),
+        (0.5, 1.0, 1e12),
+        (1e12, 1e12, 1e-12),
     ],
     "elliprd": [
-        (0.0, 1e-12, 1.0), (1e-12, 0.0, 1.0), (0.0, 1.0, 1e-12), (1.0, 1.0, 1.0), (0.0, 2.0, 1.0),
-        (0.0, 1e-300, 1.0), (1e-300, 1.0, 1.0), (1.0, 1.0, 1e-100), (1e-100, 1e-100, 1.0),
-        (1e100, 1e100, 1e100), (1e-100, 1e-100, 1e-100), (0.0, 1.0, 1e200), (2.0, 3.0, 4.0),
+        (0.0, 1e-12, 1.0),
+        (1e-12, 0.0, 1.0),
+        (0.0, 1.0, 1e-12),
+        (1.0, 1.0, 1.0),
+        (0.0, 2.0, 1.0),
+        (0.0, 1e-300, 1.0),
+        (1e-300, 1.0, 1.0),
+        (1.0, 1.0, 1e-100),
+        (1e-100, 1e-100, 1.0),
+        (1e100, 1e100, 1e100),
+        (1e-100, 1e-100, 1e-100),
+        (0.0, 1.0, 1e200),
+        (2.0, 3.0, 4.0),
         (1e12, 1e-12, 1.0),
     ],
     "elliprj": [
-        (0.0, 1e-12, 1.0, 1.0), (1.0, 1.0, 1.0, 1e-12), (1.0, 1.0, 1.0, 1e12), (0.0, 1.0, 2.0, 3.0),
-        (2.0, 3.0, 4.0, 5.0), (1.0, 1.0, 1.0, 1.0), (0.0, 1e-300, 1.0, 1.0), (1e-300, 1.0, 1.0, 1.0),
-        (1.0, 1.0, 1.0, 1e-100), (1e-100, 1e-100, 1e-100, 1e-100), (1e100, 1e100, 1e100, 1e100),
-        (0.0, 1.0, 1.0, 1e-200), (1.0, 2.0, 3.0, 1e100), (1e-12, 1e-12, 1.0, 1e-12),
+        (0.0, 1e-12, 1.0, 1.0),
+        (1.0, 1.0, 1.0, 1e-12),
+        (1.0, 1.0, 1.0, 1e12),
+        (0.0, 1.0, 2.0, 3.0),
+        (2.0, 3.0, 4.0, 5.0),
+        (1.0, 1.0, 1.0, 1.0),
+        (0.0, 1e-300, 1.0, 1.0),
+        (1e-300, 1.0, 1.0, 1.0),
+        (1.0, 1.0, 1.0, 1e-100),
+        (1e-100, 1e-100, 1e-100, 1e-100),
+        (1e100, 1e100, 1e100, 1e100),
+        (0.0, 1.0, 1.0, 1e-200),
+        (1.0, 2.0, 3.0, 1e100),
+        (1e-12, 1e-12, 1.0, 1e-12),
     ],
     "elliprc": [
-        (0.0, 0.25), (2.25, 2.0), (1.0, 1.0), (0.0, 1e-300), (1e-300, 1.0), (1e300, 1.0),
-        (1.0, 1e-300), (0.0, 1e300), (1e300, 1e300), (1e-300, 1e-300), (1.0, 1e-12), (1e-12, 1.0),
+        (0.0, 0.25),
+        (2.25, 2.0),
+        (1.0, 1.0),
+        (0.0, 1e-300),
+        (1e-300, 1.0),
+        (1e300, 1.0),
+        (1.0, 1e-300),
+        (0.0, 1e300),
+        (1e300, 1e300),
+        (1e-300, 1e-300),
+        (1.0, 1e-12),
+        (1e-12, 1.0),
     ],
 }
 
@@ -82,7 +124,7 @@ def _random_points(name, rng, n_moderate=90, n_wide=40, n_zero=30):
     return np.concatenate([moderate, wide, zero, edges]).T.copy()
 
 
-@functools.lru_cache(maxsize=None)
+@functools.cache
 def grid64(name):
     seed = {"elliprf": 11, "elliprd": 12, "elliprj": 13, "elliprc": 14}[name]
     args = _random_points(name, np.random.default_rng(seed))
@@ -90,7 +132,7 @@ def grid64(name):
     return args, hi[0], lo[0]
 
 
-@functools.lru_cache(maxsize=None)
+@functools.cache
 def grid32(name):
     """Ordinary points for float32: arguments 1e-3..1e3 (and one zero), as float32."""
     rng = np.random.default_rng(100 + FUNCTIONS.index(name))
@@ -102,7 +144,7 @@ def grid32(name):
     return args, hi[0], lo[0]
 
 
-@functools.lru_cache(maxsize=None)
+@functools.cache
 def _jit(name):
     return jax.jit(getattr(special, name))
 
@@ -122,8 +164,13 @@ def test_float64_against_mpmath(name):
     out = jitted(name)(*args)
     assert out.dtype == jnp.float64
     rel = ref.ratio(ref.error(out, hi, lo), np.abs(hi))
-    ref.check(f"{name} float64 relative error", rel, TOL64[name], _inputs(name, args),
-              {"value": np.asarray(out), "reference": hi})
+    ref.check(
+        f"{name} float64 relative error",
+        rel,
+        TOL64[name],
+        _inputs(name, args),
+        {"value": np.asarray(out), "reference": hi},
+    )
 
 
 @pytest.mark.parametrize("name", FUNCTIONS)
@@ -132,8 +179,13 @@ def test_float32_against_mpmath(name):
     out = jitted(name)(*args)
     assert out.dtype == jnp.float32
     rel = ref.ratio(ref.error(out, hi, lo), np.abs(hi))
-    ref.check(f"{name} float32 relative error", rel, TOL32[name], _inputs(name, args),
-              {"value": np.asarray(out), "reference": hi})
+    ref.check(
+        f"{name} float32 relative error",
+        rel,
+        TOL32[name],
+        _inputs(name, args),
+        {"value": np.asarray(out), "reference": hi},
+    )
 
 
 @pytest.mark.parametrize("name", FUNCTIONS)
@@ -163,8 +215,7 @@ def test_closed_form_values():
         "R_F(x,x,x) = x^-1/2": (rf, 1 / np.sqrt(x)),
         "R_C(x,x) = x^-1/2": (rc, 1 / np.sqrt(x)),
         "R_D(x,x,x) = x^-3/2": (np.asarray(jitted("elliprd")(x[1:-1], x[1:-1], x[1:-1])), x[1:-1] ** -1.5),
-        "R_J(x,x,x,x) = x^-3/2": (
-            np.asarray(jitted("elliprj")(x[1:-1], x[1:-1], x[1:-1], x[1:-1])), x[1:-1] ** -1.5),
+        "R_J(x,x,x,x) = x^-3/2": (np.asarray(jitted("elliprj")(x[1:-1], x[1:-1], x[1:-1], x[1:-1])), x[1:-1] ** -1.5),
     }
     for label, (ours, exact) in checks.items():
         ref.check(label, ref.ratio(np.abs(ours - exact), exact), 4e-16 * 4, {"x": x[: ours.size]})
@@ -173,7 +224,9 @@ def test_closed_form_values():
         "R_C(9/4, 2) = ln 2": (float(jitted("elliprc")(2.25, 2.0)), np.log(2.0)),
         "R_F(0, 1, 1) = pi/2": (float(jitted("elliprf")(0.0, 1.0, 1.0)), np.pi / 2),
         "R_D(0, 2, 1) = 3 Gamma(3/4)^2 / sqrt(2 pi) (DLMF 19.20.22)": (
-            float(jitted("elliprd")(0.0, 2.0, 1.0)), 3 * 0.59907011736779610372),
+            float(jitted("elliprd")(0.0, 2.0, 1.0)),
+            3 * 0.59907011736779610372,
+        ),
     }
     for label, (ours, exact) in specials.items():
         assert abs(ours - exact) <= 4e-16 * abs(exact), f"{label}: got {ours!r}, want {exact!r}"
@@ -192,7 +245,7 @@ def test_broadcasting_jit_vmap():
     assert grid.shape == (5, 4)
     loop = np.array([[float(special.elliprf(a, b, 1.0)) for b in y] for a in x])
     np.testing.assert_allclose(np.asarray(grid), loop, rtol=1e-15)
-    xs, ys, zs, ps = (np.random.default_rng(5).uniform(0.1, 3.0, (4, 16)))
+    xs, ys, zs, ps = np.random.default_rng(5).uniform(0.1, 3.0, (4, 16))
     mapped = jax.vmap(special.elliprj)(xs, ys, zs, ps)
     direct = jax.jit(special.elliprj)(xs, ys, zs, ps)
     np.testing.assert_allclose(np.asarray(mapped), np.asarray(direct), rtol=1e-15)
@@ -225,8 +278,7 @@ def test_symmetry_and_homogeneity(x, y, z, p):
     base = float(rj(x, y, z, p))
     for perm in [(y, z, x), (z, x, y), (y, x, z)]:
         assert abs(float(rj(*perm, p)) - base) <= tol * base, ("R_J symmetry", x, y, z, p)
-    assert abs(float(rj(4 * x, 4 * y, 4 * z, 4 * p)) * 8 - base) <= tol * base, (
-        "R_J homogeneity", x, y, z, p)
+    assert abs(float(rj(4 * x, 4 * y, 4 * z, 4 * p)) * 8 - base) <= tol * base, ("R_J homogeneity", x, y, z, p)
     rc = jitted("elliprc")
     base = float(rc(x, y))
     assert abs(float(rc(4 * x, 4 * y)) * 2 - base) <= tol * base, ("R_C homogeneity", x, y)

@@ -15,9 +15,9 @@ import jax
 import jax.numpy as jnp
 import mpmath
 import numpy as np
-import pytest
 
 from frbjax.special._circular import cos_sin
+
 
 MAX_ULP, MEAN_ULP = 0.72, 0.27
 
@@ -29,13 +29,17 @@ def _ulps(values, references):
     return np.asarray(errors) / np.spacing(np.abs(values))
 
 
-@functools.lru_cache(maxsize=None)
+@functools.cache
 def _angles():
     rng = np.random.default_rng(11)
-    blocks = [rng.uniform(-1, 1, 600), rng.uniform(-10, 10, 600), rng.uniform(-1e3, 1e3, 600),
-              rng.uniform(-8e5, 8e5, 600),
-              # Next to multiples of pi/2, where the reduced argument is small and cancellation is worst.
-              rng.integers(-100000, 100000, 600) * (np.pi / 2) + rng.normal(size=600) * 1e-9]
+    blocks = [
+        rng.uniform(-1, 1, 600),
+        rng.uniform(-10, 10, 600),
+        rng.uniform(-1e3, 1e3, 600),
+        rng.uniform(-8e5, 8e5, 600),
+        # Next to multiples of pi/2, where the reduced argument is small and cancellation is worst.
+        rng.integers(-100000, 100000, 600) * (np.pi / 2) + rng.normal(size=600) * 1e-9,
+    ]
     return np.concatenate(blocks)
 
 
@@ -68,8 +72,7 @@ def test_derivatives_and_float32():
     float32 takes XLA's functions unchanged."""
     x = jnp.asarray([0.3, -2.0, 40.0])
     np.testing.assert_allclose(jax.vmap(jax.grad(lambda v: cos_sin(v)[1]))(x), np.cos(np.asarray(x)), rtol=1e-15)
-    np.testing.assert_allclose(jax.vmap(jax.hessian(lambda v: cos_sin(v)[0]))(x), -np.cos(np.asarray(x)),
-                               rtol=1e-15)
+    np.testing.assert_allclose(jax.vmap(jax.hessian(lambda v: cos_sin(v)[0]))(x), -np.cos(np.asarray(x)), rtol=1e-15)
     _, tangent = jax.jvp(lambda v: cos_sin(v)[0], (x,), (jnp.full(3, 0.5),))
     np.testing.assert_allclose(tangent, -0.5 * np.sin(np.asarray(x)), rtol=1e-15)
     x32 = jnp.asarray([0.3, 2.0], jnp.float32)

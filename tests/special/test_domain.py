@@ -15,11 +15,21 @@ import scipy.special
 
 from frbjax import special
 
+
 mpmath.mp.dps = 30
 
 # (n, m) with m <= n < -1, and neighbours on the other side of n = m.
-THIRD_KIND = [(-2.0, -2.0), (-1.9, -2.0), (-2.0, -3.0), (-10.0, -50.0), (-1e3, -1e4), (-1e5, -1e5),
-              (-2.5, -2.0), (-3.0, -2.0), (-1.5, 0.5)]
+THIRD_KIND = [
+    (-2.0, -2.0),
+    (-1.9, -2.0),
+    (-2.0, -3.0),
+    (-10.0, -50.0),
+    (-1e3, -1e4),
+    (-1e5, -1e5),
+    (-2.5, -2.0),
+    (-3.0, -2.0),
+    (-1.5, 0.5),
+]
 
 
 @pytest.mark.parametrize("n, m", THIRD_KIND)
@@ -36,8 +46,16 @@ def test_incomplete_third_kind_with_negative_parameter(n, phi, m):
     assert abs(float(special.ellippiinc(n, phi, m)) / expected - 1) < 2e-15
 
 
-@pytest.mark.parametrize("name, arguments", [("ellipe", (1.5,)), ("ellipe", (4.0,)), ("elliprc", (-1.0, 0.0)),
-                                             ("elliprc", (-1.0, 2.0)), ("elliprc", (1.0, 0.0))])
+@pytest.mark.parametrize(
+    "name, arguments",
+    [
+        ("ellipe", (1.5,)),
+        ("ellipe", (4.0,)),
+        ("elliprc", (-1.0, 0.0)),
+        ("elliprc", (-1.0, 2.0)),
+        ("elliprc", (1.0, 0.0)),
+    ],
+)
 def test_outside_the_domain_nan_as_scipy(name, arguments):
     assert np.isnan(getattr(scipy.special, name)(*arguments))
     assert np.isnan(float(getattr(special, name)(*arguments)))
@@ -46,5 +64,6 @@ def test_outside_the_domain_nan_as_scipy(name, arguments):
 def test_inside_the_domain_unchanged():
     """The points next to those edges keep scipy's values."""
     for name, arguments in [("ellipe", (1.0,)), ("ellipe", (-3.0,)), ("elliprc", (2.0, -1.0)), ("elliprc", (0.0, 1.0))]:
-        np.testing.assert_allclose(float(getattr(special, name)(*arguments)), getattr(scipy.special, name)(*arguments),
-                                   rtol=4e-16)
+        np.testing.assert_allclose(
+            float(getattr(special, name)(*arguments)), getattr(scipy.special, name)(*arguments), rtol=4e-16
+        )

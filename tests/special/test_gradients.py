@@ -35,23 +35,39 @@ import frbjax.special as special
 
 from . import _mpmath_reference as ref
 
+
 HALF_PI = np.pi / 2
 TOL = 1e-12  # issue target for every derivative (float64); tightened per function below
 # The measured worst errors on these grids (FRBJAX_ERROR_LOG, 2026-11-24) with a margin of about 2-3:
 # R_J 1.1e-13 (d/dx, the tangent of its duplication loop next to x = 0), every other <= 1e-15.
 TOL_D = {
-    "elliprf": 2e-15, "elliprd": 2.5e-15, "elliprj": 3e-13, "elliprc": 1.5e-15,
-    "ellipk": 1.5e-15, "ellipe": 2e-15, "ellipkm1": 1.5e-15,
-    "ellipkinc": 1.2e-15, "ellippiinc": 2.5e-15, "ellippi": 2.5e-15,
-    "ellipj_u": 2.5e-15, "ellipj_m": 3e-15,
+    "elliprf": 2e-15,
+    "elliprd": 2.5e-15,
+    "elliprj": 3e-13,
+    "elliprc": 1.5e-15,
+    "ellipk": 1.5e-15,
+    "ellipe": 2e-15,
+    "ellipkm1": 1.5e-15,
+    "ellipkinc": 1.2e-15,
+    "ellippiinc": 2.5e-15,
+    "ellippi": 2.5e-15,
+    "ellipj_u": 2.5e-15,
+    "ellipj_m": 3e-15,
 }
 assert max(TOL_D.values()) <= TOL
 TOL_D32 = 1e-5  # float32 derivatives (no issue target; measured worst 2.7e-6, dcn/dm)
 
 ARGNAMES = {
-    "elliprf": ("x", "y", "z"), "elliprd": ("x", "y", "z"), "elliprj": ("x", "y", "z", "p"),
-    "elliprc": ("x", "y"), "ellipk": ("m",), "ellipe": ("m",), "ellipkm1": ("p",),
-    "ellipkinc": ("phi", "m"), "ellippiinc": ("n", "phi", "m"), "ellippi": ("n", "m"),
+    "elliprf": ("x", "y", "z"),
+    "elliprd": ("x", "y", "z"),
+    "elliprj": ("x", "y", "z", "p"),
+    "elliprc": ("x", "y"),
+    "ellipk": ("m",),
+    "ellipe": ("m",),
+    "ellipkm1": ("p",),
+    "ellipkinc": ("phi", "m"),
+    "ellippiinc": ("n", "phi", "m"),
+    "ellippi": ("n", "m"),
     "ellipj": ("u", "m"),
 }
 PARAMETRISED = {"ellipk", "ellipe", "ellipkinc", "ellippiinc", "ellippi", "ellipj"}  # accept mc
@@ -67,7 +83,7 @@ def _function(name, with_mc):
     return fn
 
 
-@functools.lru_cache(maxsize=None)
+@functools.cache
 def _jvp_jit(name, with_mc):
     fn = _function(name, with_mc)
     k = len(ARGNAMES[name]) + with_mc
@@ -78,7 +94,7 @@ def _jvp_jit(name, with_mc):
     return jax.jit(tangent)
 
 
-@functools.lru_cache(maxsize=None)
+@functools.cache
 def _vjp_jit(name, with_mc):
     fn = _function(name, with_mc)
     k = len(ARGNAMES[name]) + with_mc
@@ -144,12 +160,13 @@ def _steps_abs(*xs):
     return tuple(ref.step(abs(x)) for x in xs)
 
 
-@functools.lru_cache(maxsize=None)
+@functools.cache
 def carlson_grid(name):
     rng = np.random.default_rng(300 + list(ARGNAMES).index(name))
     nargs = len(ARGNAMES[name])
-    pts = np.concatenate([ref.log_uniform(rng, -3, 3, (40, nargs)),
-                          ref.log_uniform(rng, -10, 10, (12, nargs))]).T.copy()
+    pts = np.concatenate(
+        [ref.log_uniform(rng, -3, 3, (40, nargs)), ref.log_uniform(rng, -10, 10, (12, nargs))]
+    ).T.copy()
     fn = getattr(ref, name)
     _, _, grad, _ = ref.taylor_table(fn, list(pts), _steps_abs, order=1)
     return pts, grad
@@ -159,11 +176,10 @@ def _param(m, mc):
     return [ref.parameter(a, b) for a, b in zip(m, mc if mc is not None else [None] * len(m))]
 
 
-@functools.lru_cache(maxsize=None)
+@functools.cache
 def complete_grid():
     rng = np.random.default_rng(310)
-    m = np.concatenate([rng.uniform(0, 1, 40), 1 - ref.log_uniform(rng, -15, -1, 15),
-                        [0.0, 1e-300, 0.5, 1 - 1e-15]])
+    m = np.concatenate([rng.uniform(0, 1, 40), 1 - ref.log_uniform(rng, -15, -1, 15), [0.0, 1e-300, 0.5, 1 - 1e-15]])
     mc = np.concatenate([ref.log_uniform(rng, -17, 0, 15), [1e-17, 1e-300]])
     out = {"m": m, "mc": mc}
     for name in ("ellipk", "ellipe"):
@@ -171,12 +187,13 @@ def complete_grid():
         out[name] = ref.taylor_table(fn, [_param(m, None)], lambda a: (ref.m_step(a),))[2][0, 0]
         out[name + "_mc"] = ref.taylor_table(fn, [_param(1 - mc, mc)], lambda a: (ref.m_step(a),))[2][0, 0]
     # ellipkm1(p) = K(1 - p): d/dp = -K'(1 - p); reference differentiates in p directly.
-    out["ellipkm1"] = ref.taylor_table(lambda p: ref.ellipk(ref.parameter(None, p)), [mc],
-                                       lambda a: (ref.step(abs(a)),))[2][0, 0]
+    out["ellipkm1"] = ref.taylor_table(
+        lambda p: ref.ellipk(ref.parameter(None, p)), [mc], lambda a: (ref.step(abs(a)),)
+    )[2][0, 0]
     return out
 
 
-@functools.lru_cache(maxsize=None)
+@functools.cache
 def legendre_grid(name, kind):
     """Points (no phi = 0: zero derivatives are checked in the finiteness test), and the value,
     gradient and Hessian of the reference there."""
@@ -185,10 +202,17 @@ def legendre_grid(name, kind):
     size = 36 if name == "ellippiinc" else 50
     m = np.concatenate([uni(0, 1, size), 1 - ref.log_uniform(rng, -15, -1, size // 4)])
     total = m.size
-    phi = np.concatenate([uni(-HALF_PI, HALF_PI, size - 10), ref.signed(rng, ref.log_uniform(rng, 0, 3, 10)),
-                          uni(-3, 3, size // 4)])
-    n = np.concatenate([uni(-1, 0.9, size - 8), -ref.log_uniform(rng, 0, 6, 4), 1 - ref.log_uniform(rng, -4, -1, 4),
-                        uni(-1, 0.99, size // 4)])
+    phi = np.concatenate(
+        [uni(-HALF_PI, HALF_PI, size - 10), ref.signed(rng, ref.log_uniform(rng, 0, 3, 10)), uni(-3, 3, size // 4)]
+    )
+    n = np.concatenate(
+        [
+            uni(-1, 0.9, size - 8),
+            -ref.log_uniform(rng, 0, 6, 4),
+            1 - ref.log_uniform(rng, -4, -1, 4),
+            uni(-1, 0.99, size // 4),
+        ]
+    )
     mc = None
     if kind == "mc":
         mc = ref.log_uniform(rng, -17, 0, total)
@@ -214,13 +238,18 @@ def _sizes(name, columns, mc):
     return [s_n, s_m]
 
 
-@functools.lru_cache(maxsize=None)
+@functools.cache
 def jacobi_grid(kind):
     """(u, m, mc, reference value/gradient/Hessian in (u, m) of (sn, cn, dn, am))."""
     rng = np.random.default_rng(330)
     size = 60
-    u = np.concatenate([ref.signed(rng, ref.log_uniform(rng, -2, 1.5, size)),
-                        ref.signed(rng, ref.log_uniform(rng, 1.5, 4, 15)), [1e6, -1e6 + 0.5]])
+    u = np.concatenate(
+        [
+            ref.signed(rng, ref.log_uniform(rng, -2, 1.5, size)),
+            ref.signed(rng, ref.log_uniform(rng, 1.5, 4, 15)),
+            [1e6, -1e6 + 0.5],
+        ]
+    )
     total = u.size
     if kind == "plain":
         m = np.concatenate([rng.uniform(0, 1, size), 1 - ref.log_uniform(rng, -15, -1, 15), [0.3, 0.9]])
@@ -228,8 +257,7 @@ def jacobi_grid(kind):
     else:
         mc = np.concatenate([ref.log_uniform(rng, -17, 0, total - 2), [1e-17, 1e-12]])
         m = 1 - mc
-    table = ref.taylor_table(ref.ellipj, [u, _param(m, mc)],
-                             lambda a, b: (ref.step(abs(a)), ref.m_step(b)), order=2)
+    table = ref.taylor_table(ref.ellipj, [u, _param(m, mc)], lambda a, b: (ref.step(abs(a)), ref.m_step(b)), order=2)
     return u, m, mc, table
 
 
@@ -244,8 +272,13 @@ def test_carlson_partials(name, mode):
     inputs = dict(zip(ARGNAMES[name], pts))
     for i, arg in enumerate(ARGNAMES[name]):
         rel = ref.ratio(np.abs(ours[0, i] - grad[0, i]), np.abs(grad[0, i]))
-        ref.check(f"d{name}/d{arg} ({mode}) relative error", rel, TOL_D[name], inputs,
-                  {"derivative": ours[0, i], "reference": grad[0, i]})
+        ref.check(
+            f"d{name}/d{arg} ({mode}) relative error",
+            rel,
+            TOL_D[name],
+            inputs,
+            {"derivative": ours[0, i], "reference": grad[0, i]},
+        )
 
 
 # ----------------------------------------------------------------------------- complete K and E
@@ -257,12 +290,22 @@ def test_complete_derivatives(name, mode):
     g = complete_grid()
     m, mc = g["m"], g["mc"]
     ours = partials(name, [m], mode)[0, 0]
-    ref.check(f"d{name}/dm ({mode}) relative error", ref.ratio(np.abs(ours - g[name]), np.abs(g[name])),
-              TOL_D[name], {"m": m}, {"derivative": ours, "reference": g[name]})
+    ref.check(
+        f"d{name}/dm ({mode}) relative error",
+        ref.ratio(np.abs(ours - g[name]), np.abs(g[name])),
+        TOL_D[name],
+        {"m": m},
+        {"derivative": ours, "reference": g[name]},
+    )
     ours = partials(name, [1 - mc], mode, mc=mc)[0, 0]
     want = g[name + "_mc"]
-    ref.check(f"d{name}/dm with mc ({mode}) relative error", ref.ratio(np.abs(ours - want), np.abs(want)),
-              TOL_D[name], {"mc": mc}, {"derivative": ours, "reference": want})
+    ref.check(
+        f"d{name}/dm with mc ({mode}) relative error",
+        ref.ratio(np.abs(ours - want), np.abs(want)),
+        TOL_D[name],
+        {"mc": mc},
+        {"derivative": ours, "reference": want},
+    )
 
 
 @pytest.mark.parametrize("mode", ["fwd", "rev"])
@@ -270,8 +313,13 @@ def test_ellipkm1_derivative(mode):
     g = complete_grid()
     p = g["mc"]
     ours = partials("ellipkm1", [p], mode)[0, 0]
-    ref.check(f"dellipkm1/dp ({mode}) relative error", ref.ratio(np.abs(ours - g["ellipkm1"]), np.abs(g["ellipkm1"])),
-              TOL_D["ellipkm1"], {"p": p}, {"derivative": ours, "reference": g["ellipkm1"]})
+    ref.check(
+        f"dellipkm1/dp ({mode}) relative error",
+        ref.ratio(np.abs(ours - g["ellipkm1"]), np.abs(g["ellipkm1"])),
+        TOL_D["ellipkm1"],
+        {"p": p},
+        {"derivative": ours, "reference": g["ellipkm1"]},
+    )
 
 
 def test_mc_tangent_convention():
@@ -280,10 +328,12 @@ def test_mc_tangent_convention():
     mc = g["mc"]
     dm, dmc = _mc_halves("ellipk", [1 - mc], mc)
     want = g["ellipk_mc"]
-    ref.check("dK/dm with mc given = K'/2", ref.ratio(np.abs(dm - want / 2), np.abs(want / 2)),
-              TOL_D["ellipk"], {"mc": mc})
-    ref.check("dK/dmc with mc given = -K'/2", ref.ratio(np.abs(dmc + want / 2), np.abs(want / 2)),
-              TOL_D["ellipk"], {"mc": mc})
+    ref.check(
+        "dK/dm with mc given = K'/2", ref.ratio(np.abs(dm - want / 2), np.abs(want / 2)), TOL_D["ellipk"], {"mc": mc}
+    )
+    ref.check(
+        "dK/dmc with mc given = -K'/2", ref.ratio(np.abs(dmc + want / 2), np.abs(want / 2)), TOL_D["ellipk"], {"mc": mc}
+    )
     u = np.linspace(-3, 3, 7)
     dm, dmc = _mc_halves("ellipj", [u, np.full(7, 0.75)], np.full(7, 0.25))
     plain = partials("ellipj", [u, np.full(7, 0.75)], "rev")[0, 1]
@@ -309,9 +359,13 @@ def test_legendre_partials(name, kind, mode):
         spread = sum(s * np.abs(hess[0, i, j]) for j, s in enumerate(sizes))
         scale = np.maximum(np.abs(want), spread)
         measure = ref.ratio(np.abs(ours[0, i] - want), scale)
-        ref.check(f"d{name}/d{arg} ({kind}, {mode}) conditioned relative error", measure, TOL_D[name],
-                  inputs, {"derivative": ours[0, i], "reference": want,
-                           "kappa": ref.ratio(spread, np.abs(want))})
+        ref.check(
+            f"d{name}/d{arg} ({kind}, {mode}) conditioned relative error",
+            measure,
+            TOL_D[name],
+            inputs,
+            {"derivative": ours[0, i], "reference": want, "kappa": ref.ratio(spread, np.abs(want))},
+        )
 
 
 # -------------------------------------------------------------------------------------- Jacobi
@@ -330,16 +384,19 @@ def test_jacobi_partials(kind, mode):
             want = grad[c, i]
             spread = sum(s * np.abs(hess[c, i, j]) for j, s in enumerate(sizes))
             measure = ref.ratio(np.abs(ours[c, i] - want), np.maximum(np.abs(want), spread))
-            ref.check(f"d{name}/d{arg} ({kind}, {mode}) conditioned relative error", measure,
-                      TOL_D[f"ellipj_{arg}"], inputs,
-                      {"derivative": ours[c, i], "reference": want,
-                       "kappa": ref.ratio(spread, np.abs(want))})
+            ref.check(
+                f"d{name}/d{arg} ({kind}, {mode}) conditioned relative error",
+                measure,
+                TOL_D[f"ellipj_{arg}"],
+                inputs,
+                {"derivative": ours[c, i], "reference": want, "kappa": ref.ratio(spread, np.abs(want))},
+            )
 
 
 # ------------------------------------------------------------------------------------- float32
 
 
-@functools.lru_cache(maxsize=None)
+@functools.cache
 def grid32(name):
     rng = np.random.default_rng(340)
     size = 40
@@ -353,8 +410,9 @@ def grid32(name):
     }[name]
     cols = [c.astype(np.float32) for c in cols]
     fn = getattr(ref, name) if name != "ellipj" else (lambda a, b: ref.ellipj(a, b))
-    _, _, grad, _ = ref.taylor_table(fn, cols, _steps_abs if name.startswith("ellipr") else
-                                     (lambda *a: tuple(ref.step(abs(x)) for x in a)), order=1)
+    _, _, grad, _ = ref.taylor_table(
+        fn, cols, _steps_abs if name.startswith("ellipr") else (lambda *a: tuple(ref.step(abs(x)) for x in a)), order=1
+    )
     return cols, grad
 
 
@@ -369,8 +427,13 @@ def test_float32_derivatives(name):
         for i, arg in enumerate(ARGNAMES[name]):
             want = grad[c, i]
             err = np.abs(ours[c, i].astype(np.float64) - want) / np.maximum(np.abs(want), 1.0)
-            ref.check(f"d{name}[{c}]/d{arg} float32 error / max(1, |g|)", err, TOL_D32,
-                      dict(zip(ARGNAMES[name], cols)), {"derivative": ours[c, i], "reference": want})
+            ref.check(
+                f"d{name}[{c}]/d{arg} float32 error / max(1, |g|)",
+                err,
+                TOL_D32,
+                dict(zip(ARGNAMES[name], cols)),
+                {"derivative": ours[c, i], "reference": want},
+            )
 
 
 # ------------------------------------------------------------------------ finite at domain edges
@@ -400,8 +463,11 @@ def test_no_nan_at_domain_edges():
     _all_partials_finite("ellipj", [u, m])
     _all_partials_finite("ellipj", [u, np.ones_like(u)], mc=np.zeros_like(u))
     # F and Pi at m in {0, 1}, n = 0, phi = 0 (|phi| < pi/2 at m = 1)
-    n, phi, m = grid(np.array([0.0, -1e3, 0.5, 0.999]), np.array([0.0, 1e-300, -0.7, 1.5]),
-                     np.array([0.0, 1e-300, 0.5, 1 - 1e-15, 1.0]))
+    n, phi, m = grid(
+        np.array([0.0, -1e3, 0.5, 0.999]),
+        np.array([0.0, 1e-300, -0.7, 1.5]),
+        np.array([0.0, 1e-300, 0.5, 1 - 1e-15, 1.0]),
+    )
     _all_partials_finite("ellipkinc", [phi, m])
     _all_partials_finite("ellippiinc", [n, phi, m])
     n, m = grid(np.array([0.0, -1e3, 0.5, 0.999]), np.array([0.0, 1e-300, 0.5, 1 - 1e-15]))
@@ -464,8 +530,7 @@ def test_check_grads_with_mc():
     point = tuple(jnp.asarray(x) for x in (1.3, 0.8))
     check_grads(lambda u, m: special.ellipj(u, m, mc=1 - m), point, order=1, modes=("fwd", "rev"))
     point = tuple(jnp.asarray(x) for x in (0.3, 1.1, 0.6))
-    check_grads(lambda n, phi, m: special.ellippiinc(n, phi, m, mc=1 - m), point, order=1,
-                modes=("fwd", "rev"))
+    check_grads(lambda n, phi, m: special.ellippiinc(n, phi, m, mc=1 - m), point, order=1, modes=("fwd", "rev"))
 
 
 def test_grad_under_jit_and_vmap():

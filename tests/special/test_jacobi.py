@@ -22,6 +22,7 @@ import frbjax.special as special
 
 from . import _mpmath_reference as ref
 
+
 COMPONENTS = ("sn", "cn", "dn", "am")
 # Issue target: 4e-15 max(1, |u|/K) in float64, 1e-5 in float32.  The tolerances are the measured worst
 # errors on these grids (FRBJAX_ERROR_LOG, 2026-11-24) with a margin of about 2: float64 6.3e-16 with
@@ -50,33 +51,68 @@ def _reference(u, m, mc):
     return hi[:4], lo[:4], hi[4]
 
 
-@functools.lru_cache(maxsize=None)
+@functools.cache
 def grids():
     rng = np.random.default_rng(2024)
     uni = rng.uniform
     k_scipy = 1 - ref.log_uniform(rng, -12, -4, 30)
     blocks = [
-        (ref.signed(rng, ref.log_uniform(rng, -3, 1.5, 100)), uni(0, 1, 100)),      # ordinary
-        (ref.signed(rng, ref.log_uniform(rng, 2, 6, 50)), uni(0, 1, 50)),           # |u| to 1e6
+        (ref.signed(rng, ref.log_uniform(rng, -3, 1.5, 100)), uni(0, 1, 100)),  # ordinary
+        (ref.signed(rng, ref.log_uniform(rng, 2, 6, 50)), uni(0, 1, 50)),  # |u| to 1e6
         (ref.signed(rng, ref.log_uniform(rng, -2, 6, 40)), 1 - ref.log_uniform(rng, -15, -1, 40)),
-        (uni(5, 100, 30), k_scipy**2),                                              # scipy's trouble
-        (np.array([0.0, 0.0, 0.0, 1.0, 1e-300, 1e6, -1e6, 1e6, -1e6, 1.0, SCIPY_FAILURE[0],
-                   1.8540746773013719, 3.7081493546027438, -1.0]),
-         np.array([0.5, 0.0, 1 - 1e-15, 1e-300, 0.5, 0.5, 0.5, 1 - 1e-15, 1e-12, 1 - 1e-15,
-                   SCIPY_FAILURE[1], 0.5, 0.5, 0.0])),
+        (uni(5, 100, 30), k_scipy**2),  # scipy's trouble
+        (
+            np.array(
+                [
+                    0.0,
+                    0.0,
+                    0.0,
+                    1.0,
+                    1e-300,
+                    1e6,
+                    -1e6,
+                    1e6,
+                    -1e6,
+                    1.0,
+                    SCIPY_FAILURE[0],
+                    1.8540746773013719,
+                    3.7081493546027438,
+                    -1.0,
+                ]
+            ),
+            np.array(
+                [
+                    0.5,
+                    0.0,
+                    1 - 1e-15,
+                    1e-300,
+                    0.5,
+                    0.5,
+                    0.5,
+                    1 - 1e-15,
+                    1e-12,
+                    1 - 1e-15,
+                    SCIPY_FAILURE[1],
+                    0.5,
+                    0.5,
+                    0.0,
+                ]
+            ),
+        ),
     ]
     u = np.concatenate([b[0] for b in blocks])
     m = np.concatenate([b[1] for b in blocks])
     u_c = np.concatenate([ref.signed(rng, ref.log_uniform(rng, -2, 6, 40)), [50.0, 1e6, -1e3, 30.0]])
-    mc = np.concatenate([ref.log_uniform(rng, -17, 0, 20), ref.log_uniform(rng, -17, -13, 20),
-                         [1e-17, 1e-17, 1e-17, 1e-300]])
+    mc = np.concatenate(
+        [ref.log_uniform(rng, -17, 0, 20), ref.log_uniform(rng, -17, -13, 20), [1e-17, 1e-17, 1e-17, 1e-300]]
+    )
     return {
         "plain": ((u, m), None, _reference(u, m, None)),
         "mc": ((u_c, 1 - mc), mc, _reference(u_c, None, mc)),
     }
 
 
-@functools.lru_cache(maxsize=None)
+@functools.cache
 def jitted(with_mc=False):
     if with_mc:
         return jax.jit(lambda u, m, mc: special.ellipj(u, m, mc=mc))
@@ -103,8 +139,13 @@ def _check_components(label, out, hi, lo, quarter, u, tol, inputs):
     scale = periods(u, quarter)
     for c, name in enumerate(COMPONENTS):
         err = ref.error(out[c], hi[c], lo[c])
-        ref.check(f"ellipj {name} {label}", err / scale, tol[name], inputs,
-                  {"value": out[c], "reference": hi[c], "K": quarter})
+        ref.check(
+            f"ellipj {name} {label}",
+            err / scale,
+            tol[name],
+            inputs,
+            {"value": out[c], "reference": hi[c], "K": quarter},
+        )
 
 
 @pytest.mark.parametrize("kind", ["plain", "mc"])
@@ -113,8 +154,7 @@ def test_float64_against_mpmath(kind):
     out = evaluate(u, m, mc)
     assert all(o.dtype == np.float64 for o in out)
     inputs = {"u": u, "m": m} if mc is None else {"u": u, "mc": mc}
-    _check_components(f"({kind}) float64 error / max(1, |u|/K)", out, hi, lo, quarter, u, TOL64,
-                      inputs)
+    _check_components(f"({kind}) float64 error / max(1, |u|/K)", out, hi, lo, quarter, u, TOL64, inputs)
 
 
 def test_scipy_failure_case():
@@ -138,8 +178,13 @@ def test_m_equal_one_limits():
     expect = [np.tanh(u), 1 / np.cosh(u), 1 / np.cosh(u), 2 * np.arctan(np.tanh(u / 2))]
     for label, out in [("m=1", evaluate(u, 1.0)), ("mc=0", evaluate(u, 1.0, 0.0))]:
         for name, got, want in zip(COMPONENTS, out, expect):
-            ref.check(f"ellipj {name} at {label} vs closed form", np.abs(got - want),
-                      TOL64[name], {"u": u}, {"value": got, "expected": want})
+            ref.check(
+                f"ellipj {name} at {label} vs closed form",
+                np.abs(got - want),
+                TOL64[name],
+                {"u": u},
+                {"value": got, "expected": want},
+            )
 
 
 def test_m_equal_zero_limits():
@@ -149,8 +194,13 @@ def test_m_equal_zero_limits():
     expect = [np.sin(u), np.cos(u), np.ones_like(u), u]
     scale = periods(u, np.pi / 2)
     for name, got, want in zip(COMPONENTS, out, expect):
-        ref.check(f"ellipj {name} at m=0 vs closed form", np.abs(got - want) / scale, TOL64[name],
-                  {"u": u}, {"value": got, "expected": want})
+        ref.check(
+            f"ellipj {name} at m=0 vs closed form",
+            np.abs(got - want) / scale,
+            TOL64[name],
+            {"u": u},
+            {"value": got, "expected": want},
+        )
 
 
 def test_identities_and_symmetry():
@@ -161,8 +211,12 @@ def test_identities_and_symmetry():
     neg = evaluate(-u, m)
     # The reduction of u is symmetric in a sensible implementation; allow a few ulps of the phase.
     scale = np.maximum(1.0, np.abs(u))
-    for name, a, b in [("sn odd", neg[0], -sn), ("cn even", neg[1], cn), ("dn even", neg[2], dn),
-                       ("am odd", neg[3], -am)]:
+    for name, a, b in [
+        ("sn odd", neg[0], -sn),
+        ("cn even", neg[1], cn),
+        ("dn even", neg[2], dn),
+        ("am odd", neg[3], -am),
+    ]:
         ref.check(name, np.abs(a - b) / scale, 1e-15, {"u": u, "m": m})
 
 
@@ -187,7 +241,7 @@ def test_finite_at_domain_edges():
 # ------------------------------------------------------------------------------------- float32
 
 
-@functools.lru_cache(maxsize=None)
+@functools.cache
 def grid32():
     rng = np.random.default_rng(32)
     u = rng.uniform(-10, 10, 150).astype(np.float32)
@@ -199,8 +253,7 @@ def test_float32_against_mpmath():
     u, m, (hi, lo, quarter) = grid32()
     out = evaluate(u, m)
     assert all(o.dtype == np.float32 for o in out)
-    _check_components("float32 error / max(1, |u|/K)", out, hi, lo, quarter, u, TOL32,
-                      {"u": u, "m": m})
+    _check_components("float32 error / max(1, |u|/K)", out, hi, lo, quarter, u, TOL32, {"u": u, "m": m})
 
 
 # --------------------------------------------------------------------------------- scipy opinion

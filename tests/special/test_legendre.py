@@ -37,23 +37,32 @@ import frbjax.special as special
 
 from . import _mpmath_reference as ref
 
+
 HALF_PI = np.pi / 2
 
 # Tolerances: issue target 5e-15 (float64) and 1e-5 (float32); each is the measured worst error on
 # these grids (FRBJAX_ERROR_LOG, 2026-11-24) with a margin of about 2-3: float64 K 1.7e-16, K(1 - p)
 # 1.3e-16, E 1.7e-16, F 3.3e-16, Pi(n|m) 6.6e-16, Pi(n; phi|m) 4.8e-16; float32 0.9e-7 to 3.8e-7.
 TOL64 = {
-    "ellipk": 5e-16, "ellipkm1": 5e-16, "ellipe": 5e-16, "ellipkinc": 8e-16,
-    "ellippi": 1.5e-15, "ellippiinc": 1.2e-15,
+    "ellipk": 5e-16,
+    "ellipkm1": 5e-16,
+    "ellipe": 5e-16,
+    "ellipkinc": 8e-16,
+    "ellippi": 1.5e-15,
+    "ellippiinc": 1.2e-15,
 }
 TOL32 = {
-    "ellipk": 4e-7, "ellipkm1": 4e-7, "ellipe": 4e-7, "ellipkinc": 6e-7,
-    "ellippi": 6e-7, "ellippiinc": 1e-6,
+    "ellipk": 4e-7,
+    "ellipkm1": 4e-7,
+    "ellipe": 4e-7,
+    "ellipkinc": 6e-7,
+    "ellippi": 6e-7,
+    "ellippiinc": 1e-6,
 }
 TOL_SCIPY = 1e-14
 
 
-@functools.lru_cache(maxsize=None)
+@functools.cache
 def jitted(name, with_mc=False):
     fn = getattr(special, name)
     if with_mc:
@@ -73,22 +82,26 @@ def evaluate(name, args, mc=None):
 
 def m_grid(rng, n_uniform=100, n_near_one=40):
     edges = [0.0, 1e-300, 1e-16, 1e-8, 0.1, 0.5, 0.9, 1 - 1e-15, 1 - 2.0**-52, 1 - 2.0**-53]
-    return np.concatenate([
-        rng.uniform(0, 1, n_uniform),
-        1 - ref.log_uniform(rng, -15, -1, n_near_one),
-        edges,
-    ])
+    return np.concatenate(
+        [
+            rng.uniform(0, 1, n_uniform),
+            1 - ref.log_uniform(rng, -15, -1, n_near_one),
+            edges,
+        ]
+    )
 
 
 def mc_grid(rng, n=40):
     """Explicit complements down to 1e-300 (m = 1 - mc rounds to 1 below 1.1e-16)."""
-    return np.concatenate([
-        ref.log_uniform(rng, -300, 0, n),
-        [1e-17, 1e-16, 2.0**-60, 1e-300, 1e-30, 0.5],
-    ])
+    return np.concatenate(
+        [
+            ref.log_uniform(rng, -300, 0, n),
+            [1e-17, 1e-16, 2.0**-60, 1e-300, 1e-30, 0.5],
+        ]
+    )
 
 
-@functools.lru_cache(maxsize=None)
+@functools.cache
 def complete_grids():
     rng = np.random.default_rng(21)
     m = m_grid(rng)
@@ -109,24 +122,36 @@ def test_complete_float64(name):
     key = "K" if name == "ellipk" else "E"
     out = evaluate(name, [g["m"]])
     hi, lo = g[f"{key}_m"]
-    ref.check(f"{name}(m) float64 relative error",
-              ref.ratio(ref.error(out, hi[0], lo[0]), np.abs(hi[0])), TOL64[name],
-              {"m": g["m"]}, {"value": out, "reference": hi[0]})
+    ref.check(
+        f"{name}(m) float64 relative error",
+        ref.ratio(ref.error(out, hi[0], lo[0]), np.abs(hi[0])),
+        TOL64[name],
+        {"m": g["m"]},
+        {"value": out, "reference": hi[0]},
+    )
     mc = g["mc"]
     out = evaluate(name, [1 - mc], mc=mc)
     hi, lo = g[f"{key}_mc"]
-    ref.check(f"{name}(m, mc=mc) float64 relative error",
-              ref.ratio(ref.error(out, hi[0], lo[0]), np.abs(hi[0])), TOL64[name],
-              {"mc": mc}, {"value": out, "reference": hi[0]})
+    ref.check(
+        f"{name}(m, mc=mc) float64 relative error",
+        ref.ratio(ref.error(out, hi[0], lo[0]), np.abs(hi[0])),
+        TOL64[name],
+        {"mc": mc},
+        {"value": out, "reference": hi[0]},
+    )
 
 
 def test_ellipkm1_float64():
     g = complete_grids()
     out = evaluate("ellipkm1", [g["p"]])
     hi, lo = g["K_p"]
-    ref.check("ellipkm1 float64 relative error",
-              ref.ratio(ref.error(out, hi[0], lo[0]), np.abs(hi[0])), TOL64["ellipkm1"],
-              {"p": g["p"]}, {"value": out, "reference": hi[0]})
+    ref.check(
+        "ellipkm1 float64 relative error",
+        ref.ratio(ref.error(out, hi[0], lo[0]), np.abs(hi[0])),
+        TOL64["ellipkm1"],
+        {"p": g["p"]},
+        {"value": out, "reference": hi[0]},
+    )
 
 
 def test_complete_limits():
@@ -138,11 +163,9 @@ def test_complete_limits():
     assert np.isposinf(float(special.ellipkm1(0.0))), "ellipkm1(0) = K(1) = +inf"
     # Pi(0|m) = K(m) and Pi(n|0) = pi / (2 sqrt(1 - n)).
     m = np.array([0.0, 0.3, 0.9, 1 - 1e-12])
-    np.testing.assert_allclose(evaluate("ellippi", [np.zeros_like(m), m]), evaluate("ellipk", [m]),
-                               rtol=4e-16)
+    np.testing.assert_allclose(evaluate("ellippi", [np.zeros_like(m), m]), evaluate("ellipk", [m]), rtol=4e-16)
     n = np.array([-1e6, -1.0, 0.0, 0.5, 0.999])
-    np.testing.assert_allclose(evaluate("ellippi", [n, np.zeros_like(n)]), HALF_PI / np.sqrt(1 - n),
-                               rtol=1e-15)
+    np.testing.assert_allclose(evaluate("ellippi", [n, np.zeros_like(n)]), HALF_PI / np.sqrt(1 - n), rtol=1e-15)
 
 
 # --------------------------------------------------------------------- incomplete F and Pi grids
@@ -174,35 +197,59 @@ def m_scale(m, mc=None):
     return mc if mc is not None else np.minimum(m, 1 - m)
 
 
-@functools.lru_cache(maxsize=None)
+@functools.cache
 def f_grids():
     """F(phi|m): {'plain': (args, mc, reference), 'mc': ...}; args = (phi, m)."""
     rng = np.random.default_rng(31)
     uni = rng.uniform
     blocks = [
-        (uni(-HALF_PI, HALF_PI, 110), uni(0, 1, 110)),                           # principal range
-        (ref.signed(rng, ref.log_uniform(rng, 0, 3, 50)), uni(0, 1, 50)),      # |phi| up to 1e3
-        (uni(-HALF_PI, HALF_PI, 30), 1 - ref.log_uniform(rng, -15, -1, 30)),   # m near 1
+        (uni(-HALF_PI, HALF_PI, 110), uni(0, 1, 110)),  # principal range
+        (ref.signed(rng, ref.log_uniform(rng, 0, 3, 50)), uni(0, 1, 50)),  # |phi| up to 1e3
+        (uni(-HALF_PI, HALF_PI, 30), 1 - ref.log_uniform(rng, -15, -1, 30)),  # m near 1
         (_near_half_pi(rng, 30), np.concatenate([uni(0, 1, 15), 1 - ref.log_uniform(rng, -15, -1, 15)])),
-        (np.array([0.0, 0.0, 0.0, 1.0, -1.0, HALF_PI, -HALF_PI, HALF_PI, 1e3, -1e3, 3.0, 1.2,
-                   1e-300, 1e-8, HALF_PI, 2 * np.pi, 0.5]),
-         np.array([0.0, 0.5, 1.0, 0.0, 0.0, 0.5, 0.5, 1 - 1e-15, 0.0, 0.99, 1e-300, 1.0, 0.5, 0.5,
-                   0.0, 0.3, 1 - 1e-15])),
+        (
+            np.array(
+                [
+                    0.0,
+                    0.0,
+                    0.0,
+                    1.0,
+                    -1.0,
+                    HALF_PI,
+                    -HALF_PI,
+                    HALF_PI,
+                    1e3,
+                    -1e3,
+                    3.0,
+                    1.2,
+                    1e-300,
+                    1e-8,
+                    HALF_PI,
+                    2 * np.pi,
+                    0.5,
+                ]
+            ),
+            np.array(
+                [0.0, 0.5, 1.0, 0.0, 0.0, 0.5, 0.5, 1 - 1e-15, 0.0, 0.99, 1e-300, 1.0, 0.5, 0.5, 0.0, 0.3, 1 - 1e-15]
+            ),
+        ),
     ]
     phi = np.concatenate([b[0] for b in blocks])
     m = np.concatenate([b[1] for b in blocks])
     phi_c = np.concatenate([uni(-3, 3, 25), _near_half_pi(rng, 10), [HALF_PI, 1e3, 0.7, -2.0]])
-    mc = np.concatenate([ref.log_uniform(rng, -17, 0, 25), ref.log_uniform(rng, -17, -5, 10),
-                         [1e-17, 1e-17, 1e-300, 1e-17]])
+    mc = np.concatenate(
+        [ref.log_uniform(rng, -17, 0, 25), ref.log_uniform(rng, -17, -5, 10), [1e-17, 1e-17, 1e-300, 1e-17]]
+    )
     out = {}
     for key, (p, mm, c) in {"plain": (phi, m, None), "mc": (phi_c, 1 - mc, mc)}.items():
-        table = ref.taylor_table(ref.ellipkinc, [p, _param_column(mm, c)],
-                                 lambda a, b: (ref.step(abs(a)), ref.m_step(b)), order=0)
+        table = ref.taylor_table(
+            ref.ellipkinc, [p, _param_column(mm, c)], lambda a, b: (ref.step(abs(a)), ref.m_step(b)), order=0
+        )
         out[key] = ((p, mm), c, table)
     return out
 
 
-@functools.lru_cache(maxsize=None)
+@functools.cache
 def pi_grids():
     """Pi(n; phi|m): {'plain': ((n, phi, m), mc, reference), 'mc': ...}."""
     rng = np.random.default_rng(41)
@@ -210,15 +257,20 @@ def pi_grids():
     blocks = [
         (uni(-1, 0.9, 80), uni(-HALF_PI, HALF_PI, 80), uni(0, 1, 80)),
         (uni(-1, 0.9, 35), ref.signed(rng, ref.log_uniform(rng, 0, 3, 35)), uni(0, 1, 35)),
-        (-ref.log_uniform(rng, 0, 8, 20), uni(-3, 3, 20), uni(0, 1, 20)),                # n << 0
-        (1 - ref.log_uniform(rng, -6, -1, 20), uni(-3, 3, 20), uni(0, 1, 20)),          # n -> 1
+        (-ref.log_uniform(rng, 0, 8, 20), uni(-3, 3, 20), uni(0, 1, 20)),  # n << 0
+        (1 - ref.log_uniform(rng, -6, -1, 20), uni(-3, 3, 20), uni(0, 1, 20)),  # n -> 1
         (uni(-1, 0.999, 20), _near_half_pi(rng, 20), 1 - ref.log_uniform(rng, -15, 0, 20)),
-        (np.array([0.0, 0.0, 0.5, 0.3, 0.3, -1.0, 0.999, 0.999, 0.999, -1e8, 0.999, 0.5, 0.0,
-                   0.0, 0.999, -1e8, 0.5]),
-         np.array([1.0, 1e3, 0.0, 1.0, 1.0, 1.2, 1.5, HALF_PI, 1e3, 1.0, 1e3, 1.5, HALF_PI,
-                   -1e3, 1e-8, 1e3, -HALF_PI]),
-         np.array([0.5, 0.3, 0.5, 0.0, 1.0, 1.0, 0.5, 0.5, 0.9, 0.5, 1 - 1e-15, 1.0, 1 - 1e-15,
-                   0.0, 0.3, 0.999, 0.7])),
+        (
+            np.array(
+                [0.0, 0.0, 0.5, 0.3, 0.3, -1.0, 0.999, 0.999, 0.999, -1e8, 0.999, 0.5, 0.0, 0.0, 0.999, -1e8, 0.5]
+            ),
+            np.array(
+                [1.0, 1e3, 0.0, 1.0, 1.0, 1.2, 1.5, HALF_PI, 1e3, 1.0, 1e3, 1.5, HALF_PI, -1e3, 1e-8, 1e3, -HALF_PI]
+            ),
+            np.array(
+                [0.5, 0.3, 0.5, 0.0, 1.0, 1.0, 0.5, 0.5, 0.9, 0.5, 1 - 1e-15, 1.0, 1 - 1e-15, 0.0, 0.3, 0.999, 0.7]
+            ),
+        ),
     ]
     n, phi, m = (np.concatenate([b[i] for b in blocks]) for i in range(3))
     k = 25
@@ -227,14 +279,17 @@ def pi_grids():
     mc = np.concatenate([ref.log_uniform(rng, -17, 0, k), [1e-17, 1e-17, 1e-300]])
     out = {}
     for key, (a, b, mm, c) in {"plain": (n, phi, m, None), "mc": (n_c, phi_c, 1 - mc, mc)}.items():
-        table = ref.taylor_table(ref.ellippiinc, [a, b, _param_column(mm, c)],
-                                 lambda x, y, z: (ref.n_step(x), ref.step(abs(y)), ref.m_step(z)),
-                                 order=0)
+        table = ref.taylor_table(
+            ref.ellippiinc,
+            [a, b, _param_column(mm, c)],
+            lambda x, y, z: (ref.n_step(x), ref.step(abs(y)), ref.m_step(z)),
+            order=0,
+        )
         out[key] = ((a, b, mm), c, table)
     return out
 
 
-@functools.lru_cache(maxsize=None)
+@functools.cache
 def pi_complete_grids():
     rng = np.random.default_rng(51)
     uni = rng.uniform
@@ -243,16 +298,19 @@ def pi_complete_grids():
         (-ref.log_uniform(rng, 0, 8, 20), uni(0, 1, 20)),
         (1 - ref.log_uniform(rng, -8, -1, 20), uni(0, 1, 20)),
         (uni(-1, 1, 20), 1 - ref.log_uniform(rng, -15, -1, 20)),
-        (np.array([0.0, 0.0, 0.999, -1e8, 0.5, 1 - 1e-12, 0.999, 0.3, -1e6, 0.0]),
-         np.array([0.5, 0.0, 0.5, 0.5, 0.0, 0.3, 1 - 1e-15, 1 - 2.0**-52, 1e-300, 1 - 1e-15])),
+        (
+            np.array([0.0, 0.0, 0.999, -1e8, 0.5, 1 - 1e-12, 0.999, 0.3, -1e6, 0.0]),
+            np.array([0.5, 0.0, 0.5, 0.5, 0.0, 0.3, 1 - 1e-15, 1 - 2.0**-52, 1e-300, 1 - 1e-15]),
+        ),
     ]
     n, m = (np.concatenate([b[i] for b in blocks]) for i in range(2))
     n_c = np.concatenate([uni(-1, 0.99, 20), [0.999, 0.0, -1e6]])
     mc = np.concatenate([ref.log_uniform(rng, -17, 0, 20), [1e-17, 1e-300, 1e-17]])
     out = {}
     for key, (a, mm, c) in {"plain": (n, m, None), "mc": (n_c, 1 - mc, mc)}.items():
-        table = ref.taylor_table(ref.ellippi, [a, _param_column(mm, c)],
-                                 lambda x, z: (ref.n_step(x), ref.m_step(z)), order=0)
+        table = ref.taylor_table(
+            ref.ellippi, [a, _param_column(mm, c)], lambda x, z: (ref.n_step(x), ref.m_step(z)), order=0
+        )
         out[key] = ((a, mm), c, table)
     return out
 
@@ -284,19 +342,27 @@ def test_incomplete_float64(name, kind):
     inputs = dict(zip(ARGNAMES[name], args))
     if mc is not None:
         inputs["mc"] = mc
-    ref.check(f"{name} ({kind}) float64 conditioned relative error", measure, TOL64[name], inputs,
-              {"value": out, "reference": hi[0], "kappa": kappa})
+    ref.check(
+        f"{name} ({kind}) float64 conditioned relative error",
+        measure,
+        TOL64[name],
+        inputs,
+        {"value": out, "reference": hi[0], "kappa": kappa},
+    )
     # Report (and bound) the plain relative error at the well-conditioned points separately.
     good = kappa <= 1
-    ref.check(f"{name} ({kind}) float64 relative error where kappa <= 1",
-              ref.ratio(err, np.abs(hi[0]))[good], TOL64[name],
-              {k: np.asarray(v)[good] for k, v in inputs.items()})
+    ref.check(
+        f"{name} ({kind}) float64 relative error where kappa <= 1",
+        ref.ratio(err, np.abs(hi[0]))[good],
+        TOL64[name],
+        {k: np.asarray(v)[good] for k, v in inputs.items()},
+    )
 
 
 # ------------------------------------------------------------------------------------- float32
 
 
-@functools.lru_cache(maxsize=None)
+@functools.cache
 def grid32():
     rng = np.random.default_rng(61)
     size = 120
@@ -322,8 +388,9 @@ def test_float32(name):
     assert out.dtype == np.float32, out.dtype
     rel = ref.ratio(ref.error(out, hi[0], lo[0]), np.abs(hi[0]))
     names = {"ellipk": ("m",), "ellipe": ("m",), "ellipkm1": ("p",)}.get(name, ARGNAMES.get(name))
-    ref.check(f"{name} float32 relative error", rel, TOL32[name], dict(zip(names, args)),
-              {"value": out, "reference": hi[0]})
+    ref.check(
+        f"{name} float32 relative error", rel, TOL32[name], dict(zip(names, args)), {"value": out, "reference": hi[0]}
+    )
 
 
 # ------------------------------------------------------------------------- limits and identities
@@ -333,13 +400,13 @@ def test_incomplete_special_values():
     phi = np.array([-1.5, -0.3, 0.0, 1e-300, 0.2, 1.0, 1.5])
     # m = 0: F(phi|0) = phi; m = 1: F(phi|1) = artanh(sin phi) for |phi| < pi/2.
     np.testing.assert_allclose(evaluate("ellipkinc", [phi, 0.0]), phi, rtol=6e-16, atol=0)
-    np.testing.assert_allclose(evaluate("ellipkinc", [phi, 1.0]), np.arctanh(np.sin(phi)),
-                               rtol=4e-15, atol=0)
+    np.testing.assert_allclose(evaluate("ellipkinc", [phi, 1.0]), np.arctanh(np.sin(phi)), rtol=4e-15, atol=0)
     # Pi(0; phi|m) = F(phi|m); phi = 0 gives exactly 0.
     phis = np.array([-1e3, -2.0, 0.0, 0.7, 1.5, 10.0])
     for m in [0.0, 0.5, 1 - 1e-12]:
-        np.testing.assert_allclose(evaluate("ellippiinc", [0.0, phis, m]),
-                                   evaluate("ellipkinc", [phis, m]), rtol=4e-15, atol=0)
+        np.testing.assert_allclose(
+            evaluate("ellippiinc", [0.0, phis, m]), evaluate("ellipkinc", [phis, m]), rtol=4e-15, atol=0
+        )
     assert float(special.ellipkinc(0.0, 0.7)) == 0.0
     assert float(special.ellippiinc(0.4, 0.0, 0.7)) == 0.0
     # Values are finite at the edges of the domain (phi < pi/2 for m = 1).
@@ -379,8 +446,13 @@ def test_mc_matches_implicit_complement():
     m = rng.uniform(0.5, 1, 50)
     phi = rng.uniform(-5, 5, 50)
     n = rng.uniform(-2, 0.9, 50)
-    for name, args in [("ellipk", [m]), ("ellipe", [m]), ("ellipkinc", [phi, m]),
-                       ("ellippi", [n, m]), ("ellippiinc", [n, phi, m])]:
+    for name, args in [
+        ("ellipk", [m]),
+        ("ellipe", [m]),
+        ("ellipkinc", [phi, m]),
+        ("ellippi", [n, m]),
+        ("ellippiinc", [n, phi, m]),
+    ]:
         a = evaluate(name, args)
         b = evaluate(name, args, mc=1 - m)
         np.testing.assert_allclose(a, b, rtol=1e-15, atol=0, err_msg=name)
@@ -398,8 +470,12 @@ def test_agrees_with_scipy(name):
     args = {"ellipk": [m], "ellipe": [m], "ellipkm1": [1 - m], "ellipkinc": [phi, m]}[name]
     ours = evaluate(name, args)
     theirs = getattr(scipy.special, name)(*args)
-    ref.check(f"{name} vs scipy", ref.ratio(np.abs(ours - theirs), np.abs(theirs)), TOL_SCIPY,
-              dict(zip(["phi", "m"] if name == "ellipkinc" else ["m"], args)))
+    ref.check(
+        f"{name} vs scipy",
+        ref.ratio(np.abs(ours - theirs), np.abs(theirs)),
+        TOL_SCIPY,
+        dict(zip(["phi", "m"] if name == "ellipkinc" else ["m"], args)),
+    )
 
 
 def test_broadcasting_and_vmap():
@@ -421,8 +497,7 @@ def test_broadcasting_and_vmap():
 # The issue's parameters (down to -DBL_MAX, where 1 - m sin^2 phi and mc = 1 - m reach the overflow
 # threshold) and amplitudes in, at the edges of and beyond the principal range.
 HUGE_NEGATIVE_M = np.array([-1e300, -1e305, -1e307, -1.5e308, -1.7976931348623157e308])
-HUGE_NEGATIVE_PHI = np.array([1e-3, 0.3, 1.0, HALF_PI - 1e-9, HALF_PI, 2.0, 10.0,
-                              -1e-3, -1.0, -HALF_PI, -2.0, -10.0])
+HUGE_NEGATIVE_PHI = np.array([1e-3, 0.3, 1.0, HALF_PI - 1e-9, HALF_PI, 2.0, 10.0, -1e-3, -1.0, -HALF_PI, -2.0, -10.0])
 
 
 def _huge_negative_grid(m):
@@ -435,8 +510,11 @@ def _f_derivatives(phi, m):
     parameter, dF/dm = E/(2 m mc) - F/(2m) - sin(phi) cos(phi)/(2 mc Delta), mc = 1 - m."""
     delta = mpmath.sqrt(1 - m * mpmath.sin(phi) ** 2)
     mc = 1 - m
-    d_m = (mpmath.ellipe(phi, m) / (2 * m * mc) - mpmath.ellipf(phi, m) / (2 * m)
-           - mpmath.sin(phi) * mpmath.cos(phi) / (2 * mc * delta))
+    d_m = (
+        mpmath.ellipe(phi, m) / (2 * m * mc)
+        - mpmath.ellipf(phi, m) / (2 * m)
+        - mpmath.sin(phi) * mpmath.cos(phi) / (2 * mc * delta)
+    )
     return 1 / delta, d_m
 
 
@@ -450,9 +528,13 @@ def test_huge_negative_parameter_float64():
     phi, m = _huge_negative_grid(HUGE_NEGATIVE_M)
     out = evaluate("ellipkinc", [phi, m])
     hi, lo = ref.values(ref.ellipkinc, phi, m)
-    ref.check("ellipkinc huge negative m float64 relative error",
-              ref.ratio(ref.error(out, hi[0], lo[0]), np.abs(hi[0])), 5e-16,
-              {"phi": phi, "m": m}, {"value": out, "reference": hi[0]})
+    ref.check(
+        "ellipkinc huge negative m float64 relative error",
+        ref.ratio(ref.error(out, hi[0], lo[0]), np.abs(hi[0])),
+        5e-16,
+        {"phi": phi, "m": m},
+        {"value": out, "reference": hi[0]},
+    )
 
 
 def test_huge_negative_parameter_float32():
@@ -463,12 +545,16 @@ def test_huge_negative_parameter_float32():
     out = evaluate("ellipkinc", [phi, m])
     assert out.dtype == np.float32
     hi, lo = ref.values(ref.ellipkinc, phi, m)
-    ref.check("ellipkinc huge negative m float32 relative error",
-              ref.ratio(ref.error(out, hi[0], lo[0]), np.abs(hi[0])), 3e-7,
-              {"phi": phi, "m": m}, {"value": out, "reference": hi[0]})
+    ref.check(
+        "ellipkinc huge negative m float32 relative error",
+        ref.ratio(ref.error(out, hi[0], lo[0]), np.abs(hi[0])),
+        3e-7,
+        {"phi": phi, "m": m},
+        {"value": out, "reference": hi[0]},
+    )
 
 
-@functools.lru_cache(maxsize=None)
+@functools.cache
 def _ellipkinc_gradient():
     return jax.jit(jax.vmap(jax.grad(special.ellipkinc, argnums=(0, 1))))
 
@@ -489,11 +575,19 @@ def test_huge_negative_parameter_gradients():
     hi_phi = np.array([float(e[0]) for e in exact])
     hi_m = np.array([float(e[1]) for e in exact])
     inputs = {"phi": phi, "m": m}
-    ref.check("ellipkinc huge negative m: dF/dphi relative error",
-              ref.ratio(np.abs(d_phi - hi_phi), np.abs(hi_phi)), 8e-16, inputs)
-    ref.check("ellipkinc huge negative m: dF/dm relative error",
-              ref.ratio(np.abs(d_m - hi_m), np.abs(hi_m)), 8e-16, inputs,
-              {"value": d_m, "reference": hi_m})
+    ref.check(
+        "ellipkinc huge negative m: dF/dphi relative error",
+        ref.ratio(np.abs(d_phi - hi_phi), np.abs(hi_phi)),
+        8e-16,
+        inputs,
+    )
+    ref.check(
+        "ellipkinc huge negative m: dF/dm relative error",
+        ref.ratio(np.abs(d_m - hi_m), np.abs(hi_m)),
+        8e-16,
+        inputs,
+        {"value": d_m, "reference": hi_m},
+    )
     assert np.all(hi_m[m <= -1e300] == 0) and np.all(np.isfinite(d_m))
 
 
@@ -502,20 +596,38 @@ def test_huge_negative_parameter_gradients():
 
 # The issue's parameters (E(-10) was 56270 for 3.6391: the fit on 0 <= mc <= 1 taken at mc = 1 - m),
 # a few more down to -DBL_MAX (where 1/mc is subnormal), and random ones.
-NEGATIVE_M = np.array([-1e-300, -1e-10, -0.5, -1.0, -10.0, -1e3, -1e10, -1e100, -1e300,
-                       -1.7976931348623157e308, -1e-5, -0.1, -2.5, -123.4, -1e20, -2.0**501,
-                       -1e305, -1.5e308])
-NEGATIVE_M32 = np.array([-1e-30, -1e-10, -0.5, -1, -10, -1e3, -1e10, -1e20, -1e30, -1e36,
-                         -3.4028235e38], np.float32)
+NEGATIVE_M = np.array(
+    [
+        -1e-300,
+        -1e-10,
+        -0.5,
+        -1.0,
+        -10.0,
+        -1e3,
+        -1e10,
+        -1e100,
+        -1e300,
+        -1.7976931348623157e308,
+        -1e-5,
+        -0.1,
+        -2.5,
+        -123.4,
+        -1e20,
+        -(2.0**501),
+        -1e305,
+        -1.5e308,
+    ]
+)
+NEGATIVE_M32 = np.array([-1e-30, -1e-10, -0.5, -1, -10, -1e3, -1e10, -1e20, -1e30, -1e36, -3.4028235e38], np.float32)
 
 
-@functools.lru_cache(maxsize=None)
+@functools.cache
 def negative_m_grids():
     rng = np.random.default_rng(101)
-    m64 = np.concatenate([NEGATIVE_M, -ref.log_uniform(rng, -300, 308.25, 150),
-                          -rng.uniform(0, 10, 100)])
-    m32 = np.concatenate([NEGATIVE_M32, -ref.log_uniform(rng, -37, 38.5, 100),
-                          -rng.uniform(0, 10, 50)]).astype(np.float32)
+    m64 = np.concatenate([NEGATIVE_M, -ref.log_uniform(rng, -300, 308.25, 150), -rng.uniform(0, 10, 100)])
+    m32 = np.concatenate([NEGATIVE_M32, -ref.log_uniform(rng, -37, 38.5, 100), -rng.uniform(0, 10, 50)]).astype(
+        np.float32
+    )
     return m64, m32
 
 
@@ -535,9 +647,13 @@ def test_ellipe_negative_parameter_float64():
     m, _ = negative_m_grids()
     hi, lo = ref.values(ref.ellipe, m)
     for out, label in [(evaluate("ellipe", [m]), "m"), (evaluate("ellipe", [m], mc=1 - m), "mc")]:
-        ref.check(f"ellipe negative m ({label}) float64 relative error",
-                  ref.ratio(ref.error(out, hi[0], lo[0]), np.abs(hi[0])), 4e-16,
-                  {"m": m}, {"value": out, "reference": hi[0]})
+        ref.check(
+            f"ellipe negative m ({label}) float64 relative error",
+            ref.ratio(ref.error(out, hi[0], lo[0]), np.abs(hi[0])),
+            4e-16,
+            {"m": m},
+            {"value": out, "reference": hi[0]},
+        )
     # E ~ sqrt(1 - m) as m -> -inf (DLMF 19.12.2): +inf at m = -inf, as scipy.special.ellipe.
     assert np.isposinf(float(special.ellipe(-np.inf)))
 
@@ -549,12 +665,16 @@ def test_ellipe_negative_parameter_float32():
     out = evaluate("ellipe", [m])
     assert out.dtype == np.float32
     hi, lo = ref.values(ref.ellipe, m)
-    ref.check("ellipe negative m float32 relative error",
-              ref.ratio(ref.error(out, hi[0], lo[0]), np.abs(hi[0])), 2e-7,
-              {"m": m}, {"value": out, "reference": hi[0]})
+    ref.check(
+        "ellipe negative m float32 relative error",
+        ref.ratio(ref.error(out, hi[0], lo[0]), np.abs(hi[0])),
+        2e-7,
+        {"m": m},
+        {"value": out, "reference": hi[0]},
+    )
 
 
-@functools.lru_cache(maxsize=None)
+@functools.cache
 def _ellipe_gradient():
     return jax.jit(jax.vmap(jax.grad(special.ellipe)))
 
@@ -572,6 +692,10 @@ def test_ellipe_negative_parameter_gradient(dtype):
     out = np.asarray(_ellipe_gradient()(m))
     assert out.dtype == m.dtype and np.all(np.isfinite(out))
     exact = np.array([float(_ellipe_derivative(x)) for x in m])
-    ref.check(f"ellipe negative m: dE/dm {dtype} relative error",
-              ref.ratio(np.abs(out - exact), np.abs(exact)), {"float64": 8e-16, "float32": 4e-7}[dtype],
-              {"m": m}, {"value": out, "reference": exact})
+    ref.check(
+        f"ellipe negative m: dE/dm {dtype} relative error",
+        ref.ratio(np.abs(out - exact), np.abs(exact)),
+        {"float64": 8e-16, "float32": 4e-7}[dtype],
+        {"m": m},
+        {"value": out, "reference": exact},
+    )

@@ -29,10 +29,17 @@ import frbjax.special as special
 
 from . import _mpmath_reference as ref
 
+
 ARGNAMES = {
-    "elliprf": ("x", "y", "z"), "elliprd": ("x", "y", "z"), "elliprj": ("x", "y", "z", "p"),
-    "elliprc": ("x", "y"), "ellipk": ("m",), "ellipe": ("m",), "ellipkinc": ("phi", "m"),
-    "ellippi": ("n", "m"), "ellippiinc": ("n", "phi", "m"),
+    "elliprf": ("x", "y", "z"),
+    "elliprd": ("x", "y", "z"),
+    "elliprj": ("x", "y", "z", "p"),
+    "elliprc": ("x", "y"),
+    "ellipk": ("m",),
+    "ellipe": ("m",),
+    "ellipkinc": ("phi", "m"),
+    "ellippi": ("n", "m"),
+    "ellippiinc": ("n", "phi", "m"),
 }
 PARAMETRISED = ("ellipk", "ellipe", "ellipkinc", "ellippi", "ellippiinc")  # accept mc
 
@@ -40,15 +47,29 @@ PARAMETRISED = ("ellipk", "ellipe", "ellipkinc", "ellippi", "ellippiinc")  # acc
 POINTS = {
     "elliprf": [(0.5, 1.2, 2.0), (3.0, 0.1, 0.7), (1e-3, 2.0, 50.0), (0.0, 0.5, 1.0), (2.0, 0.0, 0.3)],
     "elliprd": [(0.5, 1.2, 2.0), (3.0, 0.1, 0.7), (20.0, 1e-2, 0.5), (0.0, 0.5, 1.0), (0.5, 0.0, 2.0)],
-    "elliprj": [(0.5, 1.2, 2.0, 0.8), (3.0, 0.1, 0.7, 2.5), (0.2, 0.3, 0.4, 50.0), (2.0, 3.0, 4.0, 0.1),
-                (0.0, 0.5, 1.0, 0.7), (0.0, 0.5, 1.0, 40.0), (1.5, 0.0, 1.0, 0.2)],
+    "elliprj": [
+        (0.5, 1.2, 2.0, 0.8),
+        (3.0, 0.1, 0.7, 2.5),
+        (0.2, 0.3, 0.4, 50.0),
+        (2.0, 3.0, 4.0, 0.1),
+        (0.0, 0.5, 1.0, 0.7),
+        (0.0, 0.5, 1.0, 40.0),
+        (1.5, 0.0, 1.0, 0.2),
+    ],
     "elliprc": [(0.5, 1.2), (3.0, 0.1), (1.0, 1.0000001), (0.0, 0.5)],
     "ellipk": [(0.3,), (0.9,), (1 - 1e-6,), (0.0,)],
     "ellipe": [(0.3,), (0.9,), (1 - 1e-6,), (0.0,)],
     "ellipkinc": [(0.7, 0.3), (4.0, 0.9), (-2.5, 0.6), (0.0, 0.5), (1.2, 0.0), (0.0, 0.0)],
     "ellippi": [(0.4, 0.3), (-2.0, 0.8), (-0.5, 0.99), (0.0, 0.5), (0.3, 0.0), (0.0, 0.0)],
-    "ellippiinc": [(0.4, 0.7, 0.3), (-2.0, 4.0, 0.8), (-0.5, 1.5, 0.9), (0.3, 0.0, 0.5),
-                   (0.0, 1.2, 0.6), (0.5, 1.0, 0.0), (0.0, 2.0, 0.0)],
+    "ellippiinc": [
+        (0.4, 0.7, 0.3),
+        (-2.0, 4.0, 0.8),
+        (-0.5, 1.5, 0.9),
+        (0.3, 0.0, 0.5),
+        (0.0, 1.2, 0.6),
+        (0.5, 1.0, 0.0),
+        (0.0, 2.0, 0.0),
+    ],
 }
 MODES = {
     "fwd-fwd": lambda f: jax.jacfwd(jax.jacfwd(f)),
@@ -59,8 +80,15 @@ MODES = {
 # R_F 5.4e-16, R_D 3.6e-16, R_J 5.1e-16, R_C 5.1e-16, K 2.9e-16, E 3.5e-16, F 4.4e-16, Pi(n|m) 6.8e-16,
 # Pi(n; phi|m) 8.0e-16; tolerances about twice that.
 TOL = {
-    "elliprf": 1e-15, "elliprd": 1e-15, "elliprj": 1e-15, "elliprc": 1e-15,
-    "ellipk": 1e-15, "ellipe": 1e-15, "ellipkinc": 1e-15, "ellippi": 1.5e-15, "ellippiinc": 1.5e-15,
+    "elliprf": 1e-15,
+    "elliprd": 1e-15,
+    "elliprj": 1e-15,
+    "elliprc": 1e-15,
+    "ellipk": 1e-15,
+    "ellipe": 1e-15,
+    "ellipkinc": 1e-15,
+    "ellippi": 1.5e-15,
+    "ellippiinc": 1.5e-15,
 }
 
 
@@ -80,14 +108,14 @@ def _steps(name):
     return lambda *a: tuple(kinds[arg](x) for arg, x in zip(ARGNAMES[name], a))
 
 
-@functools.lru_cache(maxsize=None)
+@functools.cache
 def reference(name):
     points = np.array(POINTS[name], dtype=np.float64)
     _, _, _, hessian = ref.taylor_table(_reference_function(name), list(points.T), _steps(name), order=2)
     return points, np.moveaxis(hessian[0], -1, 0)  # (npoints, nargs, nargs), NaN where not differentiated
 
 
-@functools.lru_cache(maxsize=None)
+@functools.cache
 def _hessian_program(name, mode, with_mc):
     fn = getattr(special, name)
     if with_mc:
@@ -121,8 +149,12 @@ def test_second_derivatives(name, mode, with_mc):
     np.testing.assert_allclose(ours, np.swapaxes(ours, 1, 2), rtol=1e-12, atol=1e-300)  # symmetric
     errors = _normwise_errors(ours, want)
     print(f"\n{name} {mode}{' (mc)' if with_mc else ''}: worst normwise relative error {errors.max():.1e}")
-    ref.check(f"{name} Hessian ({mode}{', mc' if with_mc else ''}) normwise relative error", errors,
-              TOL[name], {"point": [str(tuple(p)) for p in points]})
+    ref.check(
+        f"{name} Hessian ({mode}{', mc' if with_mc else ''}) normwise relative error",
+        errors,
+        TOL[name],
+        {"point": [str(tuple(p)) for p in points]},
+    )
 
 
 def test_hessian_of_a_composite():
@@ -133,13 +165,13 @@ def test_hessian_of_a_composite():
         return special.ellippi(n, m) * special.ellipkinc(1 - n, m) + special.elliprj(0.0, m, 1.0, 1 - n)
 
     def composite_reference(n, m):
-        return (ref.ellippi(n, m) * ref.ellipkinc(1 - n, m)
-                + ref.elliprj(ref.mpf(0), m, ref.mpf(1), 1 - n))
+        return ref.ellippi(n, m) * ref.ellipkinc(1 - n, m) + ref.elliprj(ref.mpf(0), m, ref.mpf(1), 1 - n)
 
     point = np.array([0.3, 0.6])
     ours = np.asarray(jax.jit(jax.hessian(composite))(jnp.asarray(point)))
-    _, _, _, want = ref.taylor_table(composite_reference, [point[:1], point[1:]],
-                                     lambda n, m: (ref.n_step(n), ref.m_step(m)), order=2)
+    _, _, _, want = ref.taylor_table(
+        composite_reference, [point[:1], point[1:]], lambda n, m: (ref.n_step(n), ref.m_step(m)), order=2
+    )
     want = want[0, :, :, 0]
     error = float(_normwise_errors(ours[None], want[None])[0])
     print(f"\nhessian of the composite: normwise relative error {error:.1e}")

@@ -19,15 +19,28 @@ import frbjax.special as special
 from frbjax.special._carlson import _duplicate, _lambda, _plan
 from frbjax.special._jacobi import _agm_levels, _agm_steps
 
+
 EASY = 200  # more than _common.ROLLED_MAX_POINTS: the unrolled path with its skipped blocks
 
 
 def _easy_and_hard(rng):
     """Arguments close together (a few duplication steps, a few AGM levels) and far apart (all)."""
-    easy = dict(x=rng.uniform(0.9, 1.1, EASY), y=rng.uniform(0.9, 1.1, EASY), z=rng.uniform(0.9, 1.1, EASY),
-                p=rng.uniform(1.1, 1.3, EASY), u=rng.uniform(-2, 2, EASY), m=rng.uniform(0.0, 0.5, EASY))
-    hard = dict(x=np.array([1e-300, 0.0]), y=np.array([1.0, 1e-200]), z=np.array([1e3, 1.0]),
-                p=np.array([2e3, 1e-250]), u=np.array([3.0, -1.0]), m=np.array([1 - 1e-15, 1 - 1e-12]))
+    easy = dict(
+        x=rng.uniform(0.9, 1.1, EASY),
+        y=rng.uniform(0.9, 1.1, EASY),
+        z=rng.uniform(0.9, 1.1, EASY),
+        p=rng.uniform(1.1, 1.3, EASY),
+        u=rng.uniform(-2, 2, EASY),
+        m=rng.uniform(0.0, 0.5, EASY),
+    )
+    hard = dict(
+        x=np.array([1e-300, 0.0]),
+        y=np.array([1.0, 1e-200]),
+        z=np.array([1e3, 1.0]),
+        p=np.array([2e3, 1e-250]),
+        u=np.array([3.0, -1.0]),
+        m=np.array([1 - 1e-15, 1 - 1e-12]),
+    )
     return easy, hard
 
 
@@ -56,7 +69,7 @@ def test_value_of_a_point_depends_on_its_batch_by_rounding_at_most(name):
     np.testing.assert_allclose(with_hard[:EASY], alone_batch, rtol=4 * eps, atol=3 * eps if name == "ellipj" else 0)
     # One point at a time: the rolled loops of a small array.
     for i in range(0, EASY, 41):
-        one = np.asarray(function({key: value[i:i + 1] for key, value in easy.items()}))
+        one = np.asarray(function({key: value[i : i + 1] for key, value in easy.items()}))
         np.testing.assert_array_equal(one[0], alone_batch[i])
 
 
