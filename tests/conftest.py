@@ -9,13 +9,22 @@
 * No persistent compilation cache: in CI a worker died with a segmentation fault inside
   `executable.serialize()` while writing a program to the cache (jaxlib 0.10.2, CPU), and the run then
   hung until CI's limit.  Each worker compiles what it runs.
+* Compiled programs are dropped when a worker's memory mappings reach half of Linux's
+  ``vm.max_map_count``: XLA:CPU maps the code of every program it compiles into mappings of its own
+  (about 150 for one body's evaluation), JAX keeps every program it compiled, and a worker that ran
+  several hundred tests passed the limit of 65530, where the next compilation aborted the process
+  (CI, 2026-11-27: "Fatal Python error: Aborted" and segmentation faults inside
+  ``backend_compile_and_load``).  ``jax.clear_caches()`` and a garbage collection give them back;
+  the programs of later tests are compiled again.
 * The time budget (tests/_time_budget.py): a test over 60 s fails unless it is marked ``slow``, and
   the slow tests together must stay under 180 s.
 """
 
+import gc
 import os
 
 import jax
+import pytest
 from _time_budget import (  # noqa: F401  (pytest finds the hooks among this module's names)
     pytest_runtest_call,
     pytest_runtest_logreport,
@@ -33,3 +42,26 @@ os.environ["FRBJAX_CACHE_DIR"] = ""
 
 jax.config.update("jax_enable_x64", True)
 jax.config.update("jax_numpy_rank_promotion", "raise")
+
+
+def _map_limit():
+    try:
+        with open("/proc/sys/vm/max_map_count") as limit:
+            return int(limit.read()) // 2
+    except (OSError, ValueError):
+        return None  # not Linux: no such limit to keep under
+
+
+_MAP_LIMIT = _map_limit()
+
+
+def _mappings():
+    with open("/proc/self/maps", "rb") as maps:
+        return sum(1 for _ in maps)
+
+
+@pytest.hookimpl(trylast=True)
+def pytest_runtest_teardown(item, nextitem):
+    if _MAP_LIMIT is not None and _mappings() > _MAP_LIMIT:
+        jax.clear_caches()
+        gc.collect()
