@@ -33,9 +33,11 @@ lint: $(STAMP)
 # and `make test-all` both.  The time budget (tests/_time_budget.py, the lesser of CPU and wall
 # seconds): a test whose setup and call take over 60 s fails unless marked slow, and the slow tests
 # must stay under SLOW_TOTAL together (the run prints their total).  A test that runs past 10 minutes,
-# hung, fails with every thread's stack printed, instead of holding the run until CI's limit.
-PYTEST := OPENBLAS_NUM_THREADS=1 $(BIN)/python -m pytest -n 2 --dist loadfile -q --durations=15 \
-	--timeout 600 --timeout-method thread
+# hung, fails with every thread's stack printed, instead of holding the run until CI's limit; a worker
+# that crashes ends the run (--max-worker-restart 0) with its report, where replacing it could leave
+# the run waiting until CI's limit (seen with pytest-xdist 3.8 and --dist loadfile).
+PYTEST := OPENBLAS_NUM_THREADS=1 $(BIN)/python -m pytest -n 2 --dist loadfile --max-worker-restart 0 -q \
+	--durations=15 --timeout 600 --timeout-method thread
 SLOW_TOTAL ?= 2400
 test: $(STAMP) lint
 	$(PYTEST) -m "not slow" tests; rc=$$?; \

@@ -521,6 +521,7 @@ def test_derivatives_against_stencil(derivatives, key):
     assert errors["L"].max() <= 1.5e-14 and errors["q"].max() <= 8e-14
 
 
+@pytest.mark.slow  # the `derivatives` fixture compiles the tensor bodies' derivative programs: 240 s alone
 def test_derivatives_finite_everywhere(derivatives):
     """Finite derivatives at every body: sphere, axisymmetric, L = 0, L along a principal axis (the
     smallest moment's; an axisymmetric body's symmetry axis) and in the plane of two equal moments.
@@ -542,6 +543,7 @@ def test_derivatives_finite_everywhere(derivatives):
 FORWARD_REVERSE_TOLERANCE = {"near_axisymmetric_oblate_1e-06": 4e-10}
 
 
+@pytest.mark.slow  # the `derivatives` fixture (see test_derivatives_finite_everywhere)
 def test_forward_and_reverse_agree(derivatives):
     """jacfwd and jacrev differentiate the same function: they agree to rounding at every body."""
     names = STENCIL_BODIES + SPECIAL_BODIES
