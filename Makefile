@@ -7,7 +7,8 @@ STAMP := $(VENV)/.frbjax-installed
 
 .PHONY: demo lint test test-slow test-all test-floor docs bench clean
 
-$(STAMP): pyproject.toml
+# The compiled kernels (csrc/, CMakeLists.txt) are built by the install: a change to them reinstalls.
+$(STAMP): pyproject.toml CMakeLists.txt $(wildcard csrc/*)
 	test -x $(BIN)/python || $(PYTHON) -m venv $(VENV)
 	$(BIN)/python -m pip install --quiet --upgrade pip
 	$(BIN)/python -m pip install --quiet -e ".[dev]"

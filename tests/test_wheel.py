@@ -9,9 +9,10 @@ module the wheel uses without declaring it (matplotlib, the test extras) is miss
 be for a user.  Then, from a folder with no source tree in it, the installed ``frbjax`` command and
 package: ``frbjax demo`` runs (without matplotlib, which the wheel does not require: it prints its
 table and says that the plot is left out), the version is the one of ``frbjax/__init__.py`` and
-``py.typed`` ships.
+``py.typed`` and the compiled kernels ship (the kernels are selected on the CPU).
 
-Slow (a build, with setuptools >= 77 fetched into build's isolated environment, and a demo run).
+Slow (a build, with scikit-build-core and jaxlib fetched into build's isolated environment, the C++
+kernels compiled, and a demo run).
 """
 
 from __future__ import annotations
@@ -167,12 +168,16 @@ def test_wheel_installs_and_runs_from_another_folder(tmp_path):
         [
             str(python),
             "-c",
-            "import pathlib, frbjax; print(frbjax.__version__); print(pathlib.Path(frbjax.__file__).parent)",
+            "import pathlib, frbjax, jax.numpy as jnp; from frbjax.special import _compiled; "
+            "print(frbjax.__version__); print(pathlib.Path(frbjax.__file__).parent); "
+            "print(_compiled.selected(jnp.ones(1)))",
         ],
         elsewhere,
         300,
     )
-    installed_version, package = check.stdout.split()
+    installed_version, package, kernels_selected = check.stdout.split()
+    # The compiled kernels were built into the wheel and run on the CPU.
+    assert kernels_selected == "True"
     assert installed_version == version
     assert pathlib.Path(package).is_relative_to(venv)
     assert (pathlib.Path(package) / "py.typed").is_file()

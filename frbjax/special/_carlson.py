@@ -57,6 +57,7 @@ from jax.custom_derivatives import SymbolicZero
 from jax.typing import ArrayLike
 
 from .._fusion import materialise, when_any
+from . import _compiled
 from ._common import is_double, over_sqrt, promote, rolled as is_rolled
 
 
@@ -663,6 +664,8 @@ def elliprf(x: ArrayLike, y: ArrayLike, z: ArrayLike) -> Array:
     ``scipy.special.elliprf``.  Duplication algorithm, DLMF 19.36.1.
     """
     x, y, z = promote(x, y, z)
+    if _compiled.selected(x):
+        return _compiled.elliprf(x, y, z)
     return _rf(x, y, z)
 
 
@@ -674,6 +677,8 @@ def elliprd(x: ArrayLike, y: ArrayLike, z: ArrayLike) -> Array:
     for $x, y \ge 0$ (at most one zero) and $z > 0$.  As ``scipy.special.elliprd``.
     """
     x, y, z = promote(x, y, z)
+    if _compiled.selected(x):
+        return _compiled.elliprd(x, y, z)
     return _rd(x, y, z)
 
 
@@ -741,6 +746,8 @@ def elliprj(x: ArrayLike, y: ArrayLike, z: ArrayLike, p: ArrayLike) -> Array:
     $x$, $y$ and $z$ the change of parameter DLMF 19.21.12 keeps the duplication short.
     """
     x, y, z, p = promote(x, y, z, p)
+    if _compiled.selected(x):
+        return _compiled.elliprj(x, y, z, p)
     valid = p > 0
     result = _rj_general(x, y, z, jnp.where(valid, p, 1))
     return jnp.where(valid, result, jnp.nan)
@@ -756,6 +763,8 @@ def elliprc(x: ArrayLike, y: ArrayLike) -> Array:
     NaN for $x < 0$ (as scipy).
     """
     x, y = promote(x, y)
+    if _compiled.selected(x):
+        return _compiled.elliprc(x, y)
     positive = y > 0
     # One evaluation, its arguments chosen per point.
     factor = jnp.sqrt(jnp.where(positive, 1, x / jnp.where(positive, 1, x - y)))  # safe at x = 0

@@ -39,6 +39,9 @@ REFERENCE = {
 }
 FUNCTIONS = list(ARGNAMES)
 
+# Every test here runs on both paths (conftest.py): the compiled kernels and the JAX code.
+pytestmark = pytest.mark.usefixtures("special_path")
+
 # Edge cases: zero arguments, tiny/huge ratios, equal arguments, extreme magnitudes.
 EDGES = {
     "elliprf": [

@@ -264,6 +264,7 @@ def jacobi_grid(kind):
 # ------------------------------------------------------------------------------------- Carlson
 
 
+@pytest.mark.usefixtures("special_path")
 @pytest.mark.parametrize("mode", ["fwd", "rev"])
 @pytest.mark.parametrize("name", ["elliprf", "elliprd", "elliprj", "elliprc"])
 def test_carlson_partials(name, mode):
@@ -476,6 +477,7 @@ def test_no_nan_at_domain_edges():
     _all_partials_finite("ellipe", [m])
 
 
+@pytest.mark.usefixtures("special_path")
 def test_carlson_zero_argument_tangent_is_finite():
     """At a zero argument the partial in that argument is infinite; a zero tangent there must not
     produce NaN (and the other partials are finite)."""

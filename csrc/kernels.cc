@@ -1,0 +1,238 @@
+// frbjax._kernels: the compiled CPU kernels, exported to JAX as typed XLA FFI handlers.
+//
+// Every kernel here is elementwise: its inputs are K arrays of one shape (frbjax broadcasts them
+// first), of float32 or float64, and its one result has that shape with a trailing axis of
+//   order 0: the value;
+//   order 1: the value and its K partial derivatives;
+//   order 2: the value, its K partial derivatives and the K x K second ones (row-major).
+// The derivatives come from the same templated scalar code run on dual numbers (dual.hpp), so that
+// JAX's derivative rules (frbjax/special/_compiled.py) are linear in the tangents.
+//
+// The module's one function, `handlers()`, returns {target name: PyCapsule of its XLA_FFI_Handler}.
+#include <Python.h>
+
+#include <cstddef>
+#include <cstdint>
+#include <string>
+
+#include "carlson.hpp"
+#include "xla/ffi/api/ffi.h"
+
+namespace ffi = xla::ffi;
+
+namespace frbjax {
+namespace {
+
+// Each function: its arity, name and value on any number type; the partial derivatives come from the
+// value on dual numbers unless `partials` gives them in closed form (then their own derivatives come
+// from it on dual numbers).
+struct Rf {
+  static constexpr int arity = 3;
+  static constexpr bool closed_partials = false;
+  static constexpr const char* name = "elliprf";
+  template <class T>
+  static T eval(const T* a) {
+    return elliprf(a[0], a[1], a[2]);
+  }
+};
+struct Rd {
+  static constexpr bool closed_partials = false;
+  static constexpr int arity = 3;
+  static constexpr const char* name = "elliprd";
+  template <class T>
+  static T eval(const T* a) {
+    return elliprd(a[0], a[1], a[2]);
+  }
+};
+struct Rj {
+  static constexpr bool closed_partials = false;
+  static constexpr int arity = 4;
+  static constexpr const char* name = "elliprj";
+  template <class T>
+  static T eval(const T* a) {
+    return elliprj(a[0], a[1], a[2], a[3]);
+  }
+};
+struct Rc {
+  static constexpr int arity = 2;
+  static constexpr bool closed_partials = true;
+  static constexpr const char* name = "elliprc";
+  template <class T>
+  static T eval(const T* a) {
+    return elliprc(a[0], a[1]);
+  }
+  // R_C(x, y) = R_F(x, y, y) and DLMF 19.18.1 (the closed forms' own derivatives cancel near x = y):
+  // dR_C/dx = -R_D(y, y, x)/6, dR_C/dy = -R_D(x, y, y)/3 for y > 0; infinite at x = 0, where the
+  // JAX rule ignores the tangent of x (a finite stand-in here).  The principal value (y < 0) through
+  // its formula on dual numbers.
+  template <class T>
+  static void partials(const T* a, T* out) {
+    const T& x = a[0];
+    const T& y = a[1];
+    if (value(y) > 0) {
+      out[0] = value(x) > 0 ? -elliprd(y, y, x) / 6.0 : T(0.0);
+      out[1] = -elliprd(x, y, y) / 3.0;
+      return;
+    }
+    Dual<T, 2> dx(0.0), dy(0.0);
+    dx.v = x;
+    dx.d[0] = T(1.0);
+    dy.v = y;
+    dy.d[1] = T(1.0);
+    Dual<T, 2> result = elliprc(dx, dy);
+    out[0] = result.d[0];
+    out[1] = result.d[1];
+  }
+};
+
+constexpr int width(int arity, int order) {
+  return order == 0 ? 1 : order == 1 ? 1 + arity : 1 + arity + arity * arity;
+}
+
+template <class F, int Order, class R>
+void evaluate(std::size_t count, const R* const* inputs, R* output) {
+  constexpr int K = F::arity;
+  constexpr int W = width(K, Order);
+  for (std::size_t i = 0; i < count; ++i) {
+    R* out = output + i * W;
+    if constexpr (Order == 0) {
+      R arguments[K];
+      for (int j = 0; j < K; ++j) arguments[j] = inputs[j][i];
+      out[0] = F::template eval<R>(arguments);
+    } else if constexpr (F::closed_partials && Order == 1) {
+      R arguments[K];
+      for (int j = 0; j < K; ++j) arguments[j] = inputs[j][i];
+      out[0] = F::template eval<R>(arguments);
+      F::template partials<R>(arguments, out + 1);
+    } else if constexpr (F::closed_partials) {
+      using D = Dual<R, K>;
+      R plain[K];
+      D arguments[K];
+      for (int j = 0; j < K; ++j) {
+        plain[j] = inputs[j][i];
+        arguments[j] = D(0.0);
+        arguments[j].v = inputs[j][i];
+        arguments[j].d[j] = R(1);
+      }
+      out[0] = F::template eval<R>(plain);
+      D first[K];
+      F::template partials<D>(arguments, first);
+      for (int j = 0; j < K; ++j) {
+        out[1 + j] = first[j].v;
+        for (int k = 0; k < K; ++k) out[1 + K + j * K + k] = first[j].d[k];
+      }
+    } else if constexpr (Order == 1) {
+      using D = Dual<R, K>;
+      D arguments[K];
+      for (int j = 0; j < K; ++j) {
+        arguments[j] = D(0.0);
+        arguments[j].v = inputs[j][i];
+        arguments[j].d[j] = R(1);
+      }
+      D result = F::template eval<D>(arguments);
+      out[0] = result.v;
+      for (int j = 0; j < K; ++j) out[1 + j] = result.d[j];
+    } else {
+      using D1 = Dual<R, K>;
+      using D2 = Dual<D1, K>;
+      D2 arguments[K];
+      for (int j = 0; j < K; ++j) {
+        arguments[j] = D2(0.0);
+        arguments[j].v.v = inputs[j][i];
+        arguments[j].v.d[j] = R(1);
+        arguments[j].d[j].v = R(1);
+      }
+      D2 result = F::template eval<D2>(arguments);
+      out[0] = result.v.v;
+      for (int j = 0; j < K; ++j) out[1 + j] = result.v.d[j];
+      for (int j = 0; j < K; ++j)
+        for (int k = 0; k < K; ++k) out[1 + K + j * K + k] = result.d[j].d[k];
+    }
+  }
+}
+
+template <class F, int Order, class R>
+ffi::Error run(ffi::RemainingArgs arguments, ffi::AnyBuffer& result) {
+  constexpr int K = F::arity;
+  const R* inputs[K];
+  std::size_t count = result.element_count() / width(K, Order);
+  for (int j = 0; j < K; ++j) {
+    auto buffer = arguments.get<ffi::AnyBuffer>(j);
+    if (!buffer.has_value()) return buffer.error();
+    if (buffer->element_type() != result.element_type() || buffer->element_count() != count)
+      return ffi::Error::InvalidArgument(std::string(F::name) + ": the arguments must have the result's dtype and size");
+    inputs[j] = static_cast<const R*>(buffer->untyped_data());
+  }
+  evaluate<F, Order, R>(count, inputs, static_cast<R*>(result.untyped_data()));
+  return ffi::Error::Success();
+}
+
+template <class F, int Order>
+ffi::Error elementwise(ffi::RemainingArgs arguments, ffi::Result<ffi::AnyBuffer> result) {
+  if (arguments.size() != static_cast<std::size_t>(F::arity))
+    return ffi::Error::InvalidArgument(std::string(F::name) + ": wrong number of arguments");
+  switch (result->element_type()) {
+    case ffi::DataType::F64:
+      return run<F, Order, double>(arguments, *result);
+    case ffi::DataType::F32:
+      return run<F, Order, float>(arguments, *result);
+    default:
+      return ffi::Error::InvalidArgument(std::string(F::name) + ": float32 or float64 only");
+  }
+}
+
+#define FRBJAX_HANDLER(F, ORDER)                                                                     \
+  XLA_FFI_DEFINE_HANDLER(F##_##ORDER, (elementwise<F, ORDER>),                                     \
+                         ffi::Ffi::Bind().RemainingArgs().Ret<ffi::AnyBuffer>())
+
+FRBJAX_HANDLER(Rf, 0);
+FRBJAX_HANDLER(Rf, 1);
+FRBJAX_HANDLER(Rf, 2);
+FRBJAX_HANDLER(Rd, 0);
+FRBJAX_HANDLER(Rd, 1);
+FRBJAX_HANDLER(Rd, 2);
+FRBJAX_HANDLER(Rj, 0);
+FRBJAX_HANDLER(Rj, 1);
+FRBJAX_HANDLER(Rj, 2);
+FRBJAX_HANDLER(Rc, 0);
+FRBJAX_HANDLER(Rc, 1);
+FRBJAX_HANDLER(Rc, 2);
+
+struct Entry {
+  const char* name;
+  XLA_FFI_Handler* handler;
+};
+
+const Entry kHandlers[] = {
+    {"frbjax_elliprf_0", Rf_0}, {"frbjax_elliprf_1", Rf_1}, {"frbjax_elliprf_2", Rf_2},
+    {"frbjax_elliprd_0", Rd_0}, {"frbjax_elliprd_1", Rd_1}, {"frbjax_elliprd_2", Rd_2},
+    {"frbjax_elliprj_0", Rj_0}, {"frbjax_elliprj_1", Rj_1}, {"frbjax_elliprj_2", Rj_2},
+    {"frbjax_elliprc_0", Rc_0}, {"frbjax_elliprc_1", Rc_1}, {"frbjax_elliprc_2", Rc_2},
+};
+
+PyObject* handlers(PyObject*, PyObject*) {
+  PyObject* table = PyDict_New();
+  if (table == nullptr) return nullptr;
+  for (const Entry& entry : kHandlers) {
+    PyObject* capsule = PyCapsule_New(reinterpret_cast<void*>(entry.handler), nullptr, nullptr);
+    if (capsule == nullptr || PyDict_SetItemString(table, entry.name, capsule) != 0) {
+      Py_XDECREF(capsule);
+      Py_DECREF(table);
+      return nullptr;
+    }
+    Py_DECREF(capsule);
+  }
+  return table;
+}
+
+PyMethodDef kMethods[] = {
+    {"handlers", handlers, METH_NOARGS, "{target name: PyCapsule of the XLA FFI handler}."},
+    {nullptr, nullptr, 0, nullptr},
+};
+
+PyModuleDef kModule = {PyModuleDef_HEAD_INIT, "_kernels", "frbjax's compiled CPU kernels (XLA FFI).", -1, kMethods};
+
+}  // namespace
+}  // namespace frbjax
+
+PyMODINIT_FUNC PyInit__kernels() { return PyModule_Create(&frbjax::kModule); }

@@ -1,0 +1,124 @@
+r"""The compiled CPU kernels of the special functions (``frbjax._kernels``, C++ behind XLA's FFI).
+
+The C++ core (``csrc/``) evaluates each function with one scalar implementation, templated on the
+number type, per point with its own stopping rule (the algorithms of the JAX path, which stays for
+accelerators and as the cross-check).  A call costs XLA a custom call to compile, whatever the
+arithmetic inside, where the JAX path's unrolled duplications and AGM steps compile to many kernels.
+
+Which path runs is decided where a public function is traced (``selected``): the kernels when the
+default backend is the CPU, the extension was built at install, the dtype is float32 or float64, and
+``FRBJAX_KERNELS`` is not ``jax``; the JAX path otherwise.  ``FRBJAX_KERNELS=compiled`` makes a
+missing extension an error instead of a warning.
+
+Derivatives: the kernels also evaluate the function on dual numbers, which gives its partial
+derivatives (order 1) and second partial derivatives (order 2) from the same code.  Every duplication
+step is an exact identity, so the derivative of the algorithm converges to the derivative of the
+function (DLMF 19.26.18-19.26.20).  The JVP rules are linear in the tangents, so that reverse mode
+transposes a product, never a loop; second derivatives come from the rule of the order-1 kernel.
+Third derivatives are not provided (JAX reports the missing rule).  The zero-argument convention of
+the JAX path holds: the tangent of an argument that is exactly zero, where the partial derivative is
+infinite, is ignored (``frbjax.special._carlson``'s module note).
+"""
+
+from __future__ import annotations
+
+import functools
+import os
+import warnings
+
+import jax
+import jax.numpy as jnp
+
+
+_SWITCH = "FRBJAX_KERNELS"
+
+
+@functools.cache
+def _module():
+    """The extension module, or None where it was not built (a warning, once)."""
+    try:
+        from .. import _kernels
+    except ImportError as error:
+        if os.environ.get(_SWITCH) == "compiled":
+            raise ImportError(f"{_SWITCH}=compiled but frbjax's compiled kernels were not built: {error}") from error
+        warnings.warn(
+            f"frbjax's compiled CPU kernels were not built at install ({error}); the JAX path runs on the "
+            "CPU too (slower to compile).  Reinstall with a C++17 compiler to build them.",
+            RuntimeWarning,
+            stacklevel=3,
+        )
+        return None
+    for name, capsule in _kernels.handlers().items():
+        jax.ffi.register_ffi_target(name, capsule, platform="cpu")
+    return _kernels
+
+
+def selected(*arrays) -> bool:
+    """Whether the compiled kernels evaluate a function of ``arrays`` (decided when it is traced)."""
+    choice = os.environ.get(_SWITCH, "auto")
+    if choice not in ("auto", "compiled", "jax"):
+        raise ValueError(f"{_SWITCH} must be 'auto', 'compiled' or 'jax', got {choice!r}")
+    if choice == "jax" or jax.default_backend() != "cpu":
+        return False
+    if any(jnp.result_type(a) not in (jnp.float32, jnp.float64) for a in arrays):
+        return False
+    return _module() is not None
+
+
+def _width(arity, order):
+    return (1, 1 + arity, 1 + arity + arity * arity)[order]
+
+
+def _call(name, order, arguments):
+    """The kernel ``name`` of ``order`` (0, 1, 2) on broadcast arguments: (..., width)."""
+    first = arguments[0]
+    shape = jax.ShapeDtypeStruct(first.shape + (_width(len(arguments), order),), first.dtype)
+    return jax.ffi.ffi_call(f"frbjax_{name}_{order}", shape, vmap_method="broadcast_all")(*arguments)
+
+
+def _masked_tangents(primals, tangents, may_vanish):
+    """The tangents stacked on a last axis, those of exactly-zero arguments at ``may_vanish`` set to 0."""
+    columns = []
+    for index, (primal, tangent) in enumerate(zip(primals, tangents)):
+        tangent = jnp.broadcast_to(tangent, primal.shape)
+        columns.append(jnp.where(primal > 0, tangent, 0) if index in may_vanish else tangent)
+    return jnp.stack(columns, axis=-1)
+
+
+def _elementwise(name, arity, may_vanish):
+    """``name``'s compiled kernel as a JAX function of ``arity`` broadcast arrays, with its derivatives."""
+
+    @jax.custom_jvp
+    def with_partials(*arguments):
+        out = _call(name, 1, arguments)
+        return out[..., 0], out[..., 1:]
+
+    @with_partials.defjvp
+    def with_partials_jvp(primals, tangents):
+        out = _call(name, 2, primals)
+        value, partials = out[..., 0], out[..., 1 : 1 + arity]
+        second = out[..., 1 + arity :].reshape(out.shape[:-1] + (arity, arity))
+        direction = _masked_tangents(primals, tangents, may_vanish)
+        return (value, partials), (
+            jnp.sum(partials * direction, axis=-1),
+            jnp.sum(second * direction[..., None, :], axis=-1),
+        )
+
+    @jax.custom_jvp
+    def function(*arguments):
+        return _call(name, 0, arguments)[..., 0]
+
+    @function.defjvp
+    def function_jvp(primals, tangents):
+        value, partials = with_partials(*primals)
+        return value, jnp.sum(partials * _masked_tangents(primals, tangents, may_vanish), axis=-1)
+
+    function.__name__ = name
+    return function
+
+
+# The positions of the arguments that may be exactly zero (their tangents are ignored there).
+elliprf = _elementwise("elliprf", 3, (0, 1, 2))
+elliprd = _elementwise("elliprd", 3, (0, 1))
+elliprj = _elementwise("elliprj", 4, (0, 1, 2))
+elliprc = _elementwise("elliprc", 2, (0,))
