@@ -16,6 +16,7 @@
 #include <string>
 
 #include "carlson.hpp"
+#include "jacobi.hpp"
 #include "xla/ffi/api/ffi.h"
 
 namespace ffi = xla::ffi;
@@ -181,6 +182,44 @@ ffi::Error elementwise(ffi::RemainingArgs arguments, ffi::Result<ffi::AnyBuffer>
   }
 }
 
+// Jacobi's functions: (u, m, mc) -> (sn, cn, dn, am) per point, values only (the JVP rule of
+// frbjax/special/_compiled.py is written with them and R_D).
+template <class R>
+ffi::Error run_ellipj(ffi::RemainingArgs arguments, ffi::AnyBuffer& result) {
+  const R* inputs[3];
+  std::size_t count = result.element_count() / 4;
+  for (int j = 0; j < 3; ++j) {
+    auto buffer = arguments.get<ffi::AnyBuffer>(j);
+    if (!buffer.has_value()) return buffer.error();
+    if (buffer->element_type() != result.element_type() || buffer->element_count() != count)
+      return ffi::Error::InvalidArgument("ellipj: the arguments must have the result's dtype and size");
+    inputs[j] = static_cast<const R*>(buffer->untyped_data());
+  }
+  R* out = static_cast<R*>(result.untyped_data());
+  for (std::size_t i = 0; i < count; ++i) {
+    JacobiValues<R> values = ellipj(inputs[0][i], inputs[1][i], inputs[2][i]);
+    out[4 * i] = values.sn;
+    out[4 * i + 1] = values.cn;
+    out[4 * i + 2] = values.dn;
+    out[4 * i + 3] = values.am;
+  }
+  return ffi::Error::Success();
+}
+
+ffi::Error ellipj_values(ffi::RemainingArgs arguments, ffi::Result<ffi::AnyBuffer> result) {
+  if (arguments.size() != 3) return ffi::Error::InvalidArgument("ellipj: wrong number of arguments");
+  switch (result->element_type()) {
+    case ffi::DataType::F64:
+      return run_ellipj<double>(arguments, *result);
+    case ffi::DataType::F32:
+      return run_ellipj<float>(arguments, *result);
+    default:
+      return ffi::Error::InvalidArgument("ellipj: float32 or float64 only");
+  }
+}
+
+XLA_FFI_DEFINE_HANDLER(Ellipj_0, ellipj_values, ffi::Ffi::Bind().RemainingArgs().Ret<ffi::AnyBuffer>());
+
 #define FRBJAX_HANDLER(F, ORDER)                                                                     \
   XLA_FFI_DEFINE_HANDLER(F##_##ORDER, (elementwise<F, ORDER>),                                     \
                          ffi::Ffi::Bind().RemainingArgs().Ret<ffi::AnyBuffer>())
@@ -208,6 +247,7 @@ const Entry kHandlers[] = {
     {"frbjax_elliprd_0", Rd_0}, {"frbjax_elliprd_1", Rd_1}, {"frbjax_elliprd_2", Rd_2},
     {"frbjax_elliprj_0", Rj_0}, {"frbjax_elliprj_1", Rj_1}, {"frbjax_elliprj_2", Rj_2},
     {"frbjax_elliprc_0", Rc_0}, {"frbjax_elliprc_1", Rc_1}, {"frbjax_elliprc_2", Rc_2},
+    {"frbjax_ellipj_0", Ellipj_0},
 };
 
 PyObject* handlers(PyObject*, PyObject*) {

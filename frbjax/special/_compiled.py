@@ -1,4 +1,6 @@
-r"""The compiled CPU kernels of the special functions (``frbjax._kernels``, C++ behind XLA's FFI).
+r"""The compiled CPU kernels of the special functions (``frbjax._kernels``, C++ behind XLA's FFI):
+Carlson's R_F, R_D, R_J, R_C with their derivatives, and Jacobi's sn, cn, dn, am (whose JVP rule is
+written in ``_jacobi.py`` with these values and the R_D kernel).
 
 The C++ core (``csrc/``) evaluates each function with one scalar implementation, templated on the
 number type, per point with its own stopping rule (the algorithms of the JAX path, which stays for
@@ -69,10 +71,12 @@ def _width(arity, order):
     return (1, 1 + arity, 1 + arity + arity * arity)[order]
 
 
-def _call(name, order, arguments):
-    """The kernel ``name`` of ``order`` (0, 1, 2) on broadcast arguments: (..., width)."""
+def call(name, order, arguments, width=None):
+    """The kernel ``name`` of ``order`` (0, 1, 2) on broadcast arguments: (..., width), ``width`` by
+    default that of a scalar function and its derivatives."""
     first = arguments[0]
-    shape = jax.ShapeDtypeStruct(first.shape + (_width(len(arguments), order),), first.dtype)
+    width = _width(len(arguments), order) if width is None else width
+    shape = jax.ShapeDtypeStruct(first.shape + (width,), first.dtype)
     return jax.ffi.ffi_call(f"frbjax_{name}_{order}", shape, vmap_method="broadcast_all")(*arguments)
 
 
@@ -90,12 +94,12 @@ def _elementwise(name, arity, may_vanish):
 
     @jax.custom_jvp
     def with_partials(*arguments):
-        out = _call(name, 1, arguments)
+        out = call(name, 1, arguments)
         return out[..., 0], out[..., 1:]
 
     @with_partials.defjvp
     def with_partials_jvp(primals, tangents):
-        out = _call(name, 2, primals)
+        out = call(name, 2, primals)
         value, partials = out[..., 0], out[..., 1 : 1 + arity]
         second = out[..., 1 + arity :].reshape(out.shape[:-1] + (arity, arity))
         direction = _masked_tangents(primals, tangents, may_vanish)
@@ -106,7 +110,7 @@ def _elementwise(name, arity, may_vanish):
 
     @jax.custom_jvp
     def function(*arguments):
-        return _call(name, 0, arguments)[..., 0]
+        return call(name, 0, arguments)[..., 0]
 
     @function.defjvp
     def function_jvp(primals, tangents):

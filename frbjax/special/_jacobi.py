@@ -35,10 +35,11 @@ from jax import Array, lax
 from jax.typing import ArrayLike
 
 from .._fusion import when_any
+from . import _compiled
 from ._carlson import _rd
 from ._circular import cos_sin_near_zero
 from ._common import complement, is_double, over_sqrt, promote, rolled
-from ._legendre import _complete_first
+from ._legendre import _complete_first_any
 
 
 def _agm_steps(x) -> int:
@@ -91,7 +92,8 @@ def _agm_levels(mc):
     def descend(state, _):
         a, b, used, mean = state
         next_a = (a + b) / 2
-        last = used & (a - b <= tolerance * a)
+        # |a - b|: for m < 0 (mc > 1) b_0 = sqrt(mc) > a_0 = 1, and a - b < 0 stopped the AGM at once.
+        last = used & (jnp.abs(a - b) <= tolerance * a)
         mean = jnp.where(used, next_a, mean)
         return (next_a, jnp.sqrt(a * b), used & ~last, mean), (a, b, used)
 
@@ -187,8 +189,9 @@ def _jacobi_to_half_quarter(w, levels):
 
 
 def _quarter_period(mc):
-    """K(m) from mc (``_legendre._complete_first``), with a finite stand-in K = 1 where mc = 0."""
-    return _complete_first(jnp.where(mc == 0, 1, mc))
+    """K(m) from mc (``_legendre._complete_first_any``: every mc > 0, so m < 0 too), with a finite
+    stand-in K = 1 where mc = 0."""
+    return _complete_first_any(jnp.where(mc == 0, 1, mc))
 
 
 def parameter_data(mc):
@@ -244,8 +247,13 @@ def _ellipj_primal(u, m, mc, quarter, levels):
     return sn, cn, dn, am
 
 
-def _ellipj_tangents(u, m, mc, quarter, values, tangents):
-    """The JVP of (sn, cn, dn, am) (module note); ``quarter`` is K(m) (stand-in 1 at m = 1)."""
+def _rd_rule(x, y, z):
+    return _rd(x, y, z, True)
+
+
+def _ellipj_tangents(u, m, mc, quarter, values, tangents, rd=_rd_rule):
+    """The JVP of (sn, cn, dn, am) (module note); ``quarter`` is K(m) (stand-in 1 at m = 1), ``rd``
+    the R_D it is written with (the compiled kernel's on that path)."""
     sn, cn, dn, am = values
     du, dm, dmc = tangents
     dparam = 0.5 * (dm - dmc)
@@ -256,13 +264,13 @@ def _ellipj_tangents(u, m, mc, quarter, values, tangents):
     # dK/dm = R_D(0, 1, mc)/6 depends on the parameter alone (m and mc may have fewer dimensions
     # than u); a stand-in where m = 1 (no period there).
     safe_mc = jnp.where(limit, 0.5, mc)
-    dk_dm = _rd(jnp.zeros_like(safe_mc), jnp.ones_like(safe_mc), safe_mc, True) / 6
+    dk_dm = rd(jnp.zeros_like(safe_mc), jnp.ones_like(safe_mc), safe_mc) / 6
     sn_reduced = jnp.abs(sn) * jnp.sign(jnp.sin(am - turns * jnp.pi))
     cn_reduced = jnp.abs(cn)
     safe_dn = jnp.where(limit, 1, dn)
     df_dm = (
         jnp.where(turns == 0, 0, 2 * turns * dk_dm)
-        + sn_reduced**3 * _rd(cn_reduced * cn_reduced, jnp.ones_like(cn_reduced), safe_dn * safe_dn, True) / 6
+        + sn_reduced**3 * rd(cn_reduced * cn_reduced, jnp.ones_like(cn_reduced), safe_dn * safe_dn) / 6
     )
     dam_dm_generic = -safe_dn * df_dm
     # m = 1 (DLMF 22.10.ii): d am/dm = -(sinh u - u sech u)/4.
@@ -330,4 +338,21 @@ def ellipj(u: ArrayLike, m: ArrayLike, *, mc: ArrayLike | None = None) -> tuple[
     """
     m, mc = complement(m, mc)
     u, m, mc = promote(u, m, mc)
+    if _compiled.selected(u):
+        return _compiled_ellipj(u, m, mc)
     return _ellipj(u, m, mc)
+
+
+@jax.custom_jvp
+def _compiled_ellipj(u, m, mc):
+    """ellipj through the compiled kernel (``_compiled``), with the JVP rule of the JAX path written
+    with the kernel's R_D."""
+    out = _compiled.call("ellipj", 0, (u, m, mc), width=4)
+    return out[..., 0], out[..., 1], out[..., 2], out[..., 3]
+
+
+@_compiled_ellipj.defjvp
+def _compiled_ellipj_jvp(primals, tangents):
+    u, m, mc = primals
+    values = _compiled_ellipj(u, m, mc)
+    return values, _ellipj_tangents(u, m, mc, _quarter_period(mc), values, tangents, rd=_compiled.elliprd)

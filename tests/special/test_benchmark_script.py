@@ -1,4 +1,4 @@
-"""The benchmark script runs (a tiny smoke run, so CI proves it works)."""
+"""The benchmark scripts run (tiny smoke runs, so CI proves they work)."""
 
 from __future__ import annotations
 
@@ -40,3 +40,16 @@ def test_benchmark_quick(tmp_path):
         assert row["max_diff_vs_scipy"] < 1e-10, row
     assert result["gradient"]["compile_s"] > 0
     assert "ellippiinc" in proc.stdout
+
+
+def test_kernels_benchmark_quick():
+    """benchmarks/kernels.py --quick: R_C on both paths, each in its own process."""
+    proc = subprocess.run(
+        [sys.executable, str(ROOT / "benchmarks" / "kernels.py"), "--quick"],
+        cwd=ROOT,
+        capture_output=True,
+        text=True,
+        timeout=900,
+    )
+    assert proc.returncode == 0, proc.stdout + proc.stderr
+    assert "elliprc: first value" in proc.stdout and "scipy / kernels" in proc.stdout, proc.stdout

@@ -372,6 +372,7 @@ def test_legendre_partials(name, kind, mode):
 # -------------------------------------------------------------------------------------- Jacobi
 
 
+@pytest.mark.usefixtures("special_path")
 @pytest.mark.parametrize("mode", ["fwd", "rev"])
 @pytest.mark.parametrize("kind", ["plain", "mc"])
 def test_jacobi_partials(kind, mode):

@@ -23,6 +23,10 @@ import frbjax.special as special
 from . import _mpmath_reference as ref
 
 
+# Every test here runs on both paths (conftest.py): the compiled kernels and the JAX code.
+pytestmark = pytest.mark.usefixtures("special_path")
+
+
 COMPONENTS = ("sn", "cn", "dn", "am")
 # Issue target: 4e-15 max(1, |u|/K) in float64, 1e-5 in float32.  The tolerances are the measured worst
 # errors on these grids (FRBJAX_ERROR_LOG, 2026-11-24) with a margin of about 2: float64 6.3e-16 with
