@@ -395,7 +395,14 @@ def test_readme_quick_start_commands(tmp_path, cache_environment):
     commands = [line.strip() for line in block.splitlines()[1:] if line.strip()]
     assert commands == ["make demo", "make test"]
     dry_run = subprocess.run(
-        ["make", "--dry-run", "demo"], capture_output=True, text=True, cwd=root, env=cache_environment, timeout=60
+        # --no-print-directory: under `make test` this make is a sub-make (MAKELEVEL is inherited), which
+        # would print "make[1]: Entering directory ..." around its commands.
+        ["make", "--no-print-directory", "--dry-run", "demo"],
+        capture_output=True,
+        text=True,
+        cwd=root,
+        env=cache_environment,
+        timeout=60,
     )
     assert dry_run.returncode == 0, dry_run.stdout + dry_run.stderr
     program, *arguments = dry_run.stdout.strip().splitlines()[-1].split()

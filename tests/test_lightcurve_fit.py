@@ -186,6 +186,7 @@ def test_tumbler_recovered(energy_ratio, long_axis):
     assert held_out_rms(result, held_out) < bounds["held_out"]
 
 
+@pytest.mark.slow  # a light-curve inversion: compiling it takes about a minute (68 s in CI's tier, 2026-11-28)
 def test_principal_axis_rotator_recovered():
     period = 0.3  # days
     inertia = np.array([0.6, 0.8, 1.0])
