@@ -5,7 +5,7 @@ VENV := .venv
 BIN := $(VENV)/bin
 STAMP := $(VENV)/.frbjax-installed
 
-.PHONY: demo lint test test-slow test-all test-floor docs bench clean
+.PHONY: demo lint typecheck test test-slow test-all test-floor docs bench clean
 
 # The compiled kernels (csrc/, CMakeLists.txt) are built by the install: a change to them reinstalls.
 $(STAMP): pyproject.toml CMakeLists.txt $(wildcard csrc/*)
@@ -27,6 +27,12 @@ demo: $(STAMP)
 # them.  `ruff format .` and `ruff check --fix .` repair most of what it reports.
 lint: $(STAMP)
 	$(BIN)/ruff check . && $(BIN)/ruff format --check .
+
+# `make typecheck`: pyright (basic) over a user's calls of the public API (tests/typing/), which checks
+# the package's annotations as a type checker sees them (about 10 s; pyright fetches its Node package
+# on first use).
+typecheck: $(STAMP)
+	$(BIN)/pyright -p tests/typing
 
 # Two tiers, as scipy's `-m full` and diffrax's slow tests: `make test` (what CI runs) leaves out the
 # tests marked slow, the ones that compile a whole light-curve inversion, the tensor derivatives'

@@ -20,6 +20,8 @@ The library never changes JAX's global configuration: enable float64 yourself
 (``jax.config.update("jax_enable_x64", True)``) for double precision.
 """
 
+from typing import TYPE_CHECKING
+
 from . import special
 from ._body import FreeRigidBody
 from ._errors import FitError
@@ -27,6 +29,13 @@ from ._free_flow import free_flow
 from ._inertia import InertiaTensor
 from ._quaternion import quaternion_from_matrix, quaternion_to_matrix
 from ._sharding import batch_mesh, pad_batch, shard_batch, shard_bodies
+
+
+if TYPE_CHECKING:
+    # The names imported on first use (``__getattr__`` below), as type checkers should see them.
+    from . import lightcurve as lightcurve, torques as torques
+    from ._splitting import METHODS as SPLITTING_METHODS, RigidBodySplitting, RigidBodyTerm, splitting_trajectory
+    from .fit import AttitudeFit, fit_attitude
 
 
 __all__ = [
