@@ -356,6 +356,7 @@ def _model_program(fits):
     return jax.jit(lambda *args: (state(*args), jax.jacfwd(state, argnums=(0, 1, 2, 3))(*args)))
 
 
+@pytest.mark.slow  # the first body compiles the body's state and Jacobian programs: 56.5 s in CI's tier (2026-11-28)
 @pytest.mark.parametrize("name", MODEL_BODIES)
 def test_model_derivatives_are_the_bodys_except_on_exactly_symmetric_bodies(name):
     """The fits' model evaluates the motion with the elliptic formulas' own derivatives
