@@ -8,7 +8,8 @@
 // The derivatives come from the same templated scalar code run on dual numbers (dual.hpp), so that
 // JAX's derivative rules (frbjax/special/_compiled.py) are linear in the tangents.
 //
-// The module's one function, `handlers()`, returns {target name: PyCapsule of its XLA_FFI_Handler}.
+// The module's functions: `handlers()` returns {target name: PyCapsule of its XLA_FFI_Handler};
+// `jaxlib_version()` the jaxlib whose FFI headers they were built with.
 #include <Python.h>
 
 #include <cstddef>
@@ -265,8 +266,15 @@ PyObject* handlers(PyObject*, PyObject*) {
   return table;
 }
 
+#ifndef FRBJAX_JAXLIB_VERSION
+#define FRBJAX_JAXLIB_VERSION "unknown"
+#endif
+
+PyObject* jaxlib_version(PyObject*, PyObject*) { return PyUnicode_FromString(FRBJAX_JAXLIB_VERSION); }
+
 PyMethodDef kMethods[] = {
     {"handlers", handlers, METH_NOARGS, "{target name: PyCapsule of the XLA FFI handler}."},
+    {"jaxlib_version", jaxlib_version, METH_NOARGS, "The jaxlib whose XLA FFI headers the kernels were built with."},
     {nullptr, nullptr, 0, nullptr},
 };
 

@@ -25,6 +25,8 @@ infinite, is ignored (``frbjax.special._carlson``'s module note).
 from __future__ import annotations
 
 import functools
+import importlib.metadata
+import itertools
 import os
 import warnings
 
@@ -50,9 +52,34 @@ def _module():
             stacklevel=3,
         )
         return None
+    # Handlers built with a newer jaxlib's FFI headers than the one running cannot be registered, and
+    # a failed registration stops JAX's CPU backend from starting: check first (pip builds with the
+    # newest jaxlib unless the build is constrained too).
+    built, running = _kernels.jaxlib_version(), importlib.metadata.version("jaxlib")
+    if _release(running) < _release(built):
+        message = (
+            f"frbjax's compiled kernels were built with jaxlib {built}, newer than the jaxlib {running} that "
+            "runs; the JAX path runs on the CPU too.  Reinstall frbjax with this jaxlib in the build "
+            "(pip install --no-build-isolation, or PIP_CONSTRAINT) to use them."
+        )
+        if os.environ.get(_SWITCH) == "compiled":
+            raise ImportError(f"{_SWITCH}=compiled but {message}")
+        warnings.warn(message, RuntimeWarning, stacklevel=3)
+        return None
     for name, capsule in _kernels.handlers().items():
         jax.ffi.register_ffi_target(name, capsule, platform="cpu")
     return _kernels
+
+
+def _release(version):
+    """The numeric release of a version string ("0.10.2" -> (0, 10, 2)); () where unknown."""
+    numbers = []
+    for part in version.split("."):
+        digits = "".join(itertools.takewhile(str.isdigit, part))
+        if not digits:
+            break
+        numbers.append(int(digits))
+    return tuple(numbers)
 
 
 def selected(*arrays) -> bool:
