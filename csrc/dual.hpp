@@ -173,4 +173,60 @@ inline Dual<T, N> fabs(const Dual<T, N>& a) {
   return value(a) < 0 ? -a : a;
 }
 
+template <class T, int N>
+inline Dual<T, N> exp(const Dual<T, N>& a) {
+  using std::exp;
+  T e = exp(a.v);
+  return chain(a, e, e);
+}
+template <class T, int N>
+inline Dual<T, N> sin(const Dual<T, N>& a) {
+  using std::cos;
+  using std::sin;
+  return chain(a, sin(a.v), cos(a.v));
+}
+template <class T, int N>
+inline Dual<T, N> cos(const Dual<T, N>& a) {
+  using std::cos;
+  using std::sin;
+  return chain(a, cos(a.v), -sin(a.v));
+}
+template <class T, int N>
+inline Dual<T, N> tanh(const Dual<T, N>& a) {
+  using std::tanh;
+  T t = tanh(a.v);
+  return chain(a, t, 1.0 - t * t);
+}
+template <class T, int N>
+inline Dual<T, N> asinh(const Dual<T, N>& a) {
+  using std::asinh;
+  using std::sqrt;
+  return chain(a, asinh(a.v), T(1.0) / sqrt(a.v * a.v + 1.0));
+}
+// atan2(y, x): d = (x dy - y dx) / (x^2 + y^2) (0 at the origin, where it has no derivative).
+template <class T, int N>
+inline Dual<T, N> atan2(const Dual<T, N>& y, const Dual<T, N>& x) {
+  using std::atan2;
+  Dual<T, N> r;
+  r.v = atan2(y.v, x.v);
+  T norm = x.v * x.v + y.v * y.v;
+  if (!(value(norm) > 0)) return r;
+  T x_scaled = x.v / norm, y_scaled = y.v / norm;
+  for (int i = 0; i < N; ++i) r.d[i] = x_scaled * y.d[i] - y_scaled * x.d[i];
+  return r;
+}
+
+template <class T, int N>
+inline Dual<T, N> sinh(const Dual<T, N>& a) {
+  using std::cosh;
+  using std::sinh;
+  return chain(a, sinh(a.v), cosh(a.v));
+}
+template <class T, int N>
+inline Dual<T, N> cosh(const Dual<T, N>& a) {
+  using std::cosh;
+  using std::sinh;
+  return chain(a, cosh(a.v), sinh(a.v));
+}
+
 }  // namespace frbjax

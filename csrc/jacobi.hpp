@@ -22,6 +22,7 @@ namespace frbjax {
 template <class R>
 struct JacobiValues {
   R sn, cn, dn, am;
+  R turns;  // j of u = 2jK + u_r (0 at m = 1)
 };
 
 // K(m) = P(mc) - log(mc) Q(mc) on 0 < mc <= 1: the degree-10 fits of the JAX path
@@ -59,13 +60,13 @@ JacobiValues<R> ellipj(R u, R m, R mc) {
   const bool is_double = sizeof(R) == 8;
   const R nan = std::numeric_limits<R>::quiet_NaN();
   const R pi = R(3.141592653589793);
-  if (!(mc >= 0) || std::isnan(u) || std::isnan(m)) return {nan, nan, nan, nan};
+  if (!(mc >= 0) || std::isnan(u) || std::isnan(m)) return {nan, nan, nan, nan, nan};
   if (mc == 0) {
     // sech u = 2e/(1 + e^2) with e = exp(-|u|): no overflow.
     R decay = exp(-fabs(u));
     R sech = 2 * decay / (1 + decay * decay);
     R sn = tanh(u);
-    return {sn, sech, sech, sech > 0 ? atan(sn / sech) : std::copysign(pi / 2, sn)};
+    return {sn, sech, sech, sech > 0 ? atan(sn / sech) : std::copysign(pi / 2, sn), R(0)};
   }
   const int max_levels = is_double ? 13 : 8;
   const R tolerance = is_double ? R(1.0 / 67108864) : R(1.0 / 4096);  // 2^-26, 2^-12
@@ -125,7 +126,66 @@ JacobiValues<R> ellipj(R u, R m, R mc) {
   R sn_reduced = reduced < 0 ? -sn_abs : sn_abs;
   R sign = std::fmod(fabs(turns), R(2)) == 1 ? R(-1) : R(1);
   R angle = cn_reduced > 0 ? atan(sn_reduced / cn_reduced) : std::copysign(pi / 2, sn_reduced);
-  return {sign * sn_reduced, sign * cn_reduced, dn, turns * pi + angle};
+  return {sign * sn_reduced, sign * cn_reduced, dn, turns * pi + angle, turns};
+}
+
+// sn, cn, dn and the number of half periods j on any number type: on dual numbers the values of
+// the level below and their partial derivatives in closed form (the JAX path's rule,
+// frbjax/special/_jacobi.py): with the parameter's change dp = (dm - dmc)/2,
+//   d am = dn du - dn (2j dK/dm + (sn_r^3/6) R_D(cn_r^2, 1, dn^2)) dp,  dK/dm = R_D(0, 1, mc)/6,
+//   d sn = cn d am,  d cn = -sn d am,  d dn = -(sn^2 dp + 2 m sn cn d am)/(2 dn)
+// (sn_r, cn_r those of the reduced argument, DLMF 22.4.3); at m = 1 the limits of DLMF 22.10.ii.
+template <class T>
+struct JacobiTriple {
+  T sn, cn, dn;
+  double turns;
+};
+
+template <class R>
+JacobiTriple<R> jacobi_triple(const R& u, const R& m, const R& mc) {
+  JacobiValues<R> values = ellipj(u, m, mc);
+  return {values.sn, values.cn, values.dn, static_cast<double>(values.turns)};
+}
+
+template <class T, int N>
+JacobiTriple<Dual<T, N>> jacobi_triple(const Dual<T, N>& u, const Dual<T, N>& m, const Dual<T, N>& mc) {
+  using std::cosh;
+  using std::sinh;
+  using std::tanh;
+  JacobiTriple<T> base = jacobi_triple(u.v, m.v, mc.v);
+  const T &sn = base.sn, &cn = base.cn, &dn = base.dn;
+  T am_per_param, dn_per_param, dn_per_am;
+  if (value(mc.v) == 0) {
+    // The m-derivatives at m = 1 grow like e^|u|/8: |u| capped where sinh would overflow.
+    T capped = value(u.v) > 700 ? T(700.0) : value(u.v) < -700 ? T(-700.0) : u.v;
+    am_per_param = -(sinh(capped) - capped / cosh(capped)) / 4.0;
+    dn_per_param = -tanh(capped) * (sinh(capped) + capped / cosh(capped)) / 4.0;
+    dn_per_am = T(0.0);
+  } else {
+    const double parity = std::fmod(std::fabs(base.turns), 2.0) == 1 ? -1.0 : 1.0;
+    T sn_reduced = parity * sn, cn_reduced = parity * cn;
+    T amplitude_per_u = sn_reduced * sn_reduced * sn_reduced * elliprd(cn_reduced * cn_reduced, T(1.0), dn * dn) / 6.0;
+    if (base.turns != 0) amplitude_per_u = amplitude_per_u + 2.0 * base.turns * elliprd(T(0.0), T(1.0), mc.v) / 6.0;
+    am_per_param = -dn * amplitude_per_u;
+    dn_per_param = -(sn * sn) / (2.0 * dn);
+    dn_per_am = -(m.v * sn * cn) / dn;
+  }
+  JacobiTriple<Dual<T, N>> out;
+  out.turns = base.turns;
+  out.sn.v = sn;
+  out.cn.v = cn;
+  out.dn.v = dn;
+  for (int i = 0; i < N; ++i) {
+    T param = 0.5 * (m.d[i] - mc.d[i]);
+    T am = dn * u.d[i] + am_per_param * param;
+    out.sn.d[i] = cn * am;
+    out.cn.d[i] = -sn * am;
+    if (value(mc.v) == 0)
+      out.dn.d[i] = -(m.v * sn * cn) * u.d[i] + dn_per_param * param;
+    else
+      out.dn.d[i] = dn_per_param * param + dn_per_am * am;
+  }
+  return out;
 }
 
 }  // namespace frbjax

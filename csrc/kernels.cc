@@ -18,6 +18,7 @@
 
 #include "carlson.hpp"
 #include "jacobi.hpp"
+#include "motion.hpp"
 #include "xla/ffi/api/ffi.h"
 
 namespace ffi = xla::ffi;
@@ -238,6 +239,97 @@ FRBJAX_HANDLER(Rc, 0);
 FRBJAX_HANDLER(Rc, 1);
 FRBJAX_HANDLER(Rc, 2);
 
+// The working-frame motion at one time per point (motion.hpp): inputs J1, J2, J3, l1, l2, l3, tau (the
+// result's dtype) and the regime (int32), all of one size; per point and output (3 with `Attitude`
+// false, 11 with it) the value (order 0), and its 7 partial derivatives (order 1) and their 7 x 7
+// second ones (order 2) after it.
+template <int Order, bool Attitude, class R>
+ffi::Error run_motion(ffi::RemainingArgs arguments, ffi::AnyBuffer& result) {
+  constexpr int K = kMotionInputs;
+  constexpr int outputs = Attitude ? kMotionOutputs : 3;
+  constexpr int W = width(K, Order);
+  const R* inputs[K];
+  std::size_t count = result.element_count() / (outputs * W);
+  for (int j = 0; j < K; ++j) {
+    auto buffer = arguments.get<ffi::AnyBuffer>(j);
+    if (!buffer.has_value()) return buffer.error();
+    if (buffer->element_type() != result.element_type() || buffer->element_count() != count)
+      return ffi::Error::InvalidArgument("motion: the arguments must have the result's dtype and size");
+    inputs[j] = static_cast<const R*>(buffer->untyped_data());
+  }
+  auto regimes = arguments.get<ffi::AnyBuffer>(K);
+  if (!regimes.has_value()) return regimes.error();
+  if (regimes->element_type() != ffi::DataType::S32 || regimes->element_count() != count)
+    return ffi::Error::InvalidArgument("motion: the regime must be int32 of the result's size");
+  const std::int32_t* regime = static_cast<const std::int32_t*>(regimes->untyped_data());
+  R* output = static_cast<R*>(result.untyped_data());
+  for (std::size_t i = 0; i < count; ++i) {
+    R* out = output + i * outputs * W;
+    if constexpr (Order == 0) {
+      R in[K], values[kMotionOutputs];
+      for (int j = 0; j < K; ++j) in[j] = inputs[j][i];
+      working_motion<R>(in, regime[i], Attitude, values);
+      for (int o = 0; o < outputs; ++o) out[o] = values[o];
+    } else if constexpr (Order == 1) {
+      using D = Dual<R, K>;
+      D in[K], values[kMotionOutputs];
+      for (int j = 0; j < K; ++j) {
+        in[j] = D(0.0);
+        in[j].v = inputs[j][i];
+        in[j].d[j] = R(1);
+      }
+      working_motion<D>(in, regime[i], Attitude, values);
+      for (int o = 0; o < outputs; ++o) {
+        out[o * W] = values[o].v;
+        for (int j = 0; j < K; ++j) out[o * W + 1 + j] = values[o].d[j];
+      }
+    } else {
+      using D1 = Dual<R, K>;
+      using D2 = Dual<D1, K>;
+      D2 in[K], values[kMotionOutputs];
+      for (int j = 0; j < K; ++j) {
+        in[j] = D2(0.0);
+        in[j].v.v = inputs[j][i];
+        in[j].v.d[j] = R(1);
+        in[j].d[j].v = R(1);
+      }
+      working_motion<D2>(in, regime[i], Attitude, values);
+      for (int o = 0; o < outputs; ++o) {
+        out[o * W] = values[o].v.v;
+        for (int j = 0; j < K; ++j) out[o * W + 1 + j] = values[o].v.d[j];
+        for (int j = 0; j < K; ++j)
+          for (int k = 0; k < K; ++k) out[o * W + 1 + K + j * K + k] = values[o].d[j].d[k];
+      }
+    }
+  }
+  return ffi::Error::Success();
+}
+
+template <int Order, bool Attitude>
+ffi::Error motion(ffi::RemainingArgs arguments, ffi::Result<ffi::AnyBuffer> result) {
+  if (arguments.size() != static_cast<std::size_t>(kMotionInputs + 1))
+    return ffi::Error::InvalidArgument("motion: wrong number of arguments");
+  switch (result->element_type()) {
+    case ffi::DataType::F64:
+      return run_motion<Order, Attitude, double>(arguments, *result);
+    case ffi::DataType::F32:
+      return run_motion<Order, Attitude, float>(arguments, *result);
+    default:
+      return ffi::Error::InvalidArgument("motion: float32 or float64 only");
+  }
+}
+
+#define FRBJAX_MOTION_HANDLER(NAME, ORDER, ATTITUDE)                                                 \
+  XLA_FFI_DEFINE_HANDLER(NAME##_##ORDER, (motion<ORDER, ATTITUDE>),                                \
+                         ffi::Ffi::Bind().RemainingArgs().Ret<ffi::AnyBuffer>())
+
+FRBJAX_MOTION_HANDLER(Motion, 0, true);
+FRBJAX_MOTION_HANDLER(Motion, 1, true);
+FRBJAX_MOTION_HANDLER(Motion, 2, true);
+FRBJAX_MOTION_HANDLER(Momentum, 0, false);
+FRBJAX_MOTION_HANDLER(Momentum, 1, false);
+FRBJAX_MOTION_HANDLER(Momentum, 2, false);
+
 struct Entry {
   const char* name;
   XLA_FFI_Handler* handler;
@@ -249,6 +341,8 @@ const Entry kHandlers[] = {
     {"frbjax_elliprj_0", Rj_0}, {"frbjax_elliprj_1", Rj_1}, {"frbjax_elliprj_2", Rj_2},
     {"frbjax_elliprc_0", Rc_0}, {"frbjax_elliprc_1", Rc_1}, {"frbjax_elliprc_2", Rc_2},
     {"frbjax_ellipj_0", Ellipj_0},
+    {"frbjax_motion_0", Motion_0},     {"frbjax_motion_1", Motion_1},     {"frbjax_motion_2", Motion_2},
+    {"frbjax_momentum_0", Momentum_0}, {"frbjax_momentum_1", Momentum_1}, {"frbjax_momentum_2", Momentum_2},
 };
 
 PyObject* handlers(PyObject*, PyObject*) {

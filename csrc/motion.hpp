@@ -1,0 +1,228 @@
+// The exact torque-free motion in the working frame at one time per body (docs/theory.md §4, §5, §11):
+// the compiled form of frbjax/_regimes.py's `orbit_constants` and `evaluate_once`, per point, on any
+// number type (values; dual numbers for the partial derivatives in the moments, the unit angular
+// momentum and the time).
+//
+// The working frame has J1 <= J2 <= J3 and l1, l3 >= 0 (frbjax/_body.py's working_frame), so that every
+// orbit sign is +1.  For each point: the regime's constants (the amplitudes A, the rate B, the
+// parameter m and its complement mc without cancellation, alpha, the characteristic nu), then
+//   L(tau) = A (cn, sn, dn)(u0 + B tau)  (major regime; (dn, sn, cn) in the minor one),
+// from the given l and the Jacobi functions at v = B tau by the addition theorem (DLMF 22.8.1-22.8.3),
+// and the precession angle
+//   psi = tau / J_p + atan2 terms - alpha (Pi(nu; am u|m) [- u])  between 0 and tau,
+// the third-kind integral's change from Jacobi's addition theorem for Pi (Whittaker and Watson 22.74),
+// one R_J at the reduced point (DLMF 19.25.14) and the complete integral for whole half-periods
+// (DLMF 19.2.10).  On the separatrix L and psi are elementary (hyperbolic functions of u).
+//
+// Outputs: unit L(tau) (3), the chart q̂(0) (4) and q̂(tau) (4), with psi counted from tau = 0, so that
+// q(t) = q0 ⊗ P ⊗ conj(q̂(0)) ⊗ q̂(tau) ⊗ conj(P) (docs/theory.md §8).  A uniformly rotating body
+// (regime 3) gets L = l and identity charts: its motion is formed in JAX (frbjax/_uniform.py).
+#pragma once
+
+#include <cmath>
+
+#include "carlson.hpp"
+#include "dual.hpp"
+#include "jacobi.hpp"
+
+namespace frbjax {
+
+enum Regime { kMajor = 0, kMinor = 1, kSeparatrix = 2, kUniform = 3 };
+
+constexpr int kMotionInputs = 7;    // J1, J2, J3, l1, l2, l3, tau
+constexpr int kMotionOutputs = 11;  // L (3), q̂(0) (4), q̂(tau) (4)
+
+// Pi(n; phi_r|m) - F(phi_r|m) for -1 <= n <= 0, Pi itself for n < -1 (|phi_r| <= pi/2, s = sin,
+// c = cos >= 0): (n/3) s^3 R_J(c^2, Delta^2, 1, 1 - n s^2) (DLMF 19.25.14), and for n < -1 with
+// omega = m/n, kappa = (1 - n)(1 - omega): atan2(sqrt(kappa) s, c Delta)/sqrt(kappa) - (omega/3) s^3
+// R_J(c^2, Delta^2, 1, 1 - omega s^2) (DLMF 19.7.8, 19.2.18).  frbjax/special/_legendre.py's
+// `pi_without_first_kind`.
+template <class T>
+T pi_without_first_kind(const T& n, const T& s, const T& c, const T& m, const T& mc) {
+  using std::atan2;
+  using std::sqrt;
+  const bool transformed = value(n) < -1 && value(m) > value(n);
+  const T characteristic = transformed ? m / n : n;
+  const T delta_squared = c * c + mc * s * s;
+  const T tail = characteristic * s * s * s * elliprj<T>(c * c, delta_squared, T(1.0), 1.0 - characteristic * s * s) / 3.0;
+  if (!transformed) return tail;
+  const T kappa = (1.0 - n) * (1.0 - characteristic);
+  return atan2(sqrt(kappa) * s, c * sqrt(delta_squared)) * sqrt(kappa) / kappa - tail;
+}
+
+// The same over a half period (s = 1, c = 0): Pi(n|m) - K(m) or Pi(n|m).
+template <class T>
+T complete_third_kind(const T& n, const T& m, const T& mc) {
+  return pi_without_first_kind<T>(n, T(1.0), T(0.0), m, mc);
+}
+
+// q̂ = exp(psi/2 about the spatial axis) ⊗ (the rotation taking that axis to l), docs/theory.md §5:
+// built on 1 + L1 (major regime, separatrix) or 1 + L3 (minor), in the order (w, x_p, y, z) or
+// (w, y, z, x_p).  `_regimes._chart`.
+template <class T>
+void chart(const T& half_cos, const T& half_sin, const T& l1, const T& l2, const T& l3, bool minor, T* q) {
+  using std::sqrt;
+  const T& pivot = minor ? l3 : l1;
+  const T& first = minor ? l2 : l3;
+  const T& second = minor ? l1 : l2;
+  T base = 1.0 + pivot;
+  T root = sqrt(base / 2.0), inverse = 1.0 / sqrt(2.0 * base);
+  T scalar = half_cos * root;
+  T along_pivot = half_sin * root;
+  T towards_first = (first * half_cos + second * half_sin) * inverse;
+  T towards_second = (-second * half_cos + first * half_sin) * inverse;
+  q[0] = scalar;
+  q[1] = minor ? towards_first : along_pivot;
+  q[2] = minor ? towards_second : towards_first;
+  q[3] = minor ? along_pivot : towards_second;
+}
+
+// (sn, cn) with sn^2 + cn^2 = 1 from a common positive multiple, scaled by a power of two first (both
+// can be ~1e-222, whose squares underflow).
+template <class T>
+void unit_point(T sn_scaled, T cn_scaled, T& sn, T& cn) {
+  using std::sqrt;
+  double largest = std::fmax(std::fabs(static_cast<double>(value(sn_scaled))),
+                             std::fabs(static_cast<double>(value(cn_scaled))));
+  int exponent = 0;
+  if (largest > 0) std::frexp(largest, &exponent);
+  const double scale = std::ldexp(1.0, 1 - exponent);  // exact
+  sn_scaled = sn_scaled * scale;
+  cn_scaled = cn_scaled * scale;
+  T norm = sqrt(sn_scaled * sn_scaled + cn_scaled * cn_scaled);
+  sn = sn_scaled / norm;
+  cn = cn_scaled / norm;
+}
+
+template <class T>
+void working_motion(const T* in, int regime, bool attitude, T* out) {
+  using std::asinh;
+  using std::atan;
+  using std::atan2;
+  using std::cos;
+  using std::exp;
+  using std::fabs;
+  using std::sin;
+  using std::sqrt;
+  using std::tanh;
+  const T &j1 = in[0], &j2 = in[1], &j3 = in[2], &l1 = in[3], &l2 = in[4], &l3 = in[5], &tau = in[6];
+  const bool minor = regime == kMinor;
+  for (int k = 0; k < kMotionOutputs; ++k) out[k] = T(0.0);
+  out[3] = out[7] = T(1.0);
+  if (regime == kUniform || regime < 0 || regime > kUniform) {
+    out[0] = l1;
+    out[1] = l2;
+    out[2] = l3;
+    return;
+  }
+  const T a = j2 - j1, b = j3 - j2, c = j3 - j1;
+  T k1, k2, k3, psi;
+  if (regime == kSeparatrix) {
+    // L = (A1 sech, tanh, A3 sech)(u), psi = tau/J2 + 2 atan(delta tanh(u/2)) (docs/theory.md §5);
+    // sinh(u0) = l2 A1/l1 keeps its digits next to the saddle (l2 -> 1).
+    const T amplitude_1 = sqrt(j1 * b / (j2 * c)), amplitude_3 = sqrt(j3 * a / (j2 * c));
+    const T rate = sqrt(a * b / (j1 * j3)) / j2;
+    const T delta = sqrt(j3 * a) / (sqrt(j2 * c) + sqrt(j1 * b));
+    const T u0 = asinh(l2 * amplitude_1 / l1);
+    const T u = u0 + rate * tau;
+    const T decay = exp(-fabs(u));
+    const T sech = 2.0 * decay / (1.0 + decay * decay);
+    k1 = amplitude_1 * sech;
+    k2 = tanh(u);
+    k3 = amplitude_3 * sech;
+    psi = tau / j2 + 2.0 * (atan(delta * tanh(u / 2.0)) - atan(delta * tanh(u0 / 2.0)));
+  } else {
+    // One set of formulas for both regimes with the roles of the axes exchanged (`orbit_constants`):
+    // the pivot axis p (J1; J3 in the minor regime) carries the chart, o (J3; J1) is the other extreme.
+    const T g1 = l2 * l2 * a / j2 + l3 * l3 * c / j3;
+    const T g3 = l1 * l1 * c / j1 + l2 * l2 * b / j2;
+    const T g2 = l1 * l1 * a / j1 - l3 * l3 * b / j3;
+    const T &j_pivot = minor ? j3 : j1, &j_other = minor ? j1 : j3;
+    const T &g_pivot = minor ? g3 : g1, &g_other = minor ? g1 : g3;
+    const T &gap_pivot = minor ? a : b, &gap_other = minor ? b : a;
+    const T amplitude_pivot = sqrt(j_pivot * g_other / c);
+    const T amplitude_middle = sqrt(j2 * g_other / gap_pivot);
+    const T amplitude_other = sqrt(j_other * g_pivot / c);
+    const T rate = sqrt(g_pivot * gap_pivot / (j1 * j2 * j3));
+    const T m = g_other * gap_other / (g_pivot * gap_pivot);
+    const T mc = c * fabs(g2) / (g_pivot * gap_pivot);
+    const T alpha = c / sqrt(j1 * g_pivot * gap_pivot * j3 / j2);
+    const T nu = -j_pivot * g_other / (j_other * g_pivot);
+    // alpha Pi = alpha u + alpha (Pi - F) for nu >= -1: alpha B = 1/J1 - 1/J3 turns the precession
+    // rate 1/J_p into 1/J_o (`orbit_constants`).
+    const bool without_first_kind = value(nu) >= -1;
+    const T precession = 1.0 / (without_first_kind ? j_other : j_pivot);
+    const T &l_pivot = minor ? l3 : l1;
+    T sn0, cn0;
+    unit_point(l2 * amplitude_pivot, l_pivot * amplitude_middle, sn0, cn0);
+    const T dn0 = sqrt(cn0 * cn0 + mc * (sn0 * sn0));
+    const T v = rate * tau;
+    const JacobiTriple<T> at_v = jacobi_triple(v, m, mc);
+    const T &sn_v = at_v.sn, &cn_v = at_v.cn, &dn_v = at_v.dn;
+    // DLMF 22.8.1-22.8.3 at u0 + v as increments over (sn0, cn0, dn0) for short steps (the given l
+    // exactly at tau = 0, no bias over many short steps), the normalised direct form elsewhere
+    // (`evaluate_once`, where the identities are written out).
+    const T sn_v_squared = sn_v * sn_v;
+    const T one_minus_cn = value(cn_v) > 0 ? sn_v_squared / (1.0 + cn_v) : 1.0 - cn_v;
+    const T one_minus_dn = m * sn_v_squared / (1.0 + dn_v);
+    const T one_minus_dn_squared = one_minus_dn * (1.0 + dn_v);
+    const T one_minus_cn_dn = one_minus_cn + cn_v * one_minus_dn;
+    const T sn0_squared = sn0 * sn0;
+    const T denominator = cn0 * cn0 + sn0_squared * (dn_v * dn_v);
+    const bool incremental = value(denominator) >= 0.25 && value(sn_v_squared) <= 0.25;
+    T sn_w, cn_w, sn_change(0.0), cn_change(0.0);
+    if (incremental) {
+      sn_change = (cn0 * dn0 * sn_v - sn0 * (one_minus_cn_dn - sn0_squared * one_minus_dn_squared)) / denominator;
+      cn_change = (-cn0 * (one_minus_cn - sn0_squared * one_minus_dn_squared) - sn0 * dn0 * sn_v * dn_v) / denominator;
+      sn_w = sn0 + sn_change;
+      cn_w = cn0 + cn_change;
+    } else {
+      const T sn_direct = (sn0 * cn_v * dn_v + sn_v * cn0 * dn0) / denominator;
+      const T cn_direct = (cn0 * cn_v - sn0 * dn0 * sn_v * dn_v) / denominator;
+      const T norm = sqrt(sn_direct * sn_direct + cn_direct * cn_direct);
+      sn_w = sn_direct / norm;
+      cn_w = cn_direct / norm;
+    }
+    const T dn_w = sqrt(cn_w * cn_w + mc * (sn_w * sn_w));
+    const T &amplitude_1 = minor ? amplitude_other : amplitude_pivot;
+    const T &amplitude_3 = minor ? amplitude_pivot : amplitude_other;
+    if (incremental) {
+      // dn_w - dn0 with the rounding of sn_change scaled by mc (precision next to the saddle).
+      const T dn_change = (cn_change * (cn_w + cn0) + mc * sn_change * (sn_w + sn0)) / (dn_w + dn0);
+      k1 = l1 + amplitude_1 * (minor ? dn_change : cn_change);
+      k2 = l2 + amplitude_middle * sn_change;
+      k3 = l3 + amplitude_3 * (minor ? cn_change : dn_change);
+    } else {
+      k1 = amplitude_1 * (minor ? dn_w : cn_w);
+      k2 = amplitude_middle * sn_w;
+      k3 = amplitude_3 * (minor ? cn_w : dn_w);
+    }
+    if (attitude) {
+      // f(u0 + v) - f(u0) = f(v) - G(u0, v), f(v) = 2j Pi(nu|m) + f(v_r) (DLMF 19.2.10); F is additive,
+      // so the same G serves Pi - F.
+      const double parity = std::fmod(std::fabs(at_v.turns), 2.0) == 1 ? -1.0 : 1.0;
+      T third_kind_change = pi_without_first_kind<T>(nu, parity * sn_v, parity * cn_v, m, mc);
+      if (at_v.turns != 0) third_kind_change = third_kind_change + 2.0 * at_v.turns * complete_third_kind<T>(nu, m, mc);
+      const T minus_nu = -nu;
+      const T addition_scale = sqrt(minus_nu * (m + minus_nu) * (1.0 + minus_nu));
+      const T addition_amplitude = sqrt(minus_nu) / sqrt((1.0 + minus_nu) * (m + minus_nu));
+      const T addition = addition_amplitude * atan2(addition_scale * sn0 * sn_v * sn_w,
+                                                    1.0 + minus_nu * (sn_w * sn_w) - minus_nu * sn0 * sn_v * cn_w * dn_w);
+      third_kind_change = third_kind_change - addition;
+      // atan2(L2, L_o)(tau) - atan2(L2, L_o)(0) as one arctangent (L_o = L3, or L1 in the minor
+      // regime, is A_o dn > 0 at both times).
+      const T &partner = minor ? k1 : k3, &partner_start = minor ? l1 : l3;
+      const T angle_change = atan2(k2 * partner_start - partner * l2, partner * partner_start + k2 * l2);
+      psi = precession * tau + (minor ? -1.0 : 1.0) * (angle_change - alpha * third_kind_change);
+    }
+  }
+  out[0] = k1;
+  out[1] = k2;
+  out[2] = k3;
+  if (!attitude) return;
+  chart<T>(T(1.0), T(0.0), l1, l2, l3, minor, out + 3);
+  const T half_psi = psi / 2.0;
+  chart<T>(cos(half_psi), sin(half_psi), k1, k2, k3, minor, out + 7);
+}
+
+}  // namespace frbjax

@@ -1,0 +1,100 @@
+"""The working-frame motion at one time per point as one compiled CPU kernel (``csrc/motion.hpp``).
+
+The compiled form of ``_regimes.orbit_constants`` followed by ``_regimes.evaluate_once``: the same
+formulas (docs/theory.md §4, §5, §11), per point in C++ with early exits instead of elementwise
+selections, so that XLA compiles one custom call instead of the regimes' hundreds of fused loops.
+
+Derivatives: the kernel also evaluates the motion on dual numbers, which gives the partial
+derivatives of its 11 outputs in its 7 inputs (J1, J2, J3, l1, l2, l3, tau; order 1) and their second
+ones (order 2) from the same code: those of the formula taken, as the JAX path's automatic
+derivatives are.  The JVP rules are linear in the tangents (reverse mode transposes a product);
+second derivatives come from the rule of the order-1 kernel, third ones are not provided.  The
+derivative conventions of the motion at its degenerate points (uniform rotation, the regular
+precession of symmetric bodies) are applied around this function, in JAX, as on the JAX path.
+"""
+
+from __future__ import annotations
+
+import jax
+import jax.numpy as jnp
+
+from .special import _compiled
+
+
+_INPUTS = 7
+_ALL_OUTPUTS = 11  # L (3), q̂(0) (4), q̂(tau) (4)
+
+
+def _width(order):
+    return (1, 1 + _INPUTS, 1 + _INPUTS + _INPUTS * _INPUTS)[order]
+
+
+def _call(order, attitude, columns, regime):
+    """The kernel on broadcast columns (7 arrays of one shape) and the regime: (..., outputs, width)."""
+    outputs = _ALL_OUTPUTS if attitude else 3
+    shape = columns[0].shape
+    result = jax.ShapeDtypeStruct(shape + (outputs * _width(order),), columns[0].dtype)
+    name = f"frbjax_{'motion' if attitude else 'momentum'}_{order}"
+    out = jax.ffi.ffi_call(name, result, vmap_method="broadcast_all")(*columns, regime)
+    return out.reshape(shape + (outputs, _width(order)))
+
+
+def _direction(columns, tangents):
+    return jnp.stack([jnp.broadcast_to(t, c.shape) for c, t in zip(columns, tangents)], axis=-1)
+
+
+def _kernel(attitude):
+    @jax.custom_jvp
+    def with_jacobian(*arguments):
+        *columns, regime = arguments
+        out = _call(1, attitude, columns, regime)
+        return out[..., 0], out[..., 1:]
+
+    @with_jacobian.defjvp
+    def with_jacobian_jvp(primals, tangents):
+        *columns, regime = primals
+        out = _call(2, attitude, columns, regime)
+        value, jacobian = out[..., 0], out[..., 1 : 1 + _INPUTS]
+        second = out[..., 1 + _INPUTS :].reshape(out.shape[:-1] + (_INPUTS, _INPUTS))
+        direction = _direction(columns, tangents[:_INPUTS])
+        return (value, jacobian), (
+            jnp.sum(jacobian * direction[..., None, :], axis=-1),
+            jnp.sum(second * direction[..., None, None, :], axis=-1),
+        )
+
+    @jax.custom_jvp
+    def motion(*arguments):
+        *columns, regime = arguments
+        return _call(0, attitude, columns, regime)[..., 0]
+
+    @motion.defjvp
+    def motion_jvp(primals, tangents):
+        value, jacobian = with_jacobian(*primals)
+        direction = _direction(primals[:_INPUTS], tangents[:_INPUTS])
+        return value, jnp.sum(jacobian * direction[..., None, :], axis=-1)
+
+    return motion
+
+
+_motion = _kernel(True)
+_momentum = _kernel(False)
+
+
+def working_motion(inertia, unit_momentum, regime, tau, attitude=True):
+    """(unit L(tau), q̂(0), q̂(tau)) in the working frame (``_regimes.evaluate_once``'s results), or
+    (unit L(tau), None, None) without ``attitude``; sorted ``inertia`` and ``unit_momentum`` (..., 3),
+    ``regime`` and ``tau`` (...) broadcast together."""
+    batch = jnp.broadcast_shapes(inertia.shape[:-1], unit_momentum.shape[:-1], jnp.shape(regime), jnp.shape(tau))
+    columns = [jnp.broadcast_to(inertia[..., k], batch) for k in range(3)]
+    columns += [jnp.broadcast_to(unit_momentum[..., k], batch) for k in range(3)]
+    columns.append(jnp.broadcast_to(jnp.asarray(tau, inertia.dtype), batch))
+    regime = jnp.broadcast_to(regime, batch).astype(jnp.int32)
+    if not attitude:
+        return _momentum(*columns, regime), None, None
+    out = _motion(*columns, regime)
+    return out[..., :3], out[..., 3:7], out[..., 7:]
+
+
+def selected(inertia) -> bool:
+    """Whether the compiled kernel evaluates the motion of bodies of ``inertia``'s dtype."""
+    return _compiled.selected(inertia)
