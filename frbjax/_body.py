@@ -207,31 +207,6 @@ def _prepare(inertia, angular_momentum, attitude, axes=None):
     return inertia, angular_momentum, attitude, valid, permutation, sorted_inertia, unit_working, norm, regime
 
 
-def _working_constants(sorted_inertia, unit_working, regime):
-    """(per-body data of the motion, q̂(0)): on the CPU the kernel's inputs themselves (the compiled
-    kernel evaluates the whole motion at each time, ``_compiled_motion``), elsewhere the constants
-    and theta series of ``_regimes.constants``."""
-    if _compiled_motion.selected(sorted_inertia):
-        consts = dict(inertia=sorted_inertia, unit_momentum=unit_working, regime=regime)
-        _, start, _ = _compiled_motion.working_motion(
-            sorted_inertia, unit_working, regime, jnp.zeros_like(regime, sorted_inertia.dtype)
-        )
-        return consts, start
-    consts = constants(sorted_inertia, unit_working, regime)
-    return consts, regime_reference(consts, unit_working)
-
-
-def _evaluate(consts, tau, attitude=True):
-    """``_regimes.evaluate`` of the data of ``_working_constants``: (q̂(tau), unit L(tau)), or
-    (unit L(tau), None) without ``attitude``."""
-    if "series" in consts:
-        return evaluate(consts, tau, attitude)
-    momentum, _, now = _compiled_motion.working_motion(
-        consts["inertia"], consts["unit_momentum"], consts["regime"], tau, attitude
-    )
-    return (now, momentum) if attitude else (momentum, None)
-
-
 @jax.jit
 def _construct(inertia, angular_momentum, attitude, axes=None):
     """The fields of a FreeRigidBody (see its docstring) from validated inputs, as one jitted program."""
@@ -239,11 +214,12 @@ def _construct(inertia, angular_momentum, attitude, axes=None):
         inertia, angular_momentum, attitude, axes
     )
     dtype = inertia.dtype
-    consts, reference = _working_constants(sorted_inertia, unit_working, regime)
+    consts = constants(sorted_inertia, unit_working, regime)
 
     # q(t) = q0 ⊗ P ⊗ conj(q̂(0)) ⊗ q̂(|L| t) ⊗ conj(P)  (docs/theory.md §8, "Matching the
     # initial state", with the phase folded into q̂; P is the working frame as a quaternion).
     frame_rotation = quaternion.from_matrix(permutation)
+    reference = regime_reference(consts, unit_working)
     offset = quaternion.multiply(quaternion.multiply(attitude, frame_rotation), quaternion.conjugate(reference))
     # p -> offset ⊗ p ⊗ conj(P) is linear in p: one 4 x 4 matrix per body, columns the images of
     # the unit quaternions, so that each evaluation costs 16 products instead of two Hamilton
@@ -293,8 +269,8 @@ def _uniform_attitude(uniform, inertia, axes, momentum, attitude, t, moving):
 
 
 def _working_motion_once(sorted_inertia, unit_working, regime, tau, with_attitude):
-    """(unit L(tau), q̂(0), q̂(tau)) in the working frame: the compiled kernel on the CPU
-    (``_compiled_motion``), the JAX formulas (``_regimes``) elsewhere."""
+    """(unit L(tau), q̂(0), q̂(tau)) in the working frame: the JAX formulas (``_regimes``), or the
+    compiled kernel (``_compiled_motion``) where it is selected (opt-in for now: see its docstring)."""
     if _compiled_motion.selected(sorted_inertia):
         return _compiled_motion.working_motion(sorted_inertia, unit_working, regime, tau, with_attitude)
     orbit = orbit_constants(sorted_inertia, unit_working, regime)
@@ -588,17 +564,17 @@ class FreeRigidBody(eqx.Module):
     @_precession_derivatives("momentum")
     def _angular_momentum(self, t):
         t, tau = self._time(t)
-        unit_working, _ = _evaluate(self._constants, tau, attitude=False)
+        unit_working, _ = evaluate(self._constants, tau, attitude=False)
         return self._momentum_from(t, unit_working)
 
     def _elliptic_quaternion(self, t):
         t, tau = self._time(t)
-        particular, _ = _evaluate(self._constants, tau)
+        particular, _ = evaluate(self._constants, tau)
         return self._attitude_from(t, tau, particular)
 
     def _elliptic_state(self, t):
         t, tau = self._time(t)
-        particular, unit_working = _evaluate(self._constants, tau)
+        particular, unit_working = evaluate(self._constants, tau)
         return self._momentum_from(t, unit_working), self._attitude_from(t, tau, particular)
 
     _quaternion = _precession_derivatives("attitude")(_elliptic_quaternion)

@@ -1,0 +1,150 @@
+"""The compiled kernel of the one-time motion (frbjax/_compiled_motion.py, csrc/motion.hpp) against the
+JAX formulas it replaces on the CPU (``_regimes.orbit_constants`` + ``evaluate_once``), in the working
+frame: values, Jacobians and Hessians, every regime, float64 and float32, odd shapes.
+
+Both paths evaluate the same formulas, so they agree to rounding times the conditioning of the motion
+in tau (errors grow like |tau|): measured over the bodies below (2026-11-28) at most 1.7e-16 (1 + |tau|)
+for the values, 4.2e-14 (1 + |tau|)(1 + |entry|) for the Jacobians' entries (next to the separatrix,
+where they grow like 1/mc; 6.4e-15 elsewhere), and 2e-13 relative for the Hessians; the tolerances
+hold those with a margin.  Accuracy against independent references (mpmath, diffrax, CALGO 903) is
+tested through ``free_flow`` by test_paths.py, test_body_mpmath.py, test_gradients_body.py and the
+others on the motion's default path; the kernel is selected with FRBJAX_MOTION_KERNEL=compiled
+(frbjax/_compiled_motion.py says why it is not the default yet).
+"""
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+from frbjax import _compiled_motion, _regimes
+from frbjax._body import working_frame
+
+
+VALUE_TOLERANCE = {np.float64: 4e-16, np.float32: 3e-7}  # times 1 + |tau|; measured 1.7e-16, see below
+JACOBIAN_TOLERANCE = 6e-14  # times (1 + |tau|)(1 + |entry|); measured 4.2e-14 (next to the separatrix)
+
+
+def _bodies(n, dtype=np.float64, seed=5):
+    """Sorted moments, unit working-frame L, regimes and times: random bodies with symmetric ones,
+    bodies on and next to the separatrix, axis spins and L = 0 among them."""
+    rng = np.random.default_rng(seed)
+    size = max(n, 48)
+    inertia = rng.uniform(0.3, 3.0, (size, 3))
+    momentum = rng.normal(size=(size, 3))
+    inertia[:24] = [1.0, 2.0, 3.0]
+    # On the separatrix of (1, 2, 3): l1^2 = (1/2 - 1/3)/(1 - 1/3) = 1/4 with l2 = 0, l3^2 = 3/4;
+    # then next to it on both sides.
+    momentum[:8] = [0.5, 0.0, np.sqrt(0.75)]
+    momentum[8:24] = [0.5, 0.0, np.sqrt(0.75)] + np.outer(
+        np.geomspace(1e-12, 1e-2, 16) * (-1) ** np.arange(16), [1, 0, 0]
+    )
+    inertia[24:32] = [1.0, 1.0, 2.0]
+    inertia[32:40] = [1.0, 2.0, 2.0]
+    momentum[40:44] = [[0, 0, 1.0], [1.0, 0, 0], [0, 1.0, 0], [0, 0, 0]]
+    _, sorted_inertia, working = working_frame(jnp.asarray(inertia), jnp.asarray(momentum))
+    norm = jnp.linalg.norm(working, axis=-1)
+    unit = working / jnp.where(norm > 0, norm, 1)[:, None]
+    regime = _regimes.classify(sorted_inertia, unit, norm)
+    tau = 10.0 ** rng.uniform(-3, 3, size) * rng.choice([-1.0, 1.0], size)
+    tau[:8] = np.linspace(-30, 30, 8)
+    order = np.r_[np.arange(40, size), np.arange(40)][:n] if n < size else np.arange(n)
+    return sorted_inertia[order].astype(dtype), unit[order].astype(dtype), regime[order], jnp.asarray(tau[order], dtype)
+
+
+def _jax_path(inertia, unit_momentum, regime, tau):
+    return _regimes.evaluate_once(_regimes.orbit_constants(inertia, unit_momentum, regime), unit_momentum, tau)
+
+
+@pytest.mark.parametrize("dtype", [np.float64, np.float32])
+def test_the_values_agree_in_every_regime(dtype):
+    inertia, unit, regime, tau = _bodies(512, dtype)
+    regimes = np.asarray(regime)
+    assert set(np.unique(regimes)) == {0, 1, 2, 3}
+    compiled = _compiled_motion.working_motion(inertia, unit, regime, tau)
+    reference = _jax_path(inertia, unit, regime, tau)
+    moving = regimes != _regimes.UNIFORM
+    scale = 1 + np.abs(np.asarray(tau, np.float64))[moving]
+    for ours, theirs in zip(compiled, reference):
+        assert ours.dtype == dtype
+        error = np.abs(np.asarray(ours, np.float64) - np.asarray(theirs, np.float64)).max(-1)[moving]
+        assert error.max() <= VALUE_TOLERANCE[dtype] * scale.max() and (error / scale).max() <= VALUE_TOLERANCE[dtype]
+    # A uniform rotation's L is the given one (its motion is formed in JAX around the kernel).
+    np.testing.assert_array_equal(np.asarray(compiled[0])[~moving], np.asarray(unit)[~moving])
+
+
+def _diagonal_jacobians(path, inertia, unit, regime, tau):
+    """Per point, the Jacobian of its 11 outputs in its own 7 inputs (vmap of jacfwd)."""
+
+    def one(point, regime):
+        return jnp.concatenate(path(point[:3], point[3:6], regime, point[6]), -1)
+
+    points = jnp.concatenate([inertia, unit, tau[:, None]], -1)
+    return np.asarray(jax.vmap(jax.jacfwd(one))(points, regime))
+
+
+@pytest.mark.parametrize("mode", ["forward", "reverse"])
+def test_the_jacobians_agree(mode):
+    inertia, unit, regime, tau = _bodies(48)
+    # Symmetric bodies next to the plane of their equal moments take the derivatives of the regular
+    # precession (frbjax/_precession.py): there both paths' own derivatives lose 1e-16 / l_odd^2.
+    j, l = np.asarray(inertia), np.asarray(unit)
+    odd = np.where(j[:, 0] == j[:, 1], l[:, 2], np.where(j[:, 1] == j[:, 2], l[:, 0], 1.0))
+    moving = (np.asarray(regime) != _regimes.UNIFORM) & (np.abs(odd) >= 1 / 8)
+    reference = _diagonal_jacobians(_jax_path, inertia, unit, regime, tau)
+    if mode == "forward":
+        compiled = _diagonal_jacobians(_compiled_motion.working_motion, inertia, unit, regime, tau)
+    else:
+
+        def one(point, regime):
+            return jnp.concatenate(_compiled_motion.working_motion(point[:3], point[3:6], regime, point[6]), -1)
+
+        points = jnp.concatenate([inertia, unit, tau[:, None]], -1)
+        compiled = np.asarray(jax.vmap(jax.jacrev(one))(points, regime))
+    assert np.isfinite(compiled).all()
+    scale = (1 + np.abs(np.asarray(tau)))[:, None, None] * (1 + np.abs(reference))
+    assert (np.abs(compiled - reference) / scale)[moving].max() <= JACOBIAN_TOLERANCE
+
+
+@pytest.mark.parametrize("index", [0, 30, 50])
+def test_the_hessians_agree(index):
+    """Second derivatives (the order-2 kernel) on the separatrix, a symmetric body and random bodies."""
+    inertia, unit, regime, tau = _bodies(64)
+    point = jnp.concatenate([inertia[index], unit[index], tau[index : index + 1]])
+    this_regime = regime[index]
+
+    def psi_carrying_output(path):
+        return lambda x: path(x[:3], x[3:6], this_regime, x[6])[2][1]
+
+    compiled = np.asarray(jax.hessian(psi_carrying_output(_compiled_motion.working_motion))(point))
+    reference = np.asarray(jax.hessian(psi_carrying_output(_jax_path))(point))
+    assert np.isfinite(compiled).all()
+    np.testing.assert_allclose(compiled, reference, rtol=0, atol=1e-12 * (1 + np.abs(reference).max()))
+
+
+def test_odd_shapes():
+    """Zero-size batches, broadcast and non-contiguous inputs, vmap: the kernel reads its buffers only."""
+    inertia, unit, regime, tau = _bodies(12)
+    empty = _compiled_motion.working_motion(inertia[:0], unit[:0], regime[:0], tau[:0])
+    assert [a.shape for a in empty] == [(0, 3), (0, 4), (0, 4)]
+    whole = _compiled_motion.working_motion(inertia, unit, regime, tau)
+    # Every other body, from strided views; one time for all of them.
+    strided = _compiled_motion.working_motion(inertia[::2], unit[::2], regime[::2], tau[::2])
+    for a, b in zip(strided, whole):
+        np.testing.assert_array_equal(np.asarray(a), np.asarray(b)[::2])
+    grid = _compiled_motion.working_motion(inertia[:, None], unit[:, None], regime[:, None], jnp.array([0.5, 2.0]))
+    assert grid[2].shape == (12, 2, 4)
+    mapped = jax.vmap(lambda t: _compiled_motion.working_motion(inertia, unit, regime, t)[2])(jnp.array([0.5, 2.0]))
+    np.testing.assert_array_equal(np.asarray(mapped), np.swapaxes(np.asarray(grid[2]), 0, 1))
+    momentum, none, _ = _compiled_motion.working_motion(inertia, unit, regime, tau, attitude=False)
+    assert none is None
+    np.testing.assert_array_equal(np.asarray(momentum), np.asarray(whole[0]))
+
+
+def test_nan_inputs_give_nan():
+    inertia, unit, regime, tau = _bodies(4)
+    out = _compiled_motion.working_motion(inertia, unit.at[1].set(jnp.nan), regime, tau.at[2].set(jnp.nan))
+    moving = np.asarray(regime) != _regimes.UNIFORM
+    for a in out[0], out[2]:
+        assert np.isnan(np.asarray(a)[1:3][moving[1:3]]).any(-1).all()
+        assert np.isfinite(np.asarray(a)[[0, 3]]).all()
