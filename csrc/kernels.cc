@@ -154,18 +154,28 @@ void evaluate(std::size_t count, const R* const* inputs, R* output) {
   }
 }
 
+// The first `k` arguments' data, each checked to have the result's dtype and `count` elements (a
+// kernel reads exactly that many from each).
+template <class R>
+ffi::Error gather(ffi::RemainingArgs& arguments, int k, std::size_t count, ffi::DataType dtype, const char* name,
+                  const R** inputs) {
+  for (int j = 0; j < k; ++j) {
+    auto buffer = arguments.get<ffi::AnyBuffer>(j);
+    if (!buffer.has_value()) return buffer.error();
+    if (buffer->element_type() != dtype || buffer->element_count() != count)
+      return ffi::Error::InvalidArgument(std::string(name) + ": the arguments must have the result's dtype and size");
+    inputs[j] = static_cast<const R*>(buffer->untyped_data());
+  }
+  return ffi::Error::Success();
+}
+
 template <class F, int Order, class R>
 ffi::Error run(ffi::RemainingArgs arguments, ffi::AnyBuffer& result) {
   constexpr int K = F::arity;
   const R* inputs[K];
   std::size_t count = result.element_count() / width(K, Order);
-  for (int j = 0; j < K; ++j) {
-    auto buffer = arguments.get<ffi::AnyBuffer>(j);
-    if (!buffer.has_value()) return buffer.error();
-    if (buffer->element_type() != result.element_type() || buffer->element_count() != count)
-      return ffi::Error::InvalidArgument(std::string(F::name) + ": the arguments must have the result's dtype and size");
-    inputs[j] = static_cast<const R*>(buffer->untyped_data());
-  }
+  ffi::Error checked = gather<R>(arguments, K, count, result.element_type(), F::name, inputs);
+  if (checked.failure()) return checked;
   evaluate<F, Order, R>(count, inputs, static_cast<R*>(result.untyped_data()));
   return ffi::Error::Success();
 }
@@ -190,13 +200,8 @@ template <class R>
 ffi::Error run_ellipj(ffi::RemainingArgs arguments, ffi::AnyBuffer& result) {
   const R* inputs[3];
   std::size_t count = result.element_count() / 4;
-  for (int j = 0; j < 3; ++j) {
-    auto buffer = arguments.get<ffi::AnyBuffer>(j);
-    if (!buffer.has_value()) return buffer.error();
-    if (buffer->element_type() != result.element_type() || buffer->element_count() != count)
-      return ffi::Error::InvalidArgument("ellipj: the arguments must have the result's dtype and size");
-    inputs[j] = static_cast<const R*>(buffer->untyped_data());
-  }
+  ffi::Error checked = gather<R>(arguments, 3, count, result.element_type(), "ellipj", inputs);
+  if (checked.failure()) return checked;
   R* out = static_cast<R*>(result.untyped_data());
   for (std::size_t i = 0; i < count; ++i) {
     JacobiValues<R> values = ellipj(inputs[0][i], inputs[1][i], inputs[2][i]);
@@ -250,13 +255,8 @@ ffi::Error run_motion(ffi::RemainingArgs arguments, ffi::AnyBuffer& result) {
   constexpr int W = width(K, Order);
   const R* inputs[K];
   std::size_t count = result.element_count() / (outputs * W);
-  for (int j = 0; j < K; ++j) {
-    auto buffer = arguments.get<ffi::AnyBuffer>(j);
-    if (!buffer.has_value()) return buffer.error();
-    if (buffer->element_type() != result.element_type() || buffer->element_count() != count)
-      return ffi::Error::InvalidArgument("motion: the arguments must have the result's dtype and size");
-    inputs[j] = static_cast<const R*>(buffer->untyped_data());
-  }
+  ffi::Error checked = gather<R>(arguments, K, count, result.element_type(), "motion", inputs);
+  if (checked.failure()) return checked;
   auto regimes = arguments.get<ffi::AnyBuffer>(K);
   if (!regimes.has_value()) return regimes.error();
   if (regimes->element_type() != ffi::DataType::S32 || regimes->element_count() != count)
