@@ -50,10 +50,48 @@ T pi_without_first_kind(const T& n, const T& s, const T& c, const T& m, const T&
   return atan2(sqrt(kappa) * s, c * sqrt(delta_squared)) * sqrt(kappa) / kappa - tail;
 }
 
-// The same over a half period (s = 1, c = 0): Pi(n|m) - K(m) or Pi(n|m).
+// R_J(0, mc, 1, p) for 0 < mc <= 1, p > 0.  Values: 3 cel(sqrt(mc), p, 0, 1) (DLMF 19.2.11, 19.25.2) by
+// Bulirsch's iteration (R. Bulirsch, Numer. Math. 13 (1969) 305-315; the JAX path's `rj_complete`),
+// a square root and a quotient per step, stopped where the quadratic convergence has reached the
+// dtype's rounding (the relative gap of the means below its square root).  Dual numbers: R_J's
+// duplication, whose derivatives converge to the function's.
+template <class T>
+T rj_complete(const T& mc, const T& p) {
+  if constexpr (is_dual<T>::value) {
+    return elliprj<T>(T(0.0), mc, T(1.0), p);
+  } else {
+    using std::fabs;
+    using std::sqrt;
+    const T tolerance = sizeof(T) == 8 ? T(1.0 / 134217728) : T(1.0 / 8192);  // 2^-27, 2^-13
+    T kc = sqrt(mc), e = kc, mean = 1, root_p = sqrt(p);
+    T a = 0, b = 1 / root_p;
+    for (int step = 0; step < 40; ++step) {
+      T f = a;
+      a = a + b / root_p;
+      T g = e / root_p;
+      b = 2 * (b + f * g);
+      root_p = g + root_p;
+      g = mean;
+      mean = mean + kc;
+      if (fabs(g - kc) <= g * tolerance) break;
+      kc = 2 * sqrt(e);
+      e = kc * mean;
+    }
+    return T(3 * 1.5707963267948966) * (b + a * mean) / (mean * (mean + root_p));
+  }
+}
+
+// The same over a half period (s = 1, c = 0): Pi(n|m) - K(m) or Pi(n|m), with the complete R_J
+// (DLMF 19.7.8 and 19.25.14 at phi = pi/2).
 template <class T>
 T complete_third_kind(const T& n, const T& m, const T& mc) {
-  return pi_without_first_kind<T>(n, T(1.0), T(0.0), m, mc);
+  using std::sqrt;
+  const bool transformed = value(n) < -1 && value(m) > value(n);
+  const T characteristic = transformed ? m / n : n;
+  const T tail = characteristic * rj_complete<T>(mc, 1.0 - characteristic) / 3.0;
+  if (!transformed) return tail;
+  const T kappa = (1.0 - n) * (1.0 - characteristic);
+  return T(1.5707963267948966) * sqrt(kappa) / kappa - tail;
 }
 
 // q̂ = exp(psi/2 about the spatial axis) ⊗ (the rotation taking that axis to l), docs/theory.md §5:
