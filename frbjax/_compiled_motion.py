@@ -104,7 +104,7 @@ def selected(inertia) -> bool:
     """Whether the compiled kernel evaluates the one-time motion of bodies of ``inertia``'s dtype.
 
     Opt-in for now (``FRBJAX_MOTION_KERNEL=compiled``, with the special functions' kernels selected):
-    the kernel agrees with the JAX formulas evaluated op by op to the bit, but XLA compiles those with
+    the kernel agrees with the JAX formulas evaluated op by op to an ulp or two, but XLA compiles those with
     fused multiply-adds, and over long times (|L| t = 100, a reversed evolution) they came back 18x
     closer than the kernel built for the baseline instruction set (3.3 eps |L| t against 1.4, over the
     3.0 that tests/test_body_invariants.py allows); built with FMA the kernel matches that, but loses
