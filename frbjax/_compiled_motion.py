@@ -104,11 +104,11 @@ def selected(inertia) -> bool:
     """Whether the compiled kernel evaluates the one-time motion of bodies of ``inertia``'s dtype.
 
     Opt-in for now (``FRBJAX_MOTION_KERNEL=compiled``, with the special functions' kernels selected):
-    the kernel agrees with the JAX formulas evaluated op by op to an ulp or two, but XLA compiles those with
-    fused multiply-adds, and over long times (|L| t = 100, a reversed evolution) they came back 18x
-    closer than the kernel built for the baseline instruction set (3.3 eps |L| t against 1.4, over the
-    3.0 that tests/test_body_invariants.py allows); built with FMA the kernel matches that, but loses
-    a few tenths of an ulp on |L| and the spatial momentum at shorter times.  Until both hold, the
+    the kernel agrees with the JAX formulas evaluated op by op to an ulp or two, but XLA compiles
+    those with fused multiply-adds, and on the long-time reversal test (tests/test_body_invariants.py,
+    |L| t = 100 and back) the kernel's worst error is 3.3 eps |L| t where the JAX path's is 1.4 and the
+    test allows 3.0.  Built with FMA everywhere (-march=native) the kernel passes that test but loses a
+    few tenths of an ulp on |L| and the spatial momentum at shorter times.  Until both hold, the
     default stays the JAX formulas.
     """
     return os.environ.get(_SWITCH, "jax") == "compiled" and _compiled.selected(inertia)
