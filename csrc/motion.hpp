@@ -132,9 +132,71 @@ void unit_point(T sn_scaled, T cn_scaled, T& sn, T& cn) {
   cn = cn_scaled / norm;
 }
 
+// The per-body constants of the elliptic regimes (docs/theory.md §4; `_regimes.orbit_constants`): one
+// set of formulas for both, with the roles of the axes exchanged.  The pivot axis p (J1; J3 in the minor
+// regime) carries the chart, o (J3; J1) is the other extreme; g_p, g_o their energy gaps (computed
+// without cancellation, docs/theory.md §3).  The amplitudes are those of L's components (major:
+// (A1 cn, A2 sn, A3 dn), minor: (A1 dn, A2 sn, A3 cn)); (sn0, cn0) the point of the phase, from the
+// ratios of the given components.
+template <class T>
+struct EllipticOrbit {
+  T amplitude[3], rate, m, mc, alpha, nu, precession, sn0, cn0;
+};
+
+template <class T>
+EllipticOrbit<T> elliptic_orbit(const T* in, bool minor) {
+  using std::fabs;
+  using std::sqrt;
+  const T &j1 = in[0], &j2 = in[1], &j3 = in[2], &l1 = in[3], &l2 = in[4], &l3 = in[5];
+  const T a = j2 - j1, b = j3 - j2, c = j3 - j1;
+  const T g1 = l2 * l2 * a / j2 + l3 * l3 * c / j3;
+  const T g3 = l1 * l1 * c / j1 + l2 * l2 * b / j2;
+  const T g2 = l1 * l1 * a / j1 - l3 * l3 * b / j3;
+  const T &j_pivot = minor ? j3 : j1, &j_other = minor ? j1 : j3;
+  const T &g_pivot = minor ? g3 : g1, &g_other = minor ? g1 : g3;
+  const T &gap_pivot = minor ? a : b, &gap_other = minor ? b : a;
+  EllipticOrbit<T> orbit;
+  const T amplitude_pivot = sqrt(j_pivot * g_other / c);
+  const T amplitude_other = sqrt(j_other * g_pivot / c);
+  orbit.amplitude[0] = minor ? amplitude_other : amplitude_pivot;
+  orbit.amplitude[1] = sqrt(j2 * g_other / gap_pivot);
+  orbit.amplitude[2] = minor ? amplitude_pivot : amplitude_other;
+  orbit.rate = sqrt(g_pivot * gap_pivot / (j1 * j2 * j3));
+  orbit.m = g_other * gap_other / (g_pivot * gap_pivot);
+  orbit.mc = c * fabs(g2) / (g_pivot * gap_pivot);
+  orbit.alpha = c / sqrt(j1 * g_pivot * gap_pivot * j3 / j2);
+  orbit.nu = -j_pivot * g_other / (j_other * g_pivot);
+  // alpha Pi = alpha u + alpha (Pi - F) for nu >= -1: alpha B = 1/J1 - 1/J3 turns the precession rate
+  // 1/J_p into 1/J_o (`orbit_constants`).
+  orbit.precession = 1.0 / (value(orbit.nu) >= -1 ? j_other : j_pivot);
+  unit_point(l2 * amplitude_pivot, (minor ? l3 : l1) * orbit.amplitude[1], orbit.sn0, orbit.cn0);
+  return orbit;
+}
+
+// The separatrix's constants (docs/theory.md §5): L = (A1 sech, tanh, A3 sech)(u), delta = alpha, and
+// the phase from sinh(u0) = l2 A1/l1, which keeps its digits next to the saddle (l2 -> 1).
+template <class T>
+struct SeparatrixOrbit {
+  T amplitude_1, amplitude_3, rate, delta, u0;
+};
+
+template <class T>
+SeparatrixOrbit<T> separatrix_orbit(const T* in) {
+  using std::asinh;
+  using std::sqrt;
+  const T &j1 = in[0], &j2 = in[1], &j3 = in[2], &l1 = in[3], &l2 = in[4];
+  const T a = j2 - j1, b = j3 - j2, c = j3 - j1;
+  SeparatrixOrbit<T> orbit;
+  orbit.amplitude_1 = sqrt(j1 * b / (j2 * c));
+  orbit.amplitude_3 = sqrt(j3 * a / (j2 * c));
+  orbit.rate = sqrt(a * b / (j1 * j3)) / j2;
+  orbit.delta = sqrt(j3 * a) / (sqrt(j2 * c) + sqrt(j1 * b));
+  orbit.u0 = asinh(l2 * orbit.amplitude_1 / l1);
+  return orbit;
+}
+
 template <class T>
 void working_motion(const T* in, int regime, bool attitude, T* out) {
-  using std::asinh;
   using std::atan;
   using std::atan2;
   using std::cos;
@@ -153,15 +215,12 @@ void working_motion(const T* in, int regime, bool attitude, T* out) {
     out[2] = l3;
     return;
   }
-  const T a = j2 - j1, b = j3 - j2, c = j3 - j1;
   T k1, k2, k3, psi;
   if (regime == kSeparatrix) {
-    // L = (A1 sech, tanh, A3 sech)(u), psi = tau/J2 + 2 atan(delta tanh(u/2)) (docs/theory.md §5);
-    // sinh(u0) = l2 A1/l1 keeps its digits next to the saddle (l2 -> 1).
-    const T amplitude_1 = sqrt(j1 * b / (j2 * c)), amplitude_3 = sqrt(j3 * a / (j2 * c));
-    const T rate = sqrt(a * b / (j1 * j3)) / j2;
-    const T delta = sqrt(j3 * a) / (sqrt(j2 * c) + sqrt(j1 * b));
-    const T u0 = asinh(l2 * amplitude_1 / l1);
+    // psi = tau/J2 + 2 atan(delta tanh(u/2)) (docs/theory.md §5).
+    const SeparatrixOrbit<T> orbit = separatrix_orbit(in);
+    const T &amplitude_1 = orbit.amplitude_1, &amplitude_3 = orbit.amplitude_3, &rate = orbit.rate;
+    const T &delta = orbit.delta, &u0 = orbit.u0;
     const T u = u0 + rate * tau;
     const T decay = exp(-fabs(u));
     const T sech = 2.0 * decay / (1.0 + decay * decay);
@@ -170,29 +229,10 @@ void working_motion(const T* in, int regime, bool attitude, T* out) {
     k3 = amplitude_3 * sech;
     psi = tau / j2 + 2.0 * (atan(delta * tanh(u / 2.0)) - atan(delta * tanh(u0 / 2.0)));
   } else {
-    // One set of formulas for both regimes with the roles of the axes exchanged (`orbit_constants`):
-    // the pivot axis p (J1; J3 in the minor regime) carries the chart, o (J3; J1) is the other extreme.
-    const T g1 = l2 * l2 * a / j2 + l3 * l3 * c / j3;
-    const T g3 = l1 * l1 * c / j1 + l2 * l2 * b / j2;
-    const T g2 = l1 * l1 * a / j1 - l3 * l3 * b / j3;
-    const T &j_pivot = minor ? j3 : j1, &j_other = minor ? j1 : j3;
-    const T &g_pivot = minor ? g3 : g1, &g_other = minor ? g1 : g3;
-    const T &gap_pivot = minor ? a : b, &gap_other = minor ? b : a;
-    const T amplitude_pivot = sqrt(j_pivot * g_other / c);
-    const T amplitude_middle = sqrt(j2 * g_other / gap_pivot);
-    const T amplitude_other = sqrt(j_other * g_pivot / c);
-    const T rate = sqrt(g_pivot * gap_pivot / (j1 * j2 * j3));
-    const T m = g_other * gap_other / (g_pivot * gap_pivot);
-    const T mc = c * fabs(g2) / (g_pivot * gap_pivot);
-    const T alpha = c / sqrt(j1 * g_pivot * gap_pivot * j3 / j2);
-    const T nu = -j_pivot * g_other / (j_other * g_pivot);
-    // alpha Pi = alpha u + alpha (Pi - F) for nu >= -1: alpha B = 1/J1 - 1/J3 turns the precession
-    // rate 1/J_p into 1/J_o (`orbit_constants`).
-    const bool without_first_kind = value(nu) >= -1;
-    const T precession = 1.0 / (without_first_kind ? j_other : j_pivot);
-    const T &l_pivot = minor ? l3 : l1;
-    T sn0, cn0;
-    unit_point(l2 * amplitude_pivot, l_pivot * amplitude_middle, sn0, cn0);
+    const EllipticOrbit<T> orbit = elliptic_orbit(in, minor);
+    const T &m = orbit.m, &mc = orbit.mc, &nu = orbit.nu, &sn0 = orbit.sn0, &cn0 = orbit.cn0;
+    const T &alpha = orbit.alpha, &precession = orbit.precession;
+    const T &amplitude_middle = orbit.amplitude[1], &rate = orbit.rate;
     const T dn0 = sqrt(cn0 * cn0 + mc * (sn0 * sn0));
     const T v = rate * tau;
     const JacobiTriple<T> at_v = jacobi_triple(v, m, mc);
@@ -222,8 +262,7 @@ void working_motion(const T* in, int regime, bool attitude, T* out) {
       cn_w = cn_direct / norm;
     }
     const T dn_w = sqrt(cn_w * cn_w + mc * (sn_w * sn_w));
-    const T &amplitude_1 = minor ? amplitude_other : amplitude_pivot;
-    const T &amplitude_3 = minor ? amplitude_pivot : amplitude_other;
+    const T &amplitude_1 = orbit.amplitude[0], &amplitude_3 = orbit.amplitude[2];
     if (incremental) {
       // dn_w - dn0 with the rounding of sn_change scaled by mc (precision next to the saddle).
       const T dn_change = (cn_change * (cn_w + cn0) + mc * sn_change * (sn_w + sn0)) / (dn_w + dn0);
