@@ -39,8 +39,9 @@ struct SeriesLayout {
     kComplementaryScale = 24,
     kComplementaryCnFactor = 25,
     kMinor = 26,
-    kReference = 27,  // 4: q̂(0)
-    kRows = 31,       // 4 x terms
+    kReference = 27,      // 4: q̂(0), psi counted from tau = 0
+    kPsiReference = 31,   // the series' psi at tau = 0
+    kRows = 32,           // 4 x terms
   };
   static constexpr int size = kRows + 4 * terms;
 };
@@ -283,11 +284,15 @@ void series_record(const R* given, int regime, R* record) {
     record[L::kThirdComplete] = complete;
     series_coefficients<R>(m, mc, orbit.nu, complete, record);
   }
-  // q̂(0): the chart at u0 on the given unit L itself (`_regimes.reference`).
+  // psi at u0 on the given unit L itself (`_regimes.reference`).  The charts count psi from tau = 0
+  // (psi - psi(0)), as the one-time motion's do: q = q0 ⊗ P ⊗ conj(q̂(0)) ⊗ q̂(tau) ⊗ conj(P) is the
+  // same (the rotation by psi(0) about the spatial axis cancels), and both kernels then compute one
+  // function, whose derivatives the one-time kernel gives.
   R sn_scaled, cn_scaled, real, imaginary;
   series_parts<R>(record, record[L::kU0], false, sn_scaled, cn_scaled, real, imaginary);
-  const R psi = bounded_angle<R>(record, in[3], in[4], in[5], reduced_third_kind<R>(record, record[L::kU0], real, imaginary));
-  chart<R>(std::cos(psi / 2), std::sin(psi / 2), in[3], in[4], in[5], minor, record + L::kReference);
+  record[L::kPsiReference] =
+      bounded_angle<R>(record, in[3], in[4], in[5], reduced_third_kind<R>(record, record[L::kU0], real, imaginary));
+  chart<R>(R(1), R(0), in[3], in[4], in[5], minor, record + L::kReference);
 }
 
 // Unit L (3) and q̂(tau) (4) in the working frame from a record (`_regimes.evaluate`).
@@ -311,7 +316,8 @@ void series_motion(const R* record, R tau, bool attitude, R* out) {
   out[2] = record[L::kAmplitude + 2] * (minor ? cn : dn);
   if (!attitude) return;
   const R third_kind = 2 * turns * record[L::kThirdComplete] + reduced_third_kind<R>(record, reduced, real, imaginary);
-  const R psi = record[L::kPrecession] * tau + bounded_angle<R>(record, out[0], out[1], out[2], third_kind);
+  const R psi = record[L::kPrecession] * tau +
+                (bounded_angle<R>(record, out[0], out[1], out[2], third_kind) - record[L::kPsiReference]);
   chart<R>(std::cos(psi / 2), std::sin(psi / 2), out[0], out[1], out[2], minor, out + 3);
 }
 
