@@ -19,6 +19,7 @@
 #include "carlson.hpp"
 #include "jacobi.hpp"
 #include "motion.hpp"
+#include "series.hpp"
 #include "xla/ffi/api/ffi.h"
 
 namespace ffi = xla::ffi;
@@ -330,6 +331,85 @@ FRBJAX_MOTION_HANDLER(Momentum, 0, false);
 FRBJAX_MOTION_HANDLER(Momentum, 1, false);
 FRBJAX_MOTION_HANDLER(Momentum, 2, false);
 
+// A body's series record (series.hpp): inputs J1, J2, J3, l1, l2, l3 and the regime (int32) of one
+// size; the result (..., SeriesLayout<R>::size).
+template <class R>
+ffi::Error run_series_record(ffi::RemainingArgs arguments, ffi::AnyBuffer& result) {
+  constexpr int size = SeriesLayout<R>::size;
+  const R* inputs[6];
+  std::size_t count = result.element_count() / size;
+  if (result.element_count() != count * size) return ffi::Error::InvalidArgument("series_record: wrong result size");
+  ffi::Error checked = gather<R>(arguments, 6, count, result.element_type(), "series_record", inputs);
+  if (checked.failure()) return checked;
+  auto regimes = arguments.get<ffi::AnyBuffer>(6);
+  if (!regimes.has_value()) return regimes.error();
+  if (regimes->element_type() != ffi::DataType::S32 || regimes->element_count() != count)
+    return ffi::Error::InvalidArgument("series_record: the regime must be int32 of the bodies' size");
+  const std::int32_t* regime = static_cast<const std::int32_t*>(regimes->untyped_data());
+  R* output = static_cast<R*>(result.untyped_data());
+  for (std::size_t i = 0; i < count; ++i) {
+    R in[6];
+    for (int j = 0; j < 6; ++j) in[j] = inputs[j][i];
+    series_record<R>(in, regime[i], output + i * size);
+  }
+  return ffi::Error::Success();
+}
+
+// The motion from records (..., size) and times (...) of one batch shape: (..., 7) or (..., 3).
+template <bool Attitude, class R>
+ffi::Error run_series_motion(ffi::RemainingArgs arguments, ffi::AnyBuffer& result) {
+  constexpr int size = SeriesLayout<R>::size;
+  constexpr int outputs = Attitude ? 7 : 3;
+  std::size_t count = result.element_count() / outputs;
+  auto records = arguments.get<ffi::AnyBuffer>(0);
+  auto times = arguments.get<ffi::AnyBuffer>(1);
+  if (!records.has_value()) return records.error();
+  if (!times.has_value()) return times.error();
+  if (records->element_type() != result.element_type() || times->element_type() != result.element_type() ||
+      records->element_count() != count * size || times->element_count() != count)
+    return ffi::Error::InvalidArgument("series_motion: records (..., size) and times (...) of the result's dtype");
+  const R* record = static_cast<const R*>(records->untyped_data());
+  const R* tau = static_cast<const R*>(times->untyped_data());
+  R* output = static_cast<R*>(result.untyped_data());
+  for (std::size_t i = 0; i < count; ++i) {
+    R out[7];
+    series_motion<R>(record + i * size, tau[i], Attitude, out);
+    for (int o = 0; o < outputs; ++o) output[i * outputs + o] = out[o];
+  }
+  return ffi::Error::Success();
+}
+
+ffi::Error series_record_values(ffi::RemainingArgs arguments, ffi::Result<ffi::AnyBuffer> result) {
+  if (arguments.size() != 7) return ffi::Error::InvalidArgument("series_record: wrong number of arguments");
+  switch (result->element_type()) {
+    case ffi::DataType::F64:
+      return run_series_record<double>(arguments, *result);
+    case ffi::DataType::F32:
+      return run_series_record<float>(arguments, *result);
+    default:
+      return ffi::Error::InvalidArgument("series_record: float32 or float64 only");
+  }
+}
+
+template <bool Attitude>
+ffi::Error series_motion_values(ffi::RemainingArgs arguments, ffi::Result<ffi::AnyBuffer> result) {
+  if (arguments.size() != 2) return ffi::Error::InvalidArgument("series_motion: wrong number of arguments");
+  switch (result->element_type()) {
+    case ffi::DataType::F64:
+      return run_series_motion<Attitude, double>(arguments, *result);
+    case ffi::DataType::F32:
+      return run_series_motion<Attitude, float>(arguments, *result);
+    default:
+      return ffi::Error::InvalidArgument("series_motion: float32 or float64 only");
+  }
+}
+
+XLA_FFI_DEFINE_HANDLER(SeriesRecord, series_record_values, ffi::Ffi::Bind().RemainingArgs().Ret<ffi::AnyBuffer>());
+XLA_FFI_DEFINE_HANDLER(SeriesMotion, series_motion_values<true>,
+                       ffi::Ffi::Bind().RemainingArgs().Ret<ffi::AnyBuffer>());
+XLA_FFI_DEFINE_HANDLER(SeriesMomentum, series_motion_values<false>,
+                       ffi::Ffi::Bind().RemainingArgs().Ret<ffi::AnyBuffer>());
+
 struct Entry {
   const char* name;
   XLA_FFI_Handler* handler;
@@ -342,6 +422,8 @@ const Entry kHandlers[] = {
     {"frbjax_elliprc_0", Rc_0}, {"frbjax_elliprc_1", Rc_1}, {"frbjax_elliprc_2", Rc_2},
     {"frbjax_ellipj_0", Ellipj_0},
     {"frbjax_motion_0", Motion_0},     {"frbjax_motion_1", Motion_1},     {"frbjax_motion_2", Motion_2},
+    {"frbjax_series_record", SeriesRecord}, {"frbjax_series_motion", SeriesMotion},
+    {"frbjax_series_momentum", SeriesMomentum},
     {"frbjax_momentum_0", Momentum_0}, {"frbjax_momentum_1", Momentum_1}, {"frbjax_momentum_2", Momentum_2},
 };
 

@@ -1,4 +1,4 @@
-// The theta series of a body's motion (work in progress, values only): the compiled form of
+// The theta series of a body's motion (values; the derivatives are the one-time kernel's): the compiled form of
 // frbjax/_regimes.py's `constants`, `reference` and `evaluate` with frbjax/_series.py's `coefficients`
 // and `evaluate_series` (docs/theory.md §5, §9; the module note of _series.py derives every form).
 //

@@ -207,6 +207,30 @@ def _prepare(inertia, angular_momentum, attitude, axes=None):
     return inertia, angular_momentum, attitude, valid, permutation, sorted_inertia, unit_working, norm, regime
 
 
+def _working_constants(sorted_inertia, unit_working, regime):
+    """(per-body data of the motion, q̂(0)): the compiled series' records where the kernels are
+    selected (``_compiled_motion.series_selected``), the JAX series of ``_regimes.constants`` elsewhere."""
+    if _compiled_motion.series_selected(sorted_inertia):
+        record = _compiled_motion.series_record(sorted_inertia, unit_working, regime)
+        consts = dict(record=record, inertia=sorted_inertia, unit_momentum=unit_working, regime=regime)
+        # q̂(0) (psi counted from tau = 0) with its derivatives: the one-time kernel's chart at tau = 0.
+        start = _compiled_motion.working_motion(
+            sorted_inertia, unit_working, regime, jnp.zeros_like(regime, record.dtype)
+        )
+        return consts, start[1]
+    consts = constants(sorted_inertia, unit_working, regime)
+    return consts, regime_reference(consts, unit_working)
+
+
+def _evaluate(consts, tau, attitude=True):
+    """``_regimes.evaluate`` of the data of ``_working_constants``."""
+    if "record" not in consts:
+        return evaluate(consts, tau, attitude)
+    return _compiled_motion.series_motion(
+        consts["record"], consts["inertia"], consts["unit_momentum"], consts["regime"], tau, attitude
+    )
+
+
 @jax.jit
 def _construct(inertia, angular_momentum, attitude, axes=None):
     """The fields of a FreeRigidBody (see its docstring) from validated inputs, as one jitted program."""
@@ -214,12 +238,11 @@ def _construct(inertia, angular_momentum, attitude, axes=None):
         inertia, angular_momentum, attitude, axes
     )
     dtype = inertia.dtype
-    consts = constants(sorted_inertia, unit_working, regime)
+    consts, reference = _working_constants(sorted_inertia, unit_working, regime)
 
     # q(t) = q0 ⊗ P ⊗ conj(q̂(0)) ⊗ q̂(|L| t) ⊗ conj(P)  (docs/theory.md §8, "Matching the
     # initial state", with the phase folded into q̂; P is the working frame as a quaternion).
     frame_rotation = quaternion.from_matrix(permutation)
-    reference = regime_reference(consts, unit_working)
     offset = quaternion.multiply(quaternion.multiply(attitude, frame_rotation), quaternion.conjugate(reference))
     # p -> offset ⊗ p ⊗ conj(P) is linear in p: one 4 x 4 matrix per body, columns the images of
     # the unit quaternions, so that each evaluation costs 16 products instead of two Hamilton
@@ -564,17 +587,17 @@ class FreeRigidBody(eqx.Module):
     @_precession_derivatives("momentum")
     def _angular_momentum(self, t):
         t, tau = self._time(t)
-        unit_working, _ = evaluate(self._constants, tau, attitude=False)
+        unit_working, _ = _evaluate(self._constants, tau, attitude=False)
         return self._momentum_from(t, unit_working)
 
     def _elliptic_quaternion(self, t):
         t, tau = self._time(t)
-        particular, _ = evaluate(self._constants, tau)
+        particular, _ = _evaluate(self._constants, tau)
         return self._attitude_from(t, tau, particular)
 
     def _elliptic_state(self, t):
         t, tau = self._time(t)
-        particular, unit_working = evaluate(self._constants, tau)
+        particular, unit_working = _evaluate(self._constants, tau)
         return self._momentum_from(t, unit_working), self._attitude_from(t, tau, particular)
 
     _quaternion = _precession_derivatives("attitude")(_elliptic_quaternion)

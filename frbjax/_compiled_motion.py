@@ -1,4 +1,5 @@
-"""The working-frame motion at one time per point as one compiled CPU kernel (``csrc/motion.hpp``).
+"""The motion in the working frame as compiled CPU kernels: at one time per point (``csrc/motion.hpp``)
+and through a body's theta series (``csrc/series.hpp``, bottom of this module).
 
 The compiled form of ``_regimes.orbit_constants`` followed by ``_regimes.evaluate_once``: the same
 formulas (docs/theory.md §4, §5, §11), per point in C++ with early exits instead of elementwise
@@ -78,11 +79,11 @@ def _kernel(attitude):
         direction = _direction(primals[:_INPUTS], tangents[:_INPUTS])
         return value, jnp.sum(jacobian * direction[..., None, :], axis=-1)
 
-    return motion
+    return motion, with_jacobian
 
 
-_motion = _kernel(True)
-_momentum = _kernel(False)
+_motion, _with_jacobian_motion = _kernel(True)
+_momentum, _ = _kernel(False)
 
 
 def working_motion(inertia, unit_momentum, regime, tau, attitude=True):
@@ -112,3 +113,77 @@ def selected(inertia) -> bool:
     default stays the JAX formulas.
     """
     return os.environ.get(_SWITCH, "jax") == "compiled" and _compiled.selected(inertia)
+
+
+# -------------------------------------------------------------------------------------- the series
+
+
+def series_selected(inertia) -> bool:
+    """Whether a ``FreeRigidBody`` of ``inertia``'s dtype builds and evaluates its theta series with the
+    compiled kernels (csrc/series.hpp): wherever the special functions' kernels are selected
+    (``FRBJAX_KERNELS``).  Its values are the JAX series' to rounding (the same formulas); its
+    derivatives are the one-time kernel's, which computes the same function (the charts count psi
+    from tau = 0 on both)."""
+    return _compiled.selected(inertia)
+
+
+def record_size(dtype) -> int:
+    """The length of a body's series record (csrc/series.hpp's SeriesLayout): 32 + 4 x terms."""
+    return 32 + 4 * (8 if jnp.dtype(dtype) == jnp.float64 else 5)
+
+
+def series_record(inertia, unit_momentum, regime):
+    """Each body's series record (values; its derivatives are taken through ``series_motion``)."""
+    if _compiled._module() is None:
+        raise RuntimeError("frbjax's compiled kernels are not available (see frbjax.special._compiled)")
+    inertia, unit_momentum = jax.lax.stop_gradient((inertia, unit_momentum))
+    batch = jnp.broadcast_shapes(inertia.shape[:-1], unit_momentum.shape[:-1], jnp.shape(regime))
+    columns = [jnp.broadcast_to(inertia[..., k], batch) for k in range(3)]
+    columns += [jnp.broadcast_to(unit_momentum[..., k], batch) for k in range(3)]
+    result = jax.ShapeDtypeStruct(batch + (record_size(inertia.dtype),), inertia.dtype)
+    regime = jnp.broadcast_to(regime, batch).astype(jnp.int32)
+    return jax.ffi.ffi_call("frbjax_series_record", result, vmap_method="broadcast_all")(*columns, regime)
+
+
+def _series_kernel(attitude):
+    outputs = 7 if attitude else 3
+    rows = list(range(3)) + (list(range(7, 11)) if attitude else [])
+
+    @jax.custom_jvp
+    def motion(record, *arguments):
+        *columns, regime = arguments
+        shape = columns[0].shape
+        record = jnp.broadcast_to(record, shape + record.shape[-1:])
+        result = jax.ShapeDtypeStruct(shape + (outputs,), columns[0].dtype)
+        name = "frbjax_series_motion" if attitude else "frbjax_series_momentum"
+        return jax.ffi.ffi_call(name, result, vmap_method="broadcast_all")(record, columns[-1])
+
+    @motion.defjvp
+    def motion_jvp(primals, tangents):
+        # The series and the one-time kernel compute one function (the charts count psi from tau = 0):
+        # its derivatives are the one-time kernel's, in (J, l, tau); the record is a function of (J, l).
+        record, *arguments = primals
+        value = motion(record, *arguments)
+        _, jacobian = _with_jacobian_motion(*arguments)
+        direction = _direction(arguments[:_INPUTS], tangents[1 : 1 + _INPUTS])
+        return value, jnp.sum(jacobian[..., rows, :] * direction[..., None, :], axis=-1)
+
+    return motion
+
+
+_series_motion = _series_kernel(True)
+_series_momentum = _series_kernel(False)
+
+
+def series_motion(record, inertia, unit_momentum, regime, tau, attitude=True):
+    """(q̂(tau), unit L(tau)) from the bodies' records, or (unit L(tau), None) without ``attitude``."""
+    batch = jnp.broadcast_shapes(record.shape[:-1], inertia.shape[:-1], jnp.shape(regime), jnp.shape(tau))
+    columns = [jnp.broadcast_to(inertia[..., k], batch) for k in range(3)]
+    columns += [jnp.broadcast_to(unit_momentum[..., k], batch) for k in range(3)]
+    columns.append(jnp.broadcast_to(jnp.asarray(tau, inertia.dtype), batch))
+    regime = jnp.broadcast_to(regime, batch).astype(jnp.int32)
+    record = jax.lax.stop_gradient(record)
+    if not attitude:
+        return _series_momentum(record, *columns, regime), None
+    out = _series_motion(record, *columns, regime)
+    return out[..., 3:], out[..., :3]

@@ -45,8 +45,13 @@ def test_materialise_stays_a_conditional_under_vmap_and_grad():
     check_grads(f, (x,), order=2, modes=("fwd", "rev"))
 
 
-def test_body_keeps_its_conditionals_under_vmap():
-    """The quaternion of one body has the same conditionals alone and under jax.vmap (and jax.grad)."""
+def test_body_keeps_its_conditionals_under_vmap(monkeypatch):
+    """The quaternion of one body has the same conditionals alone and under jax.vmap (and jax.grad).
+
+    On the JAX path, whose formulas hold the fusion boundaries (the compiled kernels' programs have
+    none of their own)."""
+    monkeypatch.setenv("FRBJAX_KERNELS", "jax")
+    jax.clear_caches()
 
     def quaternion(x):
         return FreeRigidBody(x[:3], x[3:6]).quaternion(x[6])
