@@ -355,7 +355,8 @@ ffi::Error run_series_record(ffi::RemainingArgs arguments, ffi::AnyBuffer& resul
   return ffi::Error::Success();
 }
 
-// The motion from records (..., size) and times (...) of one batch shape: (..., 7) or (..., 3).
+// The motion from records (bodies, size) and times (bodies, per body), each body's times contiguous
+// (row-major): (bodies, per body, 7) or (..., 3).  A record is read once per body, not copied per time.
 template <bool Attitude, class R>
 ffi::Error run_series_motion(ffi::RemainingArgs arguments, ffi::AnyBuffer& result) {
   constexpr int size = SeriesLayout<R>::size;
@@ -365,16 +366,23 @@ ffi::Error run_series_motion(ffi::RemainingArgs arguments, ffi::AnyBuffer& resul
   auto times = arguments.get<ffi::AnyBuffer>(1);
   if (!records.has_value()) return records.error();
   if (!times.has_value()) return times.error();
+  std::size_t bodies = records->element_count() / size;
   if (records->element_type() != result.element_type() || times->element_type() != result.element_type() ||
-      records->element_count() != count * size || times->element_count() != count)
-    return ffi::Error::InvalidArgument("series_motion: records (..., size) and times (...) of the result's dtype");
+      records->element_count() != bodies * size || times->element_count() != count ||
+      (bodies == 0 ? count != 0 : count % bodies != 0))
+    return ffi::Error::InvalidArgument(
+        "series_motion: records (bodies, size) and times (bodies, ...) of the result's dtype");
   const R* record = static_cast<const R*>(records->untyped_data());
   const R* tau = static_cast<const R*>(times->untyped_data());
   R* output = static_cast<R*>(result.untyped_data());
-  for (std::size_t i = 0; i < count; ++i) {
-    R out[7];
-    series_motion<R>(record + i * size, tau[i], Attitude, out);
-    for (int o = 0; o < outputs; ++o) output[i * outputs + o] = out[o];
+  std::size_t per_body = bodies == 0 ? 0 : count / bodies;
+  for (std::size_t b = 0; b < bodies; ++b) {
+    for (std::size_t j = 0; j < per_body; ++j) {
+      std::size_t i = b * per_body + j;
+      R out[7];
+      series_motion<R>(record + b * size, tau[i], Attitude, out);
+      for (int o = 0; o < outputs; ++o) output[i * outputs + o] = out[o];
+    }
   }
   return ffi::Error::Success();
 }

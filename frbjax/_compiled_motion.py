@@ -16,6 +16,7 @@ precession of symmetric bodies) are applied around this function, in JAX, as on 
 
 from __future__ import annotations
 
+import math
 import os
 
 import jax
@@ -151,9 +152,9 @@ def _series_kernel(attitude):
 
     @jax.custom_jvp
     def motion(record, *arguments):
+        # record: (bodies, size), each body's points contiguous in the batch (``_records_by_body``).
         *columns, regime = arguments
         shape = columns[0].shape
-        record = jnp.broadcast_to(record, shape + record.shape[-1:])
         result = jax.ShapeDtypeStruct(shape + (outputs,), columns[0].dtype)
         name = "frbjax_series_motion" if attitude else "frbjax_series_momentum"
         return jax.ffi.ffi_call(name, result, vmap_method="broadcast_all")(record, columns[-1])
@@ -175,6 +176,19 @@ _series_motion = _series_kernel(True)
 _series_momentum = _series_kernel(False)
 
 
+def _records_by_body(record, batch):
+    """The records as (bodies, size) for points of shape ``batch``, each body's points contiguous.
+
+    The records are broadcast over the leading axes of ``batch`` up to their last non-unit axis, and
+    no further: bodies (B, 1) at times (B, T) pass B records, not B x T copies."""
+    shape = (1,) * (len(batch) - (record.ndim - 1)) + record.shape[:-1]
+    leading = max((k + 1 for k, n in enumerate(shape) if n != 1), default=0)
+    record = jnp.broadcast_to(
+        record.reshape(shape + record.shape[-1:]), batch[:leading] + shape[leading:] + record.shape[-1:]
+    )
+    return record.reshape((math.prod(batch[:leading]), record.shape[-1]))
+
+
 def series_motion(record, inertia, unit_momentum, regime, tau, attitude=True):
     """(q̂(tau), unit L(tau)) from the bodies' records, or (unit L(tau), None) without ``attitude``."""
     batch = jnp.broadcast_shapes(record.shape[:-1], inertia.shape[:-1], jnp.shape(regime), jnp.shape(tau))
@@ -182,7 +196,7 @@ def series_motion(record, inertia, unit_momentum, regime, tau, attitude=True):
     columns += [jnp.broadcast_to(unit_momentum[..., k], batch) for k in range(3)]
     columns.append(jnp.broadcast_to(jnp.asarray(tau, inertia.dtype), batch))
     regime = jnp.broadcast_to(regime, batch).astype(jnp.int32)
-    record = jax.lax.stop_gradient(record)
+    record = _records_by_body(jax.lax.stop_gradient(record), batch)
     if not attitude:
         return _series_momentum(record, *columns, regime), None
     out = _series_motion(record, *columns, regime)

@@ -94,6 +94,13 @@ _SIGNIFICANT_GAP = 3.0
 # Weight of the triangle-inequality penalty (per unit of (I3 - I1 - I2) / I3) against residuals
 # of the order of the attitude noise.
 _TRIANGLE_WEIGHT = 1e9
+# Weight (per radian, in units of the attitude residuals' weight) of a tensor fit's pull of the
+# principal axes' rotation vector towards the body axes.  An axisymmetric body leaves the rotation
+# about its symmetry axis undetermined by the data: without the pull, Levenberg-Marquardt wanders
+# along that flat valley and may exhaust max_steps; with it, the fit reports the axes nearest the
+# body axes.  Against the data's curvature (n samples of weight 1 per radian) it moves determined
+# axes by about (weight^2 / n) times their angle: 1e-8 / n rad per radian.
+_AXES_PULL = 1e-4
 # Fractions of the samples (nearest t_ref first) of the continuation windows; the last is all of them.
 _WINDOWS = (0.12, 0.3, 0.6, 1.0)
 _MIN_WINDOW = 12  # samples in the smallest window (at least)
@@ -221,7 +228,11 @@ def _residuals(theta, args):
     moments = jnp.exp(jnp.concatenate([jnp.zeros(1, theta.dtype), theta[:2]]))
     excess = (2 * jnp.max(moments) - jnp.sum(moments)) / jnp.max(moments)
     penalty = triangle * _TRIANGLE_WEIGHT * jnp.maximum(excess, 0)
-    return r.at[-1, 0].set(penalty), (q_model, w_model)
+    r = r.at[-1, 0].set(penalty)
+    if theta.shape[0] == _TENSOR_PARAMETERS:
+        # The axes' pull (_AXES_PULL) in the same row's gyro slots.
+        r = r.at[-1, 3:].set(_AXES_PULL * attitude_weight * theta[8:11])
+    return r, (q_model, w_model)
 
 
 # ------------------------------------------------------------------------------------ the solver

@@ -172,3 +172,63 @@ def test_the_series_kernel_agrees_with_the_jax_series(dtype):
         error = np.abs(np.asarray(ours, np.float64) - np.asarray(theirs, np.float64)).max(-1)[moving]
         # Up to a sign of q̂ (both are rotations; the charts keep w >= 0 at tau = 0).
         assert (error / scale).max() <= 2 * VALUE_TOLERANCE[dtype]
+
+
+def test_the_series_kernel_reads_one_record_per_body():
+    """Records (bodies, size) with each body's times contiguous: bodies (3, 1) at times (3, 5), one
+    body at times (2, 5), bodies (3, 1, 1) at times (4, 5) broadcast against each other, under
+    ``jax.vmap`` over bodies and over times, and zero bodies or zero times, all equal to the same
+    points evaluated one record per point (the values to the bit: the same kernel)."""
+    inertia, unit, regime, tau = _bodies(48, np.float64)
+    chosen = np.array([4, 30, 46])  # on the separatrix, a symmetric body, a random one
+    inertia, unit, regime = inertia[chosen], unit[chosen], regime[chosen]
+    record = _compiled_motion.series_record(inertia, unit, regime)
+    times = np.asarray(tau)[:15].reshape(3, 5)
+
+    def pointwise(rows, tau_points):
+        # One record per point, broadcast explicitly: the layout the kernel read before.
+        shape = tau_points.shape
+        return _compiled_motion.series_motion(
+            jnp.broadcast_to(record[rows], shape + record.shape[-1:]),
+            jnp.broadcast_to(inertia[rows], shape + (3,)),
+            jnp.broadcast_to(unit[rows], shape + (3,)),
+            jnp.broadcast_to(regime[rows], shape),
+            tau_points,
+        )
+
+    def same(ours, theirs):
+        for a, b in zip(ours, theirs):
+            assert a.shape == b.shape
+            assert np.array_equal(np.asarray(a), np.asarray(b))
+
+    rows = np.arange(3)[:, None]
+    same(
+        _compiled_motion.series_motion(record[:, None], inertia[:, None], unit[:, None], regime[:, None], times),
+        pointwise(np.broadcast_to(rows, (3, 5)), times),
+    )
+    same(
+        _compiled_motion.series_motion(record[1], inertia[1], unit[1], regime[1], times[:2]),
+        pointwise(np.full((2, 5), 1), times[:2]),
+    )
+    grid = np.broadcast_to(times[:1].reshape(1, 1, 5), (1, 4, 5)) * np.arange(1, 5)[None, :, None]
+    same(
+        _compiled_motion.series_motion(
+            record[:, None, None], inertia[:, None, None], unit[:, None, None], regime[:, None, None], grid
+        ),
+        pointwise(np.broadcast_to(np.arange(3)[:, None, None], (3, 4, 5)), np.broadcast_to(grid, (3, 4, 5))),
+    )
+    by_body = jax.vmap(_compiled_motion.series_motion, in_axes=(0, 0, 0, 0, 0))(record, inertia, unit, regime, times)
+    same(by_body, pointwise(np.broadcast_to(rows, (3, 5)), times))
+    by_time = jax.vmap(_compiled_motion.series_motion, in_axes=(None, None, None, None, 1), out_axes=1)(
+        record, inertia, unit, regime, times
+    )
+    same(by_time, pointwise(np.broadcast_to(rows, (3, 5)), times))
+    for empty_rows, empty_times in ((slice(0, 0), times[:0]), (slice(0, 3), times[:, :0])):
+        out = _compiled_motion.series_motion(
+            record[empty_rows, None],
+            inertia[empty_rows, None],
+            unit[empty_rows, None],
+            regime[empty_rows, None],
+            empty_times,
+        )
+        assert out[0].shape == empty_times.shape + (4,) and out[1].shape == empty_times.shape + (3,)

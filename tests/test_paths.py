@@ -17,8 +17,11 @@ from test_body_invariants import random_bodies, special_bodies
 
 
 # Measured over 256 random bodies and the special families at 8 times each, |tau| = |L| t up to 100:
-# L (relative to |L|) 6.1e-16 max(1, |tau|), q 1.0e-15 max(1, |tau|) (rounding grows with the periods).
-VALUE_TOLERANCE = 1.5e-15
+# L (relative to |L|) 6.1e-16 max(1, |tau|), q 1.0e-15 max(1, |tau|) with the JAX series (rounding
+# grows with the periods), q 1.53e-15 with the compiled series: on the body spinning 2e-10 off its
+# intermediate axis at tau = -0.024, where mpmath puts the compiled series 1.5e-15 off and the
+# one-shot path 1.1e-16 (the JAX series is 1.8e-15 off on that body at tau = 0.1).
+VALUE_TOLERANCE = 1.6e-15
 # Derivatives at 24 random bodies, |tau| up to 30, relative to each column: measured 1.3e-13.
 DERIVATIVE_TOLERANCE = 2e-13
 
