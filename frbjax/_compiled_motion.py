@@ -46,41 +46,17 @@ def _call(order, attitude, columns, regime):
     return out.reshape(shape + (outputs, _width(order)))
 
 
-def _direction(columns, tangents):
-    return jnp.stack([jnp.broadcast_to(t, c.shape) for c, t in zip(columns, tangents)], axis=-1)
+def _direction(primals, tangents):
+    """The tangents of (J1, J2, J3, l1, l2, l3, tau) stacked on a last axis (the regime has none)."""
+    return jnp.stack([jnp.broadcast_to(t, c.shape) for c, t in zip(primals[:_INPUTS], tangents[:_INPUTS])], axis=-1)
 
 
 def _kernel(attitude):
-    @jax.custom_jvp
-    def with_jacobian(*arguments):
+    def kernel(order, arguments):
         *columns, regime = arguments
-        out = _call(1, attitude, columns, regime)
-        return out[..., 0], out[..., 1:]
+        return _call(order, attitude, columns, regime)
 
-    @with_jacobian.defjvp
-    def with_jacobian_jvp(primals, tangents):
-        *columns, regime = primals
-        out = _call(2, attitude, columns, regime)
-        value, jacobian = out[..., 0], out[..., 1 : 1 + _INPUTS]
-        second = out[..., 1 + _INPUTS :].reshape(out.shape[:-1] + (_INPUTS, _INPUTS))
-        direction = _direction(columns, tangents[:_INPUTS])
-        return (value, jacobian), (
-            jnp.sum(jacobian * direction[..., None, :], axis=-1),
-            jnp.sum(second * direction[..., None, None, :], axis=-1),
-        )
-
-    @jax.custom_jvp
-    def motion(*arguments):
-        *columns, regime = arguments
-        return _call(0, attitude, columns, regime)[..., 0]
-
-    @motion.defjvp
-    def motion_jvp(primals, tangents):
-        value, jacobian = with_jacobian(*primals)
-        direction = _direction(primals[:_INPUTS], tangents[:_INPUTS])
-        return value, jnp.sum(jacobian * direction[..., None, :], axis=-1)
-
-    return motion, with_jacobian
+    return _compiled.differentiable(kernel, _INPUTS, _direction)
 
 
 _motion, _with_jacobian_motion = _kernel(True)
@@ -166,7 +142,7 @@ def _series_kernel(attitude):
         record, *arguments = primals
         value = motion(record, *arguments)
         _, jacobian = _with_jacobian_motion(*arguments)
-        direction = _direction(arguments[:_INPUTS], tangents[1 : 1 + _INPUTS])
+        direction = _direction(arguments, tangents[1:])
         return value, jnp.sum(jacobian[..., rows, :] * direction[..., None, :], axis=-1)
 
     return motion

@@ -116,36 +116,59 @@ def _masked_tangents(primals, tangents, may_vanish):
     return jnp.stack(columns, axis=-1)
 
 
-def _elementwise(name, arity, may_vanish):
-    """``name``'s compiled kernel as a JAX function of ``arity`` broadcast arrays, with its derivatives."""
+def differentiable(kernel, inputs, direction):
+    """(function, with_partials): a compiled kernel as a JAX function with its derivatives.
+
+    ``kernel(order, arguments)`` gives (..., outputs, width): each output's value, then (order >= 1)
+    its partials in the ``inputs`` differentiable arguments, then (order 2) their second partials;
+    ``direction(primals, tangents)`` gives the tangents of those arguments stacked on a last axis
+    (..., inputs).  ``function(*arguments)`` is (..., outputs) (order-0 kernel); its JVP is the
+    order-1 kernel's partials times the tangents, linear in them, so reverse mode transposes it;
+    ``with_partials(*arguments)`` gives (value, partials) and its own JVP from the order-2 kernel:
+    second derivatives, no third.
+    """
 
     @jax.custom_jvp
     def with_partials(*arguments):
-        out = call(name, 1, arguments)
+        out = kernel(1, arguments)
         return out[..., 0], out[..., 1:]
 
     @with_partials.defjvp
     def with_partials_jvp(primals, tangents):
-        out = call(name, 2, primals)
-        value, partials = out[..., 0], out[..., 1 : 1 + arity]
-        second = out[..., 1 + arity :].reshape(out.shape[:-1] + (arity, arity))
-        direction = _masked_tangents(primals, tangents, may_vanish)
+        out = kernel(2, primals)
+        value, partials = out[..., 0], out[..., 1 : 1 + inputs]
+        second = out[..., 1 + inputs :].reshape(out.shape[:-1] + (inputs, inputs))
+        step = direction(primals, tangents)[..., None, :]
         return (value, partials), (
-            jnp.sum(partials * direction, axis=-1),
-            jnp.sum(second * direction[..., None, :], axis=-1),
+            jnp.sum(partials * step, axis=-1),
+            jnp.sum(second * step[..., None, :], axis=-1),
         )
 
     @jax.custom_jvp
     def function(*arguments):
-        return call(name, 0, arguments)[..., 0]
+        return kernel(0, arguments)[..., 0]
 
     @function.defjvp
     def function_jvp(primals, tangents):
         value, partials = with_partials(*primals)
-        return value, jnp.sum(partials * _masked_tangents(primals, tangents, may_vanish), axis=-1)
+        return value, jnp.sum(partials * direction(primals, tangents)[..., None, :], axis=-1)
 
-    function.__name__ = name
-    return function
+    return function, with_partials
+
+
+def _elementwise(name, arity, may_vanish):
+    """``name``'s compiled kernel as a JAX function of ``arity`` broadcast arrays, with its derivatives."""
+    function, _ = differentiable(
+        lambda order, arguments: call(name, order, arguments)[..., None, :],
+        arity,
+        lambda primals, tangents: _masked_tangents(primals, tangents, may_vanish),
+    )
+
+    def scalar(*arguments):
+        return function(*arguments)[..., 0]
+
+    scalar.__name__ = name
+    return scalar
 
 
 # The positions of the arguments that may be exactly zero (their tangents are ignored there).
