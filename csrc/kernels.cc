@@ -19,6 +19,7 @@
 #include "carlson.hpp"
 #include "jacobi.hpp"
 #include "motion.hpp"
+#include "parallel.hpp"
 #include "series.hpp"
 #include "xla/ffi/api/ffi.h"
 
@@ -94,10 +95,10 @@ constexpr int width(int arity, int order) {
 }
 
 template <class F, int Order, class R>
-void evaluate(std::size_t count, const R* const* inputs, R* output) {
+void evaluate(std::size_t begin, std::size_t end, const R* const* inputs, R* output) {
   constexpr int K = F::arity;
   constexpr int W = width(K, Order);
-  for (std::size_t i = 0; i < count; ++i) {
+  for (std::size_t i = begin; i < end; ++i) {
     R* out = output + i * W;
     if constexpr (Order == 0) {
       R arguments[K];
@@ -170,26 +171,32 @@ ffi::Error gather(ffi::RemainingArgs& arguments, int k, std::size_t count, ffi::
   return ffi::Error::Success();
 }
 
+// Points per chunk of the thread pool (parallel.hpp): a chunk of tens of microseconds at a kernel's
+// cost per point (values ~50 ns, first derivatives a few times that, second ones tens of times).
+constexpr std::size_t grain(int order) { return order == 0 ? 1024 : order == 1 ? 256 : 32; }
+
 template <class F, int Order, class R>
-ffi::Error run(ffi::RemainingArgs arguments, ffi::AnyBuffer& result) {
+ffi::Error run(ffi::ThreadPool& pool, ffi::RemainingArgs arguments, ffi::AnyBuffer& result) {
   constexpr int K = F::arity;
   const R* inputs[K];
   std::size_t count = result.element_count() / width(K, Order);
   ffi::Error checked = gather<R>(arguments, K, count, result.element_type(), F::name, inputs);
   if (checked.failure()) return checked;
-  evaluate<F, Order, R>(count, inputs, static_cast<R*>(result.untyped_data()));
+  R* output = static_cast<R*>(result.untyped_data());
+  parallel_for(pool, count, grain(Order),
+               [&](std::size_t begin, std::size_t end) { evaluate<F, Order, R>(begin, end, inputs, output); });
   return ffi::Error::Success();
 }
 
 template <class F, int Order>
-ffi::Error elementwise(ffi::RemainingArgs arguments, ffi::Result<ffi::AnyBuffer> result) {
+ffi::Error elementwise(ffi::ThreadPool pool, ffi::RemainingArgs arguments, ffi::Result<ffi::AnyBuffer> result) {
   if (arguments.size() != static_cast<std::size_t>(F::arity))
     return ffi::Error::InvalidArgument(std::string(F::name) + ": wrong number of arguments");
   switch (result->element_type()) {
     case ffi::DataType::F64:
-      return run<F, Order, double>(arguments, *result);
+      return run<F, Order, double>(pool, arguments, *result);
     case ffi::DataType::F32:
-      return run<F, Order, float>(arguments, *result);
+      return run<F, Order, float>(pool, arguments, *result);
     default:
       return ffi::Error::InvalidArgument(std::string(F::name) + ": float32 or float64 only");
   }
@@ -198,39 +205,41 @@ ffi::Error elementwise(ffi::RemainingArgs arguments, ffi::Result<ffi::AnyBuffer>
 // Jacobi's functions: (u, m, mc) -> (sn, cn, dn, am) per point, values only (the JVP rule of
 // frbjax/special/_compiled.py is written with them and R_D).
 template <class R>
-ffi::Error run_ellipj(ffi::RemainingArgs arguments, ffi::AnyBuffer& result) {
+ffi::Error run_ellipj(ffi::ThreadPool& pool, ffi::RemainingArgs arguments, ffi::AnyBuffer& result) {
   const R* inputs[3];
   std::size_t count = result.element_count() / 4;
   ffi::Error checked = gather<R>(arguments, 3, count, result.element_type(), "ellipj", inputs);
   if (checked.failure()) return checked;
   R* out = static_cast<R*>(result.untyped_data());
-  for (std::size_t i = 0; i < count; ++i) {
-    JacobiValues<R> values = ellipj(inputs[0][i], inputs[1][i], inputs[2][i]);
-    out[4 * i] = values.sn;
-    out[4 * i + 1] = values.cn;
-    out[4 * i + 2] = values.dn;
-    out[4 * i + 3] = values.am;
-  }
+  parallel_for(pool, count, grain(0), [&](std::size_t begin, std::size_t end) {
+    for (std::size_t i = begin; i < end; ++i) {
+      JacobiValues<R> values = ellipj(inputs[0][i], inputs[1][i], inputs[2][i]);
+      out[4 * i] = values.sn;
+      out[4 * i + 1] = values.cn;
+      out[4 * i + 2] = values.dn;
+      out[4 * i + 3] = values.am;
+    }
+  });
   return ffi::Error::Success();
 }
 
-ffi::Error ellipj_values(ffi::RemainingArgs arguments, ffi::Result<ffi::AnyBuffer> result) {
+ffi::Error ellipj_values(ffi::ThreadPool pool, ffi::RemainingArgs arguments, ffi::Result<ffi::AnyBuffer> result) {
   if (arguments.size() != 3) return ffi::Error::InvalidArgument("ellipj: wrong number of arguments");
   switch (result->element_type()) {
     case ffi::DataType::F64:
-      return run_ellipj<double>(arguments, *result);
+      return run_ellipj<double>(pool, arguments, *result);
     case ffi::DataType::F32:
-      return run_ellipj<float>(arguments, *result);
+      return run_ellipj<float>(pool, arguments, *result);
     default:
       return ffi::Error::InvalidArgument("ellipj: float32 or float64 only");
   }
 }
 
-XLA_FFI_DEFINE_HANDLER(Ellipj_0, ellipj_values, ffi::Ffi::Bind().RemainingArgs().Ret<ffi::AnyBuffer>());
+XLA_FFI_DEFINE_HANDLER(Ellipj_0, ellipj_values, ffi::Ffi::Bind().Ctx<ffi::ThreadPool>().RemainingArgs().Ret<ffi::AnyBuffer>());
 
 #define FRBJAX_HANDLER(F, ORDER)                                                                     \
   XLA_FFI_DEFINE_HANDLER(F##_##ORDER, (elementwise<F, ORDER>),                                     \
-                         ffi::Ffi::Bind().RemainingArgs().Ret<ffi::AnyBuffer>())
+                         ffi::Ffi::Bind().Ctx<ffi::ThreadPool>().RemainingArgs().Ret<ffi::AnyBuffer>())
 
 FRBJAX_HANDLER(Rf, 0);
 FRBJAX_HANDLER(Rf, 1);
@@ -250,7 +259,7 @@ FRBJAX_HANDLER(Rc, 2);
 // false, 11 with it) the value (order 0), and its 7 partial derivatives (order 1) and their 7 x 7
 // second ones (order 2) after it.
 template <int Order, bool Attitude, class R>
-ffi::Error run_motion(ffi::RemainingArgs arguments, ffi::AnyBuffer& result) {
+ffi::Error run_motion(ffi::ThreadPool& pool, ffi::RemainingArgs arguments, ffi::AnyBuffer& result) {
   constexpr int K = kMotionInputs;
   constexpr int outputs = Attitude ? kMotionOutputs : 3;
   constexpr int W = width(K, Order);
@@ -264,57 +273,59 @@ ffi::Error run_motion(ffi::RemainingArgs arguments, ffi::AnyBuffer& result) {
     return ffi::Error::InvalidArgument("motion: the regime must be int32 of the result's size");
   const std::int32_t* regime = static_cast<const std::int32_t*>(regimes->untyped_data());
   R* output = static_cast<R*>(result.untyped_data());
-  for (std::size_t i = 0; i < count; ++i) {
-    R* out = output + i * outputs * W;
-    if constexpr (Order == 0) {
-      R in[K], values[kMotionOutputs];
-      for (int j = 0; j < K; ++j) in[j] = inputs[j][i];
-      working_motion<R>(in, regime[i], Attitude, values);
-      for (int o = 0; o < outputs; ++o) out[o] = values[o];
-    } else if constexpr (Order == 1) {
-      using D = Dual<R, K>;
-      D in[K], values[kMotionOutputs];
-      for (int j = 0; j < K; ++j) {
-        in[j] = D(0.0);
-        in[j].v = inputs[j][i];
-        in[j].d[j] = R(1);
-      }
-      working_motion<D>(in, regime[i], Attitude, values);
-      for (int o = 0; o < outputs; ++o) {
-        out[o * W] = values[o].v;
-        for (int j = 0; j < K; ++j) out[o * W + 1 + j] = values[o].d[j];
-      }
-    } else {
-      using D1 = Dual<R, K>;
-      using D2 = Dual<D1, K>;
-      D2 in[K], values[kMotionOutputs];
-      for (int j = 0; j < K; ++j) {
-        in[j] = D2(0.0);
-        in[j].v.v = inputs[j][i];
-        in[j].v.d[j] = R(1);
-        in[j].d[j].v = R(1);
-      }
-      working_motion<D2>(in, regime[i], Attitude, values);
-      for (int o = 0; o < outputs; ++o) {
-        out[o * W] = values[o].v.v;
-        for (int j = 0; j < K; ++j) out[o * W + 1 + j] = values[o].v.d[j];
-        for (int j = 0; j < K; ++j)
-          for (int k = 0; k < K; ++k) out[o * W + 1 + K + j * K + k] = values[o].d[j].d[k];
+  parallel_for(pool, count, grain(Order) / 4, [&](std::size_t begin, std::size_t end) {
+    for (std::size_t i = begin; i < end; ++i) {
+      R* out = output + i * outputs * W;
+      if constexpr (Order == 0) {
+        R in[K], values[kMotionOutputs];
+        for (int j = 0; j < K; ++j) in[j] = inputs[j][i];
+        working_motion<R>(in, regime[i], Attitude, values);
+        for (int o = 0; o < outputs; ++o) out[o] = values[o];
+      } else if constexpr (Order == 1) {
+        using D = Dual<R, K>;
+        D in[K], values[kMotionOutputs];
+        for (int j = 0; j < K; ++j) {
+          in[j] = D(0.0);
+          in[j].v = inputs[j][i];
+          in[j].d[j] = R(1);
+        }
+        working_motion<D>(in, regime[i], Attitude, values);
+        for (int o = 0; o < outputs; ++o) {
+          out[o * W] = values[o].v;
+          for (int j = 0; j < K; ++j) out[o * W + 1 + j] = values[o].d[j];
+        }
+      } else {
+        using D1 = Dual<R, K>;
+        using D2 = Dual<D1, K>;
+        D2 in[K], values[kMotionOutputs];
+        for (int j = 0; j < K; ++j) {
+          in[j] = D2(0.0);
+          in[j].v.v = inputs[j][i];
+          in[j].v.d[j] = R(1);
+          in[j].d[j].v = R(1);
+        }
+        working_motion<D2>(in, regime[i], Attitude, values);
+        for (int o = 0; o < outputs; ++o) {
+          out[o * W] = values[o].v.v;
+          for (int j = 0; j < K; ++j) out[o * W + 1 + j] = values[o].v.d[j];
+          for (int j = 0; j < K; ++j)
+            for (int k = 0; k < K; ++k) out[o * W + 1 + K + j * K + k] = values[o].d[j].d[k];
+        }
       }
     }
-  }
+  });
   return ffi::Error::Success();
 }
 
 template <int Order, bool Attitude>
-ffi::Error motion(ffi::RemainingArgs arguments, ffi::Result<ffi::AnyBuffer> result) {
+ffi::Error motion(ffi::ThreadPool pool, ffi::RemainingArgs arguments, ffi::Result<ffi::AnyBuffer> result) {
   if (arguments.size() != static_cast<std::size_t>(kMotionInputs + 1))
     return ffi::Error::InvalidArgument("motion: wrong number of arguments");
   switch (result->element_type()) {
     case ffi::DataType::F64:
-      return run_motion<Order, Attitude, double>(arguments, *result);
+      return run_motion<Order, Attitude, double>(pool, arguments, *result);
     case ffi::DataType::F32:
-      return run_motion<Order, Attitude, float>(arguments, *result);
+      return run_motion<Order, Attitude, float>(pool, arguments, *result);
     default:
       return ffi::Error::InvalidArgument("motion: float32 or float64 only");
   }
@@ -322,7 +333,7 @@ ffi::Error motion(ffi::RemainingArgs arguments, ffi::Result<ffi::AnyBuffer> resu
 
 #define FRBJAX_MOTION_HANDLER(NAME, ORDER, ATTITUDE)                                                 \
   XLA_FFI_DEFINE_HANDLER(NAME##_##ORDER, (motion<ORDER, ATTITUDE>),                                \
-                         ffi::Ffi::Bind().RemainingArgs().Ret<ffi::AnyBuffer>())
+                         ffi::Ffi::Bind().Ctx<ffi::ThreadPool>().RemainingArgs().Ret<ffi::AnyBuffer>())
 
 FRBJAX_MOTION_HANDLER(Motion, 0, true);
 FRBJAX_MOTION_HANDLER(Motion, 1, true);
@@ -334,7 +345,7 @@ FRBJAX_MOTION_HANDLER(Momentum, 2, false);
 // A body's series record (series.hpp): inputs J1, J2, J3, l1, l2, l3 and the regime (int32) of one
 // size; the result (..., SeriesLayout<R>::size).
 template <class R>
-ffi::Error run_series_record(ffi::RemainingArgs arguments, ffi::AnyBuffer& result) {
+ffi::Error run_series_record(ffi::ThreadPool& pool, ffi::RemainingArgs arguments, ffi::AnyBuffer& result) {
   constexpr int size = SeriesLayout<R>::size;
   const R* inputs[6];
   std::size_t count = result.element_count() / size;
@@ -347,18 +358,20 @@ ffi::Error run_series_record(ffi::RemainingArgs arguments, ffi::AnyBuffer& resul
     return ffi::Error::InvalidArgument("series_record: the regime must be int32 of the bodies' size");
   const std::int32_t* regime = static_cast<const std::int32_t*>(regimes->untyped_data());
   R* output = static_cast<R*>(result.untyped_data());
-  for (std::size_t i = 0; i < count; ++i) {
-    R in[6];
-    for (int j = 0; j < 6; ++j) in[j] = inputs[j][i];
-    series_record<R>(in, regime[i], output + i * size);
-  }
+  parallel_for(pool, count, grain(1) / 4, [&](std::size_t begin, std::size_t end) {
+    for (std::size_t i = begin; i < end; ++i) {
+      R in[6];
+      for (int j = 0; j < 6; ++j) in[j] = inputs[j][i];
+      series_record<R>(in, regime[i], output + i * size);
+    }
+  });
   return ffi::Error::Success();
 }
 
 // The motion from records (bodies, size) and times (bodies, per body), each body's times contiguous
 // (row-major): (bodies, per body, 7) or (..., 3).  A record is read once per body, not copied per time.
 template <bool Attitude, class R>
-ffi::Error run_series_motion(ffi::RemainingArgs arguments, ffi::AnyBuffer& result) {
+ffi::Error run_series_motion(ffi::ThreadPool& pool, ffi::RemainingArgs arguments, ffi::AnyBuffer& result) {
   constexpr int size = SeriesLayout<R>::size;
   constexpr int outputs = Attitude ? 7 : 3;
   std::size_t count = result.element_count() / outputs;
@@ -376,47 +389,48 @@ ffi::Error run_series_motion(ffi::RemainingArgs arguments, ffi::AnyBuffer& resul
   const R* tau = static_cast<const R*>(times->untyped_data());
   R* output = static_cast<R*>(result.untyped_data());
   std::size_t per_body = bodies == 0 ? 0 : count / bodies;
-  for (std::size_t b = 0; b < bodies; ++b) {
-    for (std::size_t j = 0; j < per_body; ++j) {
-      std::size_t i = b * per_body + j;
+  parallel_for(pool, count, grain(0) / 4, [&](std::size_t begin, std::size_t end) {
+    for (std::size_t i = begin; i < end; ++i) {
       R out[7];
-      series_motion<R>(record + b * size, tau[i], Attitude, out);
+      series_motion<R>(record + (i / per_body) * size, tau[i], Attitude, out);
       for (int o = 0; o < outputs; ++o) output[i * outputs + o] = out[o];
     }
-  }
+  });
   return ffi::Error::Success();
 }
 
-ffi::Error series_record_values(ffi::RemainingArgs arguments, ffi::Result<ffi::AnyBuffer> result) {
+ffi::Error series_record_values(ffi::ThreadPool pool, ffi::RemainingArgs arguments,
+                                ffi::Result<ffi::AnyBuffer> result) {
   if (arguments.size() != 7) return ffi::Error::InvalidArgument("series_record: wrong number of arguments");
   switch (result->element_type()) {
     case ffi::DataType::F64:
-      return run_series_record<double>(arguments, *result);
+      return run_series_record<double>(pool, arguments, *result);
     case ffi::DataType::F32:
-      return run_series_record<float>(arguments, *result);
+      return run_series_record<float>(pool, arguments, *result);
     default:
       return ffi::Error::InvalidArgument("series_record: float32 or float64 only");
   }
 }
 
 template <bool Attitude>
-ffi::Error series_motion_values(ffi::RemainingArgs arguments, ffi::Result<ffi::AnyBuffer> result) {
+ffi::Error series_motion_values(ffi::ThreadPool pool, ffi::RemainingArgs arguments,
+                                ffi::Result<ffi::AnyBuffer> result) {
   if (arguments.size() != 2) return ffi::Error::InvalidArgument("series_motion: wrong number of arguments");
   switch (result->element_type()) {
     case ffi::DataType::F64:
-      return run_series_motion<Attitude, double>(arguments, *result);
+      return run_series_motion<Attitude, double>(pool, arguments, *result);
     case ffi::DataType::F32:
-      return run_series_motion<Attitude, float>(arguments, *result);
+      return run_series_motion<Attitude, float>(pool, arguments, *result);
     default:
       return ffi::Error::InvalidArgument("series_motion: float32 or float64 only");
   }
 }
 
-XLA_FFI_DEFINE_HANDLER(SeriesRecord, series_record_values, ffi::Ffi::Bind().RemainingArgs().Ret<ffi::AnyBuffer>());
+XLA_FFI_DEFINE_HANDLER(SeriesRecord, series_record_values, ffi::Ffi::Bind().Ctx<ffi::ThreadPool>().RemainingArgs().Ret<ffi::AnyBuffer>());
 XLA_FFI_DEFINE_HANDLER(SeriesMotion, series_motion_values<true>,
-                       ffi::Ffi::Bind().RemainingArgs().Ret<ffi::AnyBuffer>());
+                       ffi::Ffi::Bind().Ctx<ffi::ThreadPool>().RemainingArgs().Ret<ffi::AnyBuffer>());
 XLA_FFI_DEFINE_HANDLER(SeriesMomentum, series_motion_values<false>,
-                       ffi::Ffi::Bind().RemainingArgs().Ret<ffi::AnyBuffer>());
+                       ffi::Ffi::Bind().Ctx<ffi::ThreadPool>().RemainingArgs().Ret<ffi::AnyBuffer>());
 
 struct Entry {
   const char* name;

@@ -232,3 +232,24 @@ def test_the_series_kernel_reads_one_record_per_body():
             empty_times,
         )
         assert out[0].shape == empty_times.shape + (4,) and out[1].shape == empty_times.shape + (3,)
+
+
+def test_large_batches_split_over_the_thread_pool_give_the_same_bits():
+    """Batches of many chunks of the thread pool (csrc/parallel.hpp) against the same points one body
+    (100 times) at a time, in fewer chunks or on the calling thread alone: the series motion (48
+    bodies x 100 times), the one-time motion and its Jacobian, to the bit."""
+    inertia, unit, regime, tau = _bodies(48, np.float64)
+    record = _compiled_motion.series_record(inertia, unit, regime)
+    times = jnp.asarray(np.random.default_rng(3).uniform(-30, 30, (48, 100)))
+    together = _compiled_motion.series_motion(record[:, None], inertia[:, None], unit[:, None], regime[:, None], times)
+    for body in range(48):
+        alone = _compiled_motion.series_motion(record[body], inertia[body], unit[body], regime[body], times[body])
+        for a, b in zip(alone, together):
+            assert np.array_equal(np.asarray(a), np.asarray(b)[body])
+    columns = [jnp.broadcast_to(c[:, None], times.shape) for c in (*inertia.T, *unit.T)] + [times]
+    regimes = jnp.broadcast_to(regime[:, None], times.shape).astype(jnp.int32)
+    for order in (0, 1):
+        whole = np.asarray(_compiled_motion._call(order, True, columns, regimes))
+        for body in range(0, 48, 6):
+            piece = np.asarray(_compiled_motion._call(order, True, [c[body] for c in columns], regimes[body]))
+            assert np.array_equal(piece, whole[body])

@@ -113,3 +113,28 @@ def test_odd_shapes_stay_inside_their_buffers():
     np.testing.assert_allclose(mapped, special.elliprf(grid, 2.0, grid), rtol=0)
     shape = jax.eval_shape(special.elliprj, jnp.ones((5, 1)), 1.0, 2.0, jnp.ones(7))
     assert shape.shape == (5, 7)
+
+
+def test_large_batches_split_over_the_thread_pool_give_the_same_bits():
+    """A batch above a chunk (csrc/parallel.hpp: 1024 points for values, 256 for first derivatives)
+    is split over XLA's intra-op thread pool where it has more than one thread (as on the two-core
+    machines of CI): each point's result is the one computed alone, to the bit, with none missed or
+    written twice, for values, their partials, and Jacobi's functions."""
+    assert _compiled._module() is not None  # registers the handlers
+    rng = np.random.default_rng(7)
+    arguments = _arguments(rng, 3, np.float64, 3000)
+    whole = np.asarray(_compiled.call("elliprf", 0, [jnp.asarray(a) for a in arguments]))
+    partials = np.asarray(_compiled.call("elliprf", 1, [jnp.asarray(a) for a in arguments]))
+    # Pieces of 100 points run on the calling thread alone.
+    for start in range(0, 3000, 100):
+        piece = [jnp.asarray(a[start : start + 100]) for a in arguments]
+        assert np.array_equal(
+            np.asarray(_compiled.call("elliprf", 0, piece)), whole[start : start + 100], equal_nan=True
+        )
+        assert np.array_equal(
+            np.asarray(_compiled.call("elliprf", 1, piece)), partials[start : start + 100], equal_nan=True
+        )
+    u, m = rng.uniform(-50, 50, 5000), rng.uniform(0, 1, 5000)
+    jacobi = lambda k: _compiled.call("ellipj", 0, [jnp.asarray(a[k]) for a in (u, m, 1 - m)], width=4)  # noqa: E731
+    alone = np.concatenate([np.asarray(jacobi(slice(k, k + 500))) for k in range(0, 5000, 500)])
+    assert np.array_equal(np.asarray(jacobi(slice(None))), alone, equal_nan=True)
