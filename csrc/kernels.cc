@@ -470,15 +470,37 @@ PyObject* handlers(PyObject*, PyObject*) {
 
 PyObject* jaxlib_version(PyObject*, PyObject*) { return PyUnicode_FromString(FRBJAX_JAXLIB_VERSION); }
 
+// Whether this CPU has fused multiply-add instructions, for choosing the FMA build (CMakeLists.txt).
+PyObject* cpu_has_fma(PyObject*, PyObject*) {
+#if defined(__x86_64__) || defined(__i386__)
+  __builtin_cpu_init();
+  return PyBool_FromLong(__builtin_cpu_supports("fma") ? 1 : 0);
+#else
+  Py_RETURN_FALSE;
+#endif
+}
+
 PyMethodDef kMethods[] = {
     {"handlers", handlers, METH_NOARGS, "{target name: PyCapsule of the XLA FFI handler}."},
     {"jaxlib_version", jaxlib_version, METH_NOARGS, "The jaxlib whose XLA FFI headers the kernels were built with."},
+    {"cpu_has_fma", cpu_has_fma, METH_NOARGS, "Whether this CPU has FMA instructions (the FMA build runs here)."},
     {nullptr, nullptr, 0, nullptr},
 };
 
-PyModuleDef kModule = {PyModuleDef_HEAD_INIT, "_kernels", "frbjax's compiled CPU kernels (XLA FFI).", -1, kMethods};
+// Two builds of this file (CMakeLists.txt): _kernels for any CPU of the target, _kernels_fma with FMA
+// instructions and the motion's products fused (motion.hpp), chosen at run time where the CPU has them.
+#ifndef FRBJAX_MODULE
+#define FRBJAX_MODULE _kernels
+#endif
+#define FRBJAX_STRING_OF(x) #x
+#define FRBJAX_STRING(x) FRBJAX_STRING_OF(x)
+#define FRBJAX_JOIN_OF(a, b) a##b
+#define FRBJAX_JOIN(a, b) FRBJAX_JOIN_OF(a, b)
+
+PyModuleDef kModule = {PyModuleDef_HEAD_INIT, FRBJAX_STRING(FRBJAX_MODULE), "frbjax's compiled CPU kernels (XLA FFI).", -1,
+                       kMethods};
 
 }  // namespace
 }  // namespace frbjax
 
-PyMODINIT_FUNC PyInit__kernels() { return PyModule_Create(&frbjax::kModule); }
+PyMODINIT_FUNC FRBJAX_JOIN(PyInit_, FRBJAX_MODULE)() { return PyModule_Create(&frbjax::kModule); }

@@ -79,17 +79,18 @@ def working_motion(inertia, unit_momentum, regime, tau, attitude=True):
 
 
 def selected(inertia) -> bool:
-    """Whether the compiled kernel evaluates the one-time motion of bodies of ``inertia``'s dtype.
+    """Whether the compiled kernel evaluates the one-time motion of bodies of ``inertia``'s dtype:
+    wherever the special functions' kernels are selected (``FRBJAX_KERNELS``), unless
+    ``FRBJAX_MOTION_KERNEL=jax`` keeps the JAX formulas for the motion alone.
 
-    Opt-in for now (``FRBJAX_MOTION_KERNEL=compiled``, with the special functions' kernels selected):
-    the kernel agrees with the JAX formulas evaluated op by op to an ulp or two, but XLA compiles
-    those with fused multiply-adds, and on the long-time reversal test (tests/test_body_invariants.py,
-    |L| t = 100 and back) the kernel's worst error is 3.3 eps |L| t where the JAX path's is 1.4 and the
-    test allows 3.0.  Built with FMA everywhere (-march=native) the kernel passes that test but loses a
-    few tenths of an ulp on |L| and the spatial momentum at shorter times.  Until both hold, the
-    default stays the JAX formulas.
+    Where the CPU has FMA instructions the kernel fuses the motion's products and sums as XLA:CPU
+    fuses the JAX path's (csrc/motion.hpp): unfused, its long time-reversal error was 3.3 eps |L| t
+    against the JAX path's 1.4 (tests/test_body_invariants.py allows 3.0); fused, 1.0.
     """
-    return os.environ.get(_SWITCH, "jax") == "compiled" and _compiled.selected(inertia)
+    choice = os.environ.get(_SWITCH, "compiled")
+    if choice not in ("compiled", "jax"):
+        raise ValueError(f"{_SWITCH} must be 'compiled' or 'jax', got {choice!r}")
+    return choice == "compiled" and _compiled.selected(inertia)
 
 
 # -------------------------------------------------------------------------------------- the series

@@ -66,9 +66,16 @@ def _module():
             raise ImportError(f"{_SWITCH}=compiled but {message}")
         warnings.warn(message, RuntimeWarning, stacklevel=3)
         return None
-    for name, capsule in _kernels.handlers().items():
+    module = _kernels
+    if _kernels.cpu_has_fma():
+        # The FMA build (CMakeLists.txt), as XLA:CPU compiles the JAX path with FMA instructions here.
+        try:
+            from .. import _kernels_fma as module
+        except ImportError:
+            module = _kernels
+    for name, capsule in module.handlers().items():
         jax.ffi.register_ffi_target(name, capsule, platform="cpu")
-    return _kernels
+    return module
 
 
 def _release(version):
