@@ -4,9 +4,10 @@ Each scenario runs in a fresh Python process (nothing compiled before it, JAX's 
 off), pinned to one core with XLA single-threaded, float64, for each of frbjax's CPU paths:
 
 * ``jax``: ``FRBJAX_KERNELS=jax``, the JAX code everywhere (the path of accelerators);
-* ``kernels``: the default, the special functions as compiled kernels (frbjax/special/_compiled.py);
-* ``motion``: also the one-time motion as one compiled kernel (``FRBJAX_MOTION_KERNEL=compiled``,
-  frbjax/_compiled_motion.py; opt-in while its accuracy over long times is settled),
+* ``kernels``: the special functions and a ``FreeRigidBody``'s series as compiled kernels, the
+  one-time motion in JAX (``FRBJAX_MOTION_KERNEL=jax``);
+* ``motion``: the default on the CPU, the one-time motion as one compiled kernel too
+  (frbjax/_compiled_motion.py),
 
 and diffrax 0.7 Dopri8 at rtol = atol = 1e-12 on dL/dt = L x Omega, dq/dt = q (0, Omega)/2 (the
 solver of benchmarks/work_precision.py) in the same run.  Rows (issue 41's targets):
@@ -39,7 +40,7 @@ from pathlib import Path
 
 PATHS = {
     "jax": {"FRBJAX_KERNELS": "jax"},
-    "kernels": {"FRBJAX_KERNELS": "auto"},
+    "kernels": {"FRBJAX_KERNELS": "auto", "FRBJAX_MOTION_KERNEL": "jax"},
     "motion": {"FRBJAX_KERNELS": "auto", "FRBJAX_MOTION_KERNEL": "compiled"},
 }
 

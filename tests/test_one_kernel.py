@@ -3,6 +3,9 @@
 One body's free flow and one body's splitting trajectory are compiled as one kernel where the
 backend supports it, and as XLA's ordinary kernels otherwise (``FRBJAX_ONE_KERNEL=0``, a batch, or a
 region holding an operation without a single-kernel emitter).  Both give the same values to rounding.
+
+The regions belong to the one-time motion's JAX formulas, which the CPU runs where the compiled
+motion kernel is not selected: this module runs them with ``FRBJAX_MOTION_KERNEL=jax``.
 """
 
 from __future__ import annotations
@@ -41,6 +44,17 @@ def _forget_library_traces():
 
     _free_flow._free_flow.clear_cache()
     _free_flow._tensor_free_flow.clear_cache()
+
+
+@pytest.fixture(autouse=True, scope="module")
+def _jax_motion():
+    """The one-time motion's JAX formulas for this module (``FRBJAX_MOTION_KERNEL=jax``), read when a
+    program is traced; the library's traces made under it are forgotten before and after."""
+    with pytest.MonkeyPatch.context() as patch:
+        patch.setenv("FRBJAX_MOTION_KERNEL", "jax")
+        _forget_library_traces()
+        yield
+    _forget_library_traces()
 
 
 @pytest.fixture
