@@ -293,7 +293,7 @@ def _uniform_attitude(uniform, inertia, axes, momentum, attitude, t, moving):
 
 def _working_motion_once(sorted_inertia, unit_working, regime, tau, with_attitude):
     """(unit L(tau), q̂(0), q̂(tau)) in the working frame: the JAX formulas (``_regimes``), or the
-    compiled kernel (``_compiled_motion``) where it is selected (opt-in for now: see its docstring)."""
+    compiled kernel (``_compiled_motion``) where it is selected (the CPU's default: see its docstring)."""
     if _compiled_motion.selected(sorted_inertia):
         return _compiled_motion.working_motion(sorted_inertia, unit_working, regime, tau, with_attitude)
     orbit = orbit_constants(sorted_inertia, unit_working, regime)

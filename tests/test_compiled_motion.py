@@ -8,8 +8,8 @@ for the values, 4.2e-14 (1 + |tau|)(1 + |entry|) for the Jacobians' entries (nex
 where they grow like 1/mc; 6.4e-15 elsewhere), and 2e-13 relative for the Hessians; the tolerances
 hold those with a margin.  Accuracy against independent references (mpmath, diffrax, CALGO 903) is
 tested through ``free_flow`` by test_paths.py, test_body_mpmath.py, test_gradients_body.py and the
-others on the motion's default path; the kernel is selected with FRBJAX_MOTION_KERNEL=compiled
-(frbjax/_compiled_motion.py says why it is not the default yet).
+others on the motion's default path, which is this kernel on the CPU (FRBJAX_MOTION_KERNEL=jax
+selects the JAX formulas).
 """
 
 import jax
