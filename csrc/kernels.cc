@@ -171,6 +171,22 @@ ffi::Error gather(ffi::RemainingArgs& arguments, int k, std::size_t count, ffi::
   return ffi::Error::Success();
 }
 
+// `run(R())` with R the result's float type (float64 or float32), after checking the number of
+// arguments; the errors name the kernel.
+template <class Run>
+ffi::Error by_float_type(const std::string& name, std::size_t arity, const ffi::RemainingArgs& arguments,
+                         const ffi::AnyBuffer& result, Run run) {
+  if (arguments.size() != arity) return ffi::Error::InvalidArgument(name + ": wrong number of arguments");
+  switch (result.element_type()) {
+    case ffi::DataType::F64:
+      return run(double());
+    case ffi::DataType::F32:
+      return run(float());
+    default:
+      return ffi::Error::InvalidArgument(name + ": float32 or float64 only");
+  }
+}
+
 // Points per chunk of the thread pool (parallel.hpp): a chunk of tens of microseconds at a kernel's
 // cost per point (values ~50 ns, first derivatives a few times that, second ones tens of times).
 constexpr std::size_t grain(int order) { return order == 0 ? 1024 : order == 1 ? 256 : 32; }
@@ -190,16 +206,10 @@ ffi::Error run(ffi::ThreadPool& pool, ffi::RemainingArgs arguments, ffi::AnyBuff
 
 template <class F, int Order>
 ffi::Error elementwise(ffi::ThreadPool pool, ffi::RemainingArgs arguments, ffi::Result<ffi::AnyBuffer> result) {
-  if (arguments.size() != static_cast<std::size_t>(F::arity))
-    return ffi::Error::InvalidArgument(std::string(F::name) + ": wrong number of arguments");
-  switch (result->element_type()) {
-    case ffi::DataType::F64:
-      return run<F, Order, double>(pool, arguments, *result);
-    case ffi::DataType::F32:
-      return run<F, Order, float>(pool, arguments, *result);
-    default:
-      return ffi::Error::InvalidArgument(std::string(F::name) + ": float32 or float64 only");
-  }
+  return by_float_type(std::string(F::name), F::arity, arguments, *result, [&](auto zero) {
+    using R = decltype(zero);
+    return run<F, Order, R>(pool, arguments, *result);
+  });
 }
 
 // Jacobi's functions: (u, m, mc) -> (sn, cn, dn, am) per point, values only (the JVP rule of
@@ -224,15 +234,10 @@ ffi::Error run_ellipj(ffi::ThreadPool& pool, ffi::RemainingArgs arguments, ffi::
 }
 
 ffi::Error ellipj_values(ffi::ThreadPool pool, ffi::RemainingArgs arguments, ffi::Result<ffi::AnyBuffer> result) {
-  if (arguments.size() != 3) return ffi::Error::InvalidArgument("ellipj: wrong number of arguments");
-  switch (result->element_type()) {
-    case ffi::DataType::F64:
-      return run_ellipj<double>(pool, arguments, *result);
-    case ffi::DataType::F32:
-      return run_ellipj<float>(pool, arguments, *result);
-    default:
-      return ffi::Error::InvalidArgument("ellipj: float32 or float64 only");
-  }
+  return by_float_type("ellipj", 3, arguments, *result, [&](auto zero) {
+    using R = decltype(zero);
+    return run_ellipj<R>(pool, arguments, *result);
+  });
 }
 
 XLA_FFI_DEFINE_HANDLER(Ellipj_0, ellipj_values, ffi::Ffi::Bind().Ctx<ffi::ThreadPool>().RemainingArgs().Ret<ffi::AnyBuffer>());
@@ -319,16 +324,10 @@ ffi::Error run_motion(ffi::ThreadPool& pool, ffi::RemainingArgs arguments, ffi::
 
 template <int Order, bool Attitude>
 ffi::Error motion(ffi::ThreadPool pool, ffi::RemainingArgs arguments, ffi::Result<ffi::AnyBuffer> result) {
-  if (arguments.size() != static_cast<std::size_t>(kMotionInputs + 1))
-    return ffi::Error::InvalidArgument("motion: wrong number of arguments");
-  switch (result->element_type()) {
-    case ffi::DataType::F64:
-      return run_motion<Order, Attitude, double>(pool, arguments, *result);
-    case ffi::DataType::F32:
-      return run_motion<Order, Attitude, float>(pool, arguments, *result);
-    default:
-      return ffi::Error::InvalidArgument("motion: float32 or float64 only");
-  }
+  return by_float_type("motion", kMotionInputs + 1, arguments, *result, [&](auto zero) {
+    using R = decltype(zero);
+    return run_motion<Order, Attitude, R>(pool, arguments, *result);
+  });
 }
 
 #define FRBJAX_MOTION_HANDLER(NAME, ORDER, ATTITUDE)                                                 \
@@ -401,29 +400,19 @@ ffi::Error run_series_motion(ffi::ThreadPool& pool, ffi::RemainingArgs arguments
 
 ffi::Error series_record_values(ffi::ThreadPool pool, ffi::RemainingArgs arguments,
                                 ffi::Result<ffi::AnyBuffer> result) {
-  if (arguments.size() != 7) return ffi::Error::InvalidArgument("series_record: wrong number of arguments");
-  switch (result->element_type()) {
-    case ffi::DataType::F64:
-      return run_series_record<double>(pool, arguments, *result);
-    case ffi::DataType::F32:
-      return run_series_record<float>(pool, arguments, *result);
-    default:
-      return ffi::Error::InvalidArgument("series_record: float32 or float64 only");
-  }
+  return by_float_type("series_record", 7, arguments, *result, [&](auto zero) {
+    using R = decltype(zero);
+    return run_series_record<R>(pool, arguments, *result);
+  });
 }
 
 template <bool Attitude>
 ffi::Error series_motion_values(ffi::ThreadPool pool, ffi::RemainingArgs arguments,
                                 ffi::Result<ffi::AnyBuffer> result) {
-  if (arguments.size() != 2) return ffi::Error::InvalidArgument("series_motion: wrong number of arguments");
-  switch (result->element_type()) {
-    case ffi::DataType::F64:
-      return run_series_motion<Attitude, double>(pool, arguments, *result);
-    case ffi::DataType::F32:
-      return run_series_motion<Attitude, float>(pool, arguments, *result);
-    default:
-      return ffi::Error::InvalidArgument("series_motion: float32 or float64 only");
-  }
+  return by_float_type("series_motion", 2, arguments, *result, [&](auto zero) {
+    using R = decltype(zero);
+    return run_series_motion<Attitude, R>(pool, arguments, *result);
+  });
 }
 
 XLA_FFI_DEFINE_HANDLER(SeriesRecord, series_record_values, ffi::Ffi::Bind().Ctx<ffi::ThreadPool>().RemainingArgs().Ret<ffi::AnyBuffer>());
