@@ -8,16 +8,16 @@ flows in all.  This script runs it the way ``frbjax run init_example1.dat`` does
 - the time to compile the step program and the best of three runs of all the steps (compilation
   excluded), to compare with the Fortran driver's 0.21 s (gfortran -O2, one core; run this script
   under ``taskset -c 0`` for one core);
-- both with XLA's default flags as a user's own script has them: the loop over steps is one kernel
-  through the library's one-kernel regions (``frbjax._kernel``), and, in a second process with
-  ``FRBJAX_ONE_KERNEL=0``, as XLA's ordinary kernels (every step runs its some hundred kernels one by
-  one), so that the JSON has both;
+- both with XLA's default flags as a user's own script has them: on the CPU each free flow is one
+  call of the package's compiled motion kernel, and, in a second process with ``FRBJAX_KERNELS=jax``,
+  the JAX formulas compiled by XLA (every free flow runs its some hundred kernels one by one), so
+  that the JSON has both;
 - the maximum difference from out_example1.dat over Pi and Q, after 1000 steps and at the end
   (gfortran reproduces that file only to 2.3e-10).
 
 Usage: ``python benchmarks/calgo903_example1.py [--steps N] [--quick] [--output-dir DIR]
-[--no-one-kernel]``; writes ``calgo903_example1.json`` there (default benchmarks/results).
-``--no-one-kernel`` measures the ordinary kernels only (no second process).
+[--jax-formulas]``; writes ``calgo903_example1.json`` there (default benchmarks/results).
+``--jax-formulas`` measures the JAX formulas only (no second process).
 """
 
 from __future__ import annotations
@@ -39,6 +39,7 @@ jax.config.update("jax_enable_x64", True)
 import numpy as np  # noqa: E402
 
 from frbjax import _calgo903 as calgo  # noqa: E402
+from frbjax.special import _compiled  # noqa: E402
 
 
 REPOSITORY = pathlib.Path(__file__).resolve().parents[1]
@@ -54,15 +55,15 @@ def main(argv=None):
     parser.add_argument("--quick", action="store_true", help=f"smoke test: {QUICK_STEPS} steps, one run")
     parser.add_argument("--output-dir", type=pathlib.Path, default=RESULTS)
     parser.add_argument(
-        "--no-one-kernel",
+        "--jax-formulas",
         action="store_true",
-        help="XLA's ordinary kernels only (FRBJAX_ONE_KERNEL=0; no second process)",
+        help="the JAX formulas only (FRBJAX_KERNELS=jax; no second process)",
     )
     args = parser.parse_args(argv)
-    if args.no_one_kernel:
-        os.environ["FRBJAX_ONE_KERNEL"] = "0"
     environment = dict(os.environ)
-    runtime = "ordinary_kernels" if args.no_one_kernel else "one_kernel_regions"
+    if args.jax_formulas:
+        os.environ["FRBJAX_KERNELS"] = "jax"
+    runtime = "compiled_kernels" if _compiled.selected(np.zeros(3)) else "jax_formulas"
 
     problem = calgo.read_input(DATA / "init_example1.dat")
     expected = calgo.read_output(DATA / "out_example1.dat", problem.layout)
@@ -104,11 +105,11 @@ def main(argv=None):
         "max_error_first_1000_steps": error(min(steps, 1000) + 1),
         "max_error_all_steps": error(steps + 1),
         "device": str(jax.devices()[0]),
-        "xla_runtime": runtime,
+        "motion": runtime,
         "xla_flags": os.environ.get("XLA_FLAGS", ""),
     }
-    if not args.no_one_kernel:
-        results["ordinary_kernels"] = _ordinary_kernels(_argv_steps(args), environment)
+    if not args.jax_formulas:
+        results["jax_formulas"] = _jax_formulas(_argv_steps(args), environment)
     for key, value in results.items():
         print(f"{key:28s} {value}")
     args.output_dir.mkdir(parents=True, exist_ok=True)
@@ -119,11 +120,11 @@ def _argv_steps(args):
     return (["--quick"] if args.quick else []) + ([] if args.steps is None else ["--steps", str(args.steps)])
 
 
-def _ordinary_kernels(extra, environment):
-    """This script in a second process without one-kernel regions (read once per process)."""
+def _jax_formulas(extra, environment):
+    """This script in a second process with the JAX formulas (the switch is read once per process)."""
     with tempfile.TemporaryDirectory() as folder:
         subprocess.run(
-            [sys.executable, __file__, "--no-one-kernel", "--output-dir", folder, *extra],
+            [sys.executable, __file__, "--jax-formulas", "--output-dir", folder, *extra],
             check=True,
             stdout=subprocess.DEVNULL,
             env=environment,

@@ -16,7 +16,7 @@ process pins itself to CPU 0 and runs XLA single-threaded before JAX starts), fl
 * ``state_at_T``: the state (L, q) at T = 10 of 1024 random bodies by ``free_flow``, against
   diffrax Dopri8 at rtol = atol = 1e-12 (vmapped, benchmarks/work_precision.py's solve); target
   diffrax / frbjax >= 500 (stretch 1000).
-* ``one_body``: jitted ``free_flow(I, L, q, t)`` (the one-shot entry point, a one-kernel region) for
+* ``one_body``: jitted ``free_flow(I, L, q, t)`` (the one-shot entry point) for
   one body and one time against a trivial jitted function of the same four arguments (JAX's
   dispatch); target ratio <= 2; with its compile time and that of its gradient (targets 1 s, 3 s),
   and the same figures for ``FreeRigidBody(I, L, q).quaternion(t)`` (series prepared).  Also, in
@@ -230,11 +230,9 @@ def one_body(options, rng):
     arguments, trivial = one_body_case(rng)
     inertia, momentum, attitude, t = arguments
     trivial_s = best_time(lambda: trivial(*arguments), max(options.repeats, 200), min_total=0.5)
-    # The one-kernel probe (frbjax._kernel.available: one small compile, 0.07 s) runs once per
-    # process, at the first region; it is not part of any one program's compile time.
-    from frbjax import _kernel
+    from frbjax.special import _compiled
 
-    row = {"trivial_jit_us": trivial_s * 1e6, "one_kernel_regions": _kernel.available()}
+    row = {"trivial_jit_us": trivial_s * 1e6, "compiled_kernels": _compiled.selected(inertia)}
     programs = {
         "free_flow": lambda i, m, a, t: free_flow(i, m, a, t)[1],
         "FreeRigidBody": lambda i, m, a, t: FreeRigidBody(i, m, a).quaternion(t),
@@ -291,7 +289,7 @@ def latency_elsewhere(arguments, all_cores):
 
 
 def calgo903_example1(options, rng):
-    """Example 1 with XLA's default flags (one-kernel regions) against the Fortran driver's 0.21 s."""
+    """Example 1 with XLA's default flags against the Fortran driver's 0.21 s."""
     from calgo903_example1 import DATA, FORTRAN_SECONDS
 
     from frbjax import _calgo903 as calgo

@@ -14,17 +14,10 @@ from jaxtyping import Array, Float
 from ._body import _validate, _working_dtype, motion_once
 from ._checks import check_finite, on_host, real_array
 from ._inertia import InertiaTensor, through_principal_frame
-from ._kernel import one_kernel
-
-
-_state_once = one_kernel(motion_once)
 
 
 def _state_in_principal_frame(inertia, angular_momentum, attitude, t, axes):
     return motion_once(inertia, angular_momentum, attitude, t, True, axes)
-
-
-_state_once_in_principal_frame = one_kernel(_state_in_principal_frame)
 
 
 @jax.jit
@@ -43,7 +36,7 @@ def _tensor_free_flow(matrix, moments, axes, angular_momentum, attitude, t):
         return _state_in_principal_frame(moments, *arguments, axes)
 
     def evaluate(prepared, arguments):
-        return _state_once_in_principal_frame(prepared[0], *arguments, prepared[1])
+        return _state_in_principal_frame(prepared[0], *arguments, prepared[1])
 
     prepared = jax.lax.stop_gradient((moments, axes))
     return through_principal_frame(motion, evaluate, matrix, prepared, arguments)
@@ -53,8 +46,7 @@ def _tensor_free_flow(matrix, moments, axes, angular_momentum, attitude, t):
 def _free_flow(inertia, angular_momentum, attitude, t):
     batch = jnp.broadcast_shapes(inertia.shape[:-1], angular_momentum.shape[:-1], attitude.shape[:-1], t.shape)
     inertia, angular_momentum = (jnp.broadcast_to(a, batch + (3,)) for a in (inertia, angular_momentum))
-    # One body (or a few): one kernel (frbjax._kernel); a batch: XLA's fused loops.
-    return _state_once(inertia, angular_momentum, jnp.broadcast_to(attitude, batch + (4,)), t)
+    return motion_once(inertia, angular_momentum, jnp.broadcast_to(attitude, batch + (4,)), t)
 
 
 def free_flow(inertia, angular_momentum, attitude, t) -> tuple[Float[Array, "... 3"], Float[Array, "... 4"]]:

@@ -51,7 +51,6 @@ from . import _quaternion as quaternion
 from ._checks import is_concrete, real_array
 from ._free_flow import free_flow
 from ._inertia import InertiaTensor, validate_tensor
-from ._kernel import one_kernel
 
 
 __all__ = ["METHODS", "RigidBodySplitting", "RigidBodyTerm", "splitting_trajectory"]
@@ -204,9 +203,9 @@ def _per_body_with_momentum(function, t, attitude, momentum, args):
 class _Function(eqx.Module):
     """A user's function kept in a term: its arrays are pytree leaves, the rest static.
 
-    A plain function is all static (the term stays a pytree of arrays, as jit and the one-kernel
-    regions need); a module holding parameters (the torques of :mod:`frbjax.torques`, a bound method
-    of one) keeps its arrays as leaves, so that they are traced and differentiated, never hashed.
+    A plain function is all static (the term stays a pytree of arrays, as jit needs); a module
+    holding parameters (the torques of :mod:`frbjax.torques`, a bound method of one) keeps its arrays
+    as leaves, so that they are traced and differentiated, never hashed.
     """
 
     arrays: object
@@ -572,15 +571,11 @@ class RigidBodySplitting(diffrax.AbstractSolver):
         del solver_state, made_jump
         term, direction = _unwrap(terms)
         arguments = (term, direction * t0, direction * (t1 - t0), y0, args)
-        if len(self.flows) == 1 and not any(isinstance(leaf, jax.core.Tracer) for leaf in jax.tree.leaves(arguments)):
-            # One step of a method with one free flow (leapfrog) called eagerly, outside diffeqsolve:
-            # as a region it is advance's loop of one iteration around the free flow alone, on which
-            # XLA:CPU (jaxlib 0.10.2) aborts the process (as in _trajectory_region); an ordinary program.
-            y1 = _eager_advance(self, *arguments)
+        if any(isinstance(leaf, jax.core.Tracer) for leaf in jax.tree.leaves(arguments)):
+            y1 = self.advance(*arguments)
         else:
-            # A step of one body (or a few) as one kernel (frbjax._kernel): diffrax's loop then
-            # launches one kernel per step for it instead of some hundred.
-            y1 = one_kernel(self.advance)(*arguments)
+            # A step called eagerly, outside diffeqsolve: one compiled program, not op by op.
+            y1 = _eager_advance(self, *arguments)
         return y1, None, dict(y0=y0, y1=y1), None, diffrax.RESULTS.successful
 
     def func(self, terms, t0, y0, args):
@@ -614,9 +609,8 @@ class RigidBodySplitting(diffrax.AbstractSolver):
         if self.kicks[0] != 0:
             momentum = kick(momentum, attitude, kicks[0], t)
 
-        # One loop over the stages, the last kick included even when its coefficient is 0: XLA:CPU
-        # (jaxlib 0.10.2) aborted compiling diffrax's step region without a loop around the free
-        # flows (leapfrog, strang) or with other loop structures (``advance_steps``).
+        # One loop over the stages, the last kick included even when its coefficient is 0: one copy
+        # of the stage in the program, whatever the method's number of stages.
         def stage(state, coefficients):
             momentum, attitude = state
             flow, next_kick, time = coefficients
@@ -659,8 +653,7 @@ class RigidBodySplitting(diffrax.AbstractSolver):
 
             length = coefficients[0].shape[0]
             if length <= 1:
-                # No loop of zero or one iteration: XLA:CPU (jaxlib 0.10.2) aborted compiling one-kernel
-                # regions that held one around other loops.
+                # No loop of zero or one iteration: the stage itself, if any.
                 return stage(state, tuple(c[0] for c in coefficients))[0] if length else state
             return jax.lax.scan(stage, state, coefficients)[0]
 
@@ -699,22 +692,8 @@ class RigidBodySplitting(diffrax.AbstractSolver):
         def kick(momentum, attitude, coefficient, time):
             return self.kick(term, time, coefficient * h, momentum, attitude, args)
 
-        # The matrix exponential of the exact affine kick calls XLA's runtime (an LU solve), so the step
-        # cannot be one kernel (solver.step): then each free flow is one instead, its region given the
-        # moments and the state only (the torques' parameters are no business of it).
         def free_motion(momentum, attitude, time):
             return term.free_motion(momentum, attitude, time)
-
-        if term.momentum_torque is not None and term.linear_in_momentum:
-
-            def is_inertia(leaf):
-                return leaf is term.inertia
-
-            moments_only = eqx.filter(term, is_inertia, is_leaf=is_inertia)
-            region = one_kernel(lambda term, momentum, attitude, time: term.free_motion(momentum, attitude, time))
-
-            def free_motion(momentum, attitude, time):
-                return region(moments_only, momentum, attitude, time)
 
         return kick, free_motion
 
@@ -800,9 +779,9 @@ def _eager_advance(solver, term, t, h, y, args):
 
 
 @functools.lru_cache(maxsize=64)
-def _trajectory_region(solver, steps, dtype, save_every=1):
-    """The loop over ``steps`` steps of ``solver``, the state saved every ``save_every`` steps, as a
-    one-kernel region, made once per (solver, steps, dtype, save_every), so that eager calls of
+def _trajectory_program(solver, steps, dtype, save_every=1):
+    """The loop over ``steps`` steps of ``solver``, the state saved every ``save_every`` steps, as one
+    jitted function, made once per (solver, steps, dtype, save_every), so that eager calls of
     ``splitting_trajectory`` reuse its compiled program."""
 
     def trajectory(term, y0, dt, t0, args):
@@ -811,17 +790,11 @@ def _trajectory_region(solver, steps, dtype, save_every=1):
             return state, state
 
         if steps == save_every:
-            # One block: its state directly (XLA:CPU failed to compile a one-kernel region holding a
-            # loop of one iteration around the loop over the steps).
+            # One block: its state directly, without a loop of one iteration around it.
             return jax.tree.map(lambda x: x[None], saved_steps(y0, jnp.zeros((), dtype))[1])
         return jax.lax.scan(saved_steps, y0, jnp.arange(0, steps, save_every, dtype=dtype))[1]
 
-    if steps == 1 and len(solver.flows) == 1:
-        # One step of a method with one free flow (leapfrog): the region would be ``advance`` alone,
-        # its loop of one iteration around the free flow outermost, on which XLA:CPU (jaxlib 0.10.2)
-        # aborts for an eager call of one body; that loop cannot go, diffrax's step region needs it.
-        return eqx.filter_jit(trajectory)
-    return one_kernel(trajectory)
+    return eqx.filter_jit(trajectory)
 
 
 def splitting_trajectory(term, y0, *, dt, steps, t0=0.0, args=None, method="blanes_moan6", save_every=1):
@@ -861,14 +834,12 @@ def splitting_trajectory(term, y0, *, dt, steps, t0=0.0, args=None, method="blan
     t0 = jnp.asarray(t0, dtype)
     _check_initial_torque(term, t0, y0, args)
 
-    # One body (or a few): the whole loop over steps as one kernel (frbjax._kernel), the speed that
-    # XLA reaches for small loops, without a process-wide flag.  Everything the loop reads is an
-    # argument: a region closes over no tracer of the caller's.
+    # Everything the loop reads is an argument, so that its compiled program serves any state.
     key = (solver, int(steps), jnp.dtype(dtype).name, int(save_every))
     try:
-        region = _trajectory_region(*key)
+        program = _trajectory_program(*key)
     except TypeError:  # a solver that cannot be hashed (a kick solver of the user's, say): no cache
-        region = _trajectory_region.__wrapped__(*key)
-    momenta, attitudes = region(term, y0, dt, t0, args)
+        program = _trajectory_program.__wrapped__(*key)
+    momenta, attitudes = program(term, y0, dt, t0, args)
     ts = t0 + dt * (save_every * jnp.arange(steps // save_every + 1, dtype=dtype))
     return ts, (jnp.concatenate([y0[0][None], momenta]), jnp.concatenate([y0[1][None], attitudes]))

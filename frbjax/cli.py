@@ -7,9 +7,9 @@ almost about its middle axis flips over and over, with the period $4K(m)/B$ pred
 elliptic integral $K$; it plots $L(t)$ and $q(t)$ and animates the tumbling body (`FlipAnimation`).
 
 This is an application, not the library: it enables 64-bit JAX and a persistent compilation cache.
-It leaves XLA's flags alone: one body stepping in time runs as one kernel through the library's own
-one-kernel regions (``frbjax._kernel``).  JAX and matplotlib are imported when a command needs
-them, so that ``--help`` answers at once.
+It leaves XLA's flags alone: on the CPU the free flows of the splitting steps run in the package's
+compiled kernels (``FRBJAX_KERNELS=jax`` runs the JAX formulas instead).  JAX and matplotlib are
+imported when a command needs them, so that ``--help`` answers at once.
 """
 
 from __future__ import annotations
@@ -70,9 +70,8 @@ environment:
   FRBJAX_CACHE_DIR  where compiled XLA programs are kept between runs (default:
                     $XDG_CACHE_HOME/frbjax or ~/.cache/frbjax; empty: no cache).  JAX's own
                     JAX_COMPILATION_CACHE_DIR takes precedence.
-  FRBJAX_ONE_KERNEL 0: compile one body's steps as XLA's ordinary kernels instead of one
-                    kernel (frbjax._kernel; for comparison, example 1 then runs about 6 times
-                    slower)."""
+  FRBJAX_KERNELS    jax: the motion as JAX formulas compiled by XLA instead of the
+                    package's compiled kernels on the CPU (for comparison)."""
 
 
 # --------------------------------------------------------------------------------------------- parser

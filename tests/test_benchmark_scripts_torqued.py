@@ -40,9 +40,9 @@ def test_calgo903_example1_quick(tmp_path):
     result = json.loads((tmp_path / "calgo903_example1.json").read_text())
     assert result["steps"] == 200 and result["free_flows"] == 3000
     assert finite_positive(result["run_seconds"])
-    # Measured 2.4e-13 over the first 200 steps, with one-kernel regions and, in the script's second
-    # process, with XLA's ordinary kernels (FRBJAX_ONE_KERNEL=0).
-    assert result["xla_runtime"] == "one_kernel_regions"
+    # Measured 2.4e-13 over the first 200 steps, with the compiled kernels and, in the script's second
+    # process, with the JAX formulas (FRBJAX_KERNELS=jax).
+    assert result["motion"] == "compiled_kernels"
     assert result["max_error_all_steps"] < 1e-12
-    assert finite_positive(result["ordinary_kernels"]["run_seconds"])
-    assert result["ordinary_kernels"]["max_error_all_steps"] < 1e-12
+    assert finite_positive(result["jax_formulas"]["run_seconds"])
+    assert result["jax_formulas"]["max_error_all_steps"] < 1e-12

@@ -114,8 +114,8 @@ def test_console_script(tmp_path, cache_environment):
 
 @needs_data
 def test_example1_leaves_xla_flags_alone(tmp_path, capsys, monkeypatch):
-    """The command runs one body's steps as one kernel through the library (frbjax._kernel), not
-    through XLA_FLAGS, which it leaves as it found them (here: absent).
+    """The command takes its speed from the library (the compiled kernels on the CPU), not from
+    XLA_FLAGS, which it leaves as it found them (here: absent).
 
     1000 steps against the Fortran output: measured 7.0e-13 (5e-12 is the tolerance).
     """

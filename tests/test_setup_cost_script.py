@@ -31,7 +31,7 @@ def test_setup_cost_quick(tmp_path):
         assert compile_row[f"{name}_kernels"]["fusions"] > 0, name
     for name in ("free_flow", "FreeRigidBody"):
         assert result["rows"]["one_body"][name]["kernels"]["fusions"] > 0, name
-    # Example 1 runs with XLA's default loop settings (its speed comes from the one-kernel regions).
+    # Example 1 runs with XLA's default loop settings.
     assert "xla_backend_extra_options" not in result["rows"]["calgo903_example1"]["xla_flags"]
     assert result["rows"]["state_at_T"]["diffrax_ok"]
     assert result["rows"]["state_at_T"]["max_difference"] < 1e-10

@@ -17,13 +17,8 @@ The heavy top: principal moments (1, 1.6, 2.3), weight 1 along -z, centre of mas
 from __future__ import annotations
 
 import functools
-import json
-import os
 import pathlib
 import re
-import subprocess
-import sys
-import textwrap
 
 import diffrax
 import jax
@@ -439,21 +434,10 @@ def test_bad_save_every():
             frbjax.splitting_trajectory(TERM, Y0, dt=0.1, steps=10, args=ARGS, save_every=save_every)
 
 
-# One subprocess: an XLA:CPU abort compiling a one-kernel region kills the process, not the test.  Prints
-# "CASE ..." before each case (the last one names an abort) and "RESULT {case: error}" at the end.
-_SAVED_STATES_SCRIPT = textwrap.dedent("""
-    import json, sys
-    import jax
-    jax.config.update("jax_enable_x64", True)
-    import numpy as np
-    import frbjax
-
-    methods, cases, bodies, jitted = json.loads(sys.argv[1])
+def _saved_states_errors(methods, cases, bodies, jitted):
+    """{case: the largest difference between the states saved every few steps and the same rows of
+    every step}, one body eager or ``bodies`` under jit."""
     args = {"weight": 1.0, "chi": np.array([0.05, 0.1, 0.4])}
-
-    def heavy_top_potential(t, q, args):
-        return args["weight"] * (frbjax.quaternion_to_matrix(q)[2] @ args["chi"])
-
     term = frbjax.RigidBodyTerm(np.array([1.0, 1.6, 2.3]), potential=heavy_top_potential)
     rng = np.random.default_rng(1)
     attitudes = rng.normal(size=(bodies, 4))
@@ -462,8 +446,10 @@ _SAVED_STATES_SCRIPT = textwrap.dedent("""
 
     def trajectory(method, steps, save_every):
         def run(y0):
-            return frbjax.splitting_trajectory(term, y0, dt=0.1, steps=steps, args=args, method=method,
-                                               save_every=save_every)[1]
+            return frbjax.splitting_trajectory(
+                term, y0, dt=0.1, steps=steps, args=args, method=method, save_every=save_every
+            )[1]
+
         return [np.asarray(x) for x in (jax.jit(run) if jitted else run)(y0)]
 
     errors = {}
@@ -471,24 +457,20 @@ _SAVED_STATES_SCRIPT = textwrap.dedent("""
         # Every step of the longest case: the first steps of a trajectory are those of a shorter one.
         every = trajectory(method, max(steps for steps, _ in cases), 1)
         for steps, save_every in cases:
-            print("CASE", method, steps, save_every, flush=True)
             saved = trajectory(method, steps, save_every)
-            rows = [x[:steps + 1:save_every] for x in every]
+            rows = [x[: steps + 1 : save_every] for x in every]
             finite = all(np.isfinite(x).all() for x in saved)
-            errors[f"{method} {steps}/{save_every}"] = (max(float(np.abs(x - y).max()) for x, y in zip(saved, rows))
-                                                        if finite else float("inf"))
+            errors[f"{method} {steps}/{save_every}"] = (
+                max(float(np.abs(x - y).max()) for x, y in zip(saved, rows)) if finite else float("inf")
+            )
         if bodies == 1 and not jitted:
             # The solver's own step, called eagerly outside diffeqsolve, against the first saved step.
-            print("CASE", method, "step", flush=True)
             solver = frbjax.RigidBodySplitting(method)
             step = solver.step(term, 0.0, 0.1, y0, args, solver.init(term, 0.0, 0.1, y0, args), False)[0]
             errors[f"{method} step"] = max(float(np.abs(np.asarray(x) - y[1]).max()) for x, y in zip(step, every))
-    print("RESULT " + json.dumps(errors))
-""")
+    return errors
 
 
-# One body eager: the methods in two processes of about 30 s each (one process was 75 s of CPU);
-# 100 bodies under jit: each method in its own process (both in one took 64 s).
 @pytest.mark.parametrize(
     "bodies, jitted, methods, cases",
     [
@@ -506,29 +488,15 @@ _SAVED_STATES_SCRIPT = textwrap.dedent("""
 )
 def test_saved_states_compile_for_every_method(bodies, jitted, methods, cases):
     """Every method compiles and saves the states of every step (one step, every 2nd of 4, and for
-    100 bodies every 5th of 10): one body called eagerly (one-kernel regions: XLA:CPU, jaxlib 0.10.2,
-    aborted the process on one leapfrog step) and 100 bodies under jit (the ordinary program).  One
-    step is the region of one block (steps == save_every), every 2nd of 4 the loop over blocks of
-    several steps: every 5th of 10 is a loop of the same form, left out for one body (about 2.5 s of
-    compiling per method).  Measured: the saved states equal the rows of save_every = 1 to 1.1e-15
-    (one body) and 4.4e-15 (100 bodies), 0 for the methods that join no free flows; a larger matrix,
-    each case in its own process (7 methods x (steps, save_every) in (1, 1) (2, 1) (2, 2) (4, 2) (6, 3)
-    (10, 5) (10, 10) (12, 4) x eager and jit, one body, and leapfrog's for 100 bodies: 144 cases), to
-    2.1e-15.  One body eager also calls each method's ``RigidBodySplitting.step`` on its own
-    (leapfrog's aborted the process too)."""
-    env = dict(os.environ, JAX_PLATFORMS="cpu")
-    process = subprocess.run(
-        [sys.executable, "-c", _SAVED_STATES_SCRIPT, json.dumps([methods, cases, bodies, jitted])],
-        check=False,
-        cwd=REPOSITORY,
-        env=env,
-        capture_output=True,
-        text=True,
-        timeout=600,
-    )
-    started = [line for line in process.stdout.splitlines() if line.startswith("CASE ")]
-    assert process.returncode == 0, f"{started[-1:]} exit {process.returncode}: {process.stderr[-2000:]}"
-    errors = json.loads(process.stdout.splitlines()[-1][len("RESULT ") :])
+    100 bodies every 5th of 10): one body called eagerly and 100 bodies under jit.  One step is one
+    block (steps == save_every), every 2nd of 4 the loop over blocks of several steps: every 5th of
+    10 is a loop of the same form, left out for one body (about 2.5 s of compiling per method).
+    Measured: the saved states equal the rows of save_every = 1 to 1.1e-15 (one body) and 4.4e-15
+    (100 bodies), 0 for the methods that join no free flows; a larger matrix (7 methods x (steps,
+    save_every) in (1, 1) (2, 1) (2, 2) (4, 2) (6, 3) (10, 5) (10, 10) (12, 4) x eager and jit, one
+    body, and leapfrog's for 100 bodies: 144 cases), to 2.1e-15.  One body eager also calls each
+    method's ``RigidBodySplitting.step`` on its own."""
+    errors = _saved_states_errors(methods, cases, bodies, jitted)
     assert len(errors) == len(methods) * (len(cases) + (not jitted))
     assert max(errors.values()) < 1e-13, errors
 

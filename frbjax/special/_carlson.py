@@ -119,8 +119,8 @@ def _duplicate(step, state, x, rolled=False, deviation=None):
         return state, quarter
     carry = (jnp.ones_like(x), state)
     if is_rolled(x):
-        # One point or a few: a rolled loop of every step, masked (a loop that ends early needs a
-        # reduction in its condition, which a one-kernel region cannot hold: frbjax._kernel).
+        # One point or a few: a rolled loop of every step, masked (the same steps, hence the same
+        # values, as the unrolled blocks below).
         quarter, state = lax.fori_loop(0, steps, body, carry)
     else:
         # Unrolled in blocks: the first always, each later one only when some point needs it.  The
