@@ -33,7 +33,7 @@ from ._sharding import batch_mesh, pad_batch, shard_batch, shard_bodies
 
 if TYPE_CHECKING:
     # The names imported on first use (``__getattr__`` below), as type checkers should see them.
-    from . import lightcurve as lightcurve, torques as torques
+    from . import lightcurve as lightcurve, posterior as posterior, torques as torques
     from ._splitting import METHODS as SPLITTING_METHODS, RigidBodySplitting, RigidBodyTerm, splitting_trajectory
     from .fit import AttitudeFit, fit_attitude
 
@@ -80,6 +80,11 @@ def __getattr__(name):
         import importlib
 
         return importlib.import_module(".lightcurve", __name__)
+    # frbjax.posterior (sampling by numpyro's NUTS) imports numpyro.
+    if name == "posterior":
+        import importlib
+
+        return importlib.import_module(".posterior", __name__)
     if name == "SPLITTING_METHODS":
         from ._splitting import METHODS
 
