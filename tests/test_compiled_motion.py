@@ -106,18 +106,34 @@ def test_the_jacobians_agree(mode):
     assert (np.abs(compiled - reference) / scale)[moving].max() <= JACOBIAN_TOLERANCE
 
 
-@pytest.mark.parametrize("index", [0, 30, 50])
-def test_the_hessians_agree(index):
-    """Second derivatives (the order-2 kernel) on the separatrix, a symmetric body and random bodies."""
+HESSIAN_POINTS = (0, 30, 50)
+
+
+@pytest.fixture(scope="module")
+def hessians():
+    """{index: (compiled path's Hessian, JAX path's)} of the psi-carrying output at the bodies
+    HESSIAN_POINTS: each path's Hessian compiled once (jit, the regime an argument) and evaluated at
+    every point (eager ``jax.hessian`` of the JAX path dispatched its thousands of operations one by
+    one: 65 s for the first point)."""
     inertia, unit, regime, tau = _bodies(64)
-    point = jnp.concatenate([inertia[index], unit[index], tau[index : index + 1]])
-    this_regime = regime[index]
 
     def psi_carrying_output(path):
-        return lambda x: path(x[:3], x[3:6], this_regime, x[6])[2][1]
+        return lambda x, regime: path(x[:3], x[3:6], regime, x[6])[2][1]
 
-    compiled = np.asarray(jax.hessian(psi_carrying_output(_compiled_motion.working_motion))(point))
-    reference = np.asarray(jax.hessian(psi_carrying_output(_jax_path))(point))
+    programs = [
+        jax.jit(jax.hessian(psi_carrying_output(path))) for path in (_compiled_motion.working_motion, _jax_path)
+    ]
+    results = {}
+    for index in HESSIAN_POINTS:
+        point = jnp.concatenate([inertia[index], unit[index], tau[index : index + 1]])
+        results[index] = [np.asarray(program(point, regime[index])) for program in programs]
+    return results
+
+
+@pytest.mark.parametrize("index", HESSIAN_POINTS)
+def test_the_hessians_agree(hessians, index):
+    """Second derivatives (the order-2 kernel) on the separatrix, a symmetric body and random bodies."""
+    compiled, reference = hessians[index]
     assert np.isfinite(compiled).all()
     np.testing.assert_allclose(compiled, reference, rtol=0, atol=1e-12 * (1 + np.abs(reference).max()))
 

@@ -13,11 +13,15 @@ one to the series' integral over the reduced argument.
 
 from __future__ import annotations
 
+import json
+import pathlib
+
 import jax
 import jax.numpy as jnp
 import mpmath
 import numpy as np
 import pytest
+from _series_reference import CHARACTERISTICS, COMPLEMENTS, complete, expanded, reference
 
 from frbjax import _series
 
@@ -42,55 +46,34 @@ CASES = [
     (0.0, -30.0),
 ]
 
-# Next to the separatrix: mc = 1 - m (exact in binary64) and characteristics over the whole range.
-COMPLEMENTS = [1e-3, 1e-4, 7e-5, 1e-5, 1e-8, 1e-12, 1e-16, 1e-30]
-CHARACTERISTICS = [-1e-12, -1e-6, -0.3, -1.0, -1.5, -30.0, -1e4, -1e10]
+SERIES_DATA = pathlib.Path(__file__).parent / "data" / "series_references.json"
 
 
-def expanded(chi, value, u):
-    return value - u if chi >= -1 else value
-
-
-def reference(mc, chi, u):
-    """(sn, cn, dn, the expanded integral) for m = 1 - mc; am continued through whole half-periods."""
-    mc, chi, u = mpmath.mpf(mc), mpmath.mpf(chi), mpmath.mpf(u)
-    m = 1 - mc
-    quarter = mpmath.ellipk(m)
-    turns = mpmath.nint(u / (2 * quarter))
-    reduced = u - 2 * quarter * turns
-    sn = mpmath.ellipfun("sn", u, m=m)
-    cn = mpmath.ellipfun("cn", u, m=m)
-    dn = mpmath.ellipfun("dn", u, m=m)
-    # From sn and cn (>= 0) of the reduced argument: asin(sn) would lose half the digits where sn ~ 1.
-    amplitude = mpmath.atan2(mpmath.ellipfun("sn", reduced, m=m), mpmath.ellipfun("cn", reduced, m=m))
-    third = mpmath.ellippi(chi, amplitude, m) + 2 * turns * mpmath.ellippi(chi, m)
-    return [float(v) for v in (sn, cn, dn, expanded(chi, third, u))]
-
-
-def complete(mc, chi):
-    """The expanded integral at u = K."""
-    m = 1 - mpmath.mpf(mc)
-    return float(expanded(chi, mpmath.ellippi(chi, m), mpmath.ellipk(m)))
-
-
-def evaluate(data, mc, chi, u):
+def evaluate(data, mc, chi, u, whole_integral=None):
     """(sn, cn, dn, expanded integral) from the series, continued as the body continues them."""
     sn_r, cn_r, dn, reduced, turns = _series.evaluate_series(data, jnp.float64(mc), jnp.asarray(u))
     turns = np.asarray(turns)
     parity = 1 - 2 * np.mod(turns, 2)
-    whole = np.where(turns == 0, 0, 2 * turns * complete(mc, chi)) if np.any(turns) else 0
+    if np.any(turns):
+        whole_integral = complete(mc, chi) if whole_integral is None else whole_integral
+        whole = np.where(turns == 0, 0, 2 * turns * whole_integral)
+    else:
+        whole = 0
     third = whole + np.asarray(reduced)
     return np.stack([parity * np.asarray(sn_r), parity * np.asarray(cn_r), np.asarray(dn), third], -1)
 
 
-def errors(mc, chi, data, u, theirs):
-    ours = evaluate(data, mc, chi, u)
+def errors(mc, chi, data, u, theirs, whole_integral=None):
+    """Worst errors of the Jacobi functions and of the integral; ``whole_integral``: the expanded
+    integral at u = K (mpmath's, computed here when not given)."""
+    whole_integral = complete(mc, chi) if whole_integral is None else whole_integral
+    ours = evaluate(data, mc, chi, u, whole_integral)
     quarter = float(data.quarter)
     # Errors relative to the argument's size in half-periods (the reduction u - 2jK rounds like u),
     # the integral's relative to its scale (its value at u = K).
     scale = 1 + np.abs(u) / quarter
     jacobi = (np.abs(ours[:, :3] - theirs[:, :3]) / scale[:, None]).max()
-    third = (np.abs(ours[:, 3] - theirs[:, 3]) / scale / abs(complete(mc, chi))).max()
+    third = (np.abs(ours[:, 3] - theirs[:, 3]) / scale / abs(whole_integral)).max()
     return jacobi, third
 
 
@@ -143,26 +126,26 @@ def test_complementary_series_against_mpmath(mc, forced, monkeypatch):
     ``forced``: every body with m > 1/2 takes the complementary series (down to m = 0.999, q' = 6e-5,
     beyond the range it serves in float64), otherwise each takes the series chosen for it (the
     complementary one from m = 0.99993).  Points include u within 1e-9 of 0 and of K (the zeros of
-    sn and cn, formed by expm1) and several half-periods.
+    sn and cn, formed by expm1) and several half-periods.  The references are committed
+    (tests/data/series_references.json, 60 digits, from tests/data/make_series_references.py: 80 s
+    of mpmath that every run recomputed before).
     """
     if forced:
         monkeypatch.setattr(_series, "_largest_nome", lambda x: 0.0)
     m = 1 - mc
-    with mpmath.workdps(60):  # ellippi next to the separatrix, and Pi - u for chi -> 0
-        worst = [0.0, 0.0]
-        for chi in CHARACTERISTICS:
-            data = _series.coefficients(jnp.float64(m), jnp.float64(mc), jnp.float64(chi))
-            assert bool(data.complementary) == (forced or mc < 7e-5)
-            quarter = float(data.quarter)
-            u = np.concatenate(
-                [
-                    np.linspace(-2.6, 2.6, 13) * quarter,
-                    [1e-9, -3e-4, 0.3, quarter - 1e-9, quarter * (1 - 1e-5), -0.7 * quarter],
-                ]
-            )
-            theirs = np.array([reference(mc, chi, x) for x in u])
-            for k, error in enumerate(errors(mc, chi, data, u, theirs)):
-                worst[k] = max(worst[k], error)
+    cases = [case for case in json.loads(SERIES_DATA.read_text())["cases"] if case["mc"] == mc]
+    assert [case["chi"] for case in cases] == CHARACTERISTICS
+    worst = [0.0, 0.0]
+    for case in cases:
+        chi = case["chi"]
+        data = _series.coefficients(jnp.float64(m), jnp.float64(mc), jnp.float64(chi))
+        assert bool(data.complementary) == (forced or mc < 7e-5)
+        # The committed arguments are multiples of mpmath's K: the series' own is the same to rounding.
+        assert abs(float(data.quarter) - case["quarter"]) <= 4e-16 * case["quarter"]
+        u = np.array(case["u"])
+        theirs = np.array(case["sn_cn_dn_integral"])
+        for k, error in enumerate(errors(mc, chi, data, u, theirs, case["complete"])):
+            worst[k] = max(worst[k], error)
     # Measured over these cases: Jacobi functions 6.3e-16 times (1 + |u|/K) (mc = 1e-8), third kind
     # 4.7e-16 of the integral at u = K, times (1 + |u|/K) (mc = 1e-12).
     assert worst[0] <= 9e-16, worst

@@ -89,9 +89,11 @@ def test_the_paths_agree_on_first_and_second_derivatives(monkeypatch):
         monkeypatch.setenv("FRBJAX_KERNELS", path)
         jax.clear_caches()
         function = lambda v: special.elliprj(*v)  # noqa: E731
+        # Jitted: eagerly, the JAX path's Hessian dispatched its thousands of operations one by one
+        # (65 s of this test).
         results[path] = [
-            np.asarray(jax.vmap(jax.grad(function))(points)),
-            np.asarray(jax.vmap(jax.hessian(function))(points)),
+            np.asarray(jax.jit(jax.vmap(jax.grad(function)))(points)),
+            np.asarray(jax.jit(jax.vmap(jax.hessian(function)))(points)),
         ]
     jax.clear_caches()
     np.testing.assert_allclose(results["compiled"][0], results["jax"][0], rtol=1e-13)
