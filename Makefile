@@ -63,8 +63,9 @@ test-all: $(STAMP)
 # its validation, the Jacobi functions, a fit (optimistix), a torque (diffrax), a light curve, a
 # posterior (numpyro).  It checks that they work, not how fast: older JAX compiles the suite's
 # programs several times slower, so one test may take up to 10 minutes (FRBJAX_TEST_TIME_LIMIT; 60 s
-# in `make test`).  The compiled kernels are built again without build isolation, with the floor's jaxlib: pip's isolated build takes
-# the newest jaxlib, whose FFI headers jaxlib 0.7.2 refuses (frbjax then warns and runs the JAX path).
+# in `make test`).  The compiled kernels are built again without build isolation, with the floor's
+# jaxlib: pip's isolated build takes the newest jaxlib, whose FFI headers jaxlib 0.7.2 refuses
+# (frbjax then warns and runs the JAX path).
 FLOOR_VENV := .venv-floor
 FLOOR_TESTS := tests/test_validation.py tests/special/test_jacobi.py tests/test_fit.py::test_gyro_data \
 	tests/test_torques.py::test_damped_sphere_exact_damping_kick tests/test_lightcurve.py::test_periods_against_the_motion \
