@@ -522,7 +522,9 @@ CHECK_POINTS = {
 
 @pytest.mark.parametrize("name", list(CHECK_POINTS))
 def test_check_grads(name):
-    fn = getattr(special, name)
+    # Jitted: check_grads' JVPs and VJPs then compile once, where eagerly the JAX operations ran one
+    # by one (13 s for elliprj).
+    fn = jax.jit(getattr(special, name))
     for point in CHECK_POINTS[name]:
         # A finite-difference step below the default 1e-4: at ellipkm1(0.01) the third derivative
         # (~ 1/p^3) makes the default step's truncation error 1e-4 relative.
@@ -533,9 +535,11 @@ def test_check_grads_with_mc():
     # The parameter tangent is (dm - dmc)/2 (module notes): the derivative along mc = 1 - m, so the
     # finite differences must move m and mc together.
     point = tuple(jnp.asarray(x) for x in (1.3, 0.8))
-    check_grads(lambda u, m: special.ellipj(u, m, mc=1 - m), point, order=1, modes=("fwd", "rev"))
+    check_grads(jax.jit(lambda u, m: special.ellipj(u, m, mc=1 - m)), point, order=1, modes=("fwd", "rev"))
     point = tuple(jnp.asarray(x) for x in (0.3, 1.1, 0.6))
-    check_grads(lambda n, phi, m: special.ellippiinc(n, phi, m, mc=1 - m), point, order=1, modes=("fwd", "rev"))
+    check_grads(
+        jax.jit(lambda n, phi, m: special.ellippiinc(n, phi, m, mc=1 - m)), point, order=1, modes=("fwd", "rev")
+    )
 
 
 def test_grad_under_jit_and_vmap():
