@@ -56,13 +56,27 @@ def _jax_path(inertia, unit_momentum, regime, tau):
     return _regimes.evaluate_once(_regimes.orbit_constants(inertia, unit_momentum, regime), unit_momentum, tau)
 
 
+# The JAX path's batch as one compiled program (called eagerly, its operations ran one by one).
+_jax_path_program = jax.jit(_jax_path)
+
+
+@jax.jit
+def _jax_series(inertia, unit, regime, tau):
+    """The JAX series' (conj(q̂(0)) ⊗ q̂(tau), L(tau)) in the working frame, one compiled program."""
+    from frbjax import _quaternion as quaternion
+
+    consts = _regimes.constants(inertia, unit, regime)
+    q, momentum = _regimes.evaluate(consts, tau)
+    return quaternion.multiply(quaternion.conjugate(_regimes.reference(consts, unit)), q), momentum
+
+
 @pytest.mark.parametrize("dtype", [np.float64, np.float32])
 def test_the_values_agree_in_every_regime(dtype):
     inertia, unit, regime, tau = _bodies(512, dtype)
     regimes = np.asarray(regime)
     assert set(np.unique(regimes)) == {0, 1, 2, 3}
     compiled = _compiled_motion.working_motion(inertia, unit, regime, tau)
-    reference = _jax_path(inertia, unit, regime, tau)
+    reference = _jax_path_program(inertia, unit, regime, tau)
     moving = regimes != _regimes.UNIFORM
     scale = 1 + np.abs(np.asarray(tau, np.float64))[moving]
     for ours, theirs in zip(compiled, reference):
@@ -80,7 +94,8 @@ def _diagonal_jacobians(path, inertia, unit, regime, tau):
         return jnp.concatenate(path(point[:3], point[3:6], regime, point[6]), -1)
 
     points = jnp.concatenate([inertia, unit, tau[:, None]], -1)
-    return np.asarray(jax.vmap(jax.jacfwd(one))(points, regime))
+    # Jitted: eagerly the JAX path's batched operations were dispatched one by one.
+    return np.asarray(jax.jit(jax.vmap(jax.jacfwd(one)))(points, regime))
 
 
 @pytest.mark.parametrize("mode", ["forward", "reverse"])
@@ -100,13 +115,14 @@ def test_the_jacobians_agree(mode):
             return jnp.concatenate(_compiled_motion.working_motion(point[:3], point[3:6], regime, point[6]), -1)
 
         points = jnp.concatenate([inertia, unit, tau[:, None]], -1)
-        compiled = np.asarray(jax.vmap(jax.jacrev(one))(points, regime))
+        compiled = np.asarray(jax.jit(jax.vmap(jax.jacrev(one)))(points, regime))
     assert np.isfinite(compiled).all()
     scale = (1 + np.abs(np.asarray(tau)))[:, None, None] * (1 + np.abs(reference))
     assert (np.abs(compiled - reference) / scale)[moving].max() <= JACOBIAN_TOLERANCE
 
 
 HESSIAN_POINTS = (0, 30, 50)
+FAST_COMPILE_OPTIONS = {"xla_cpu_use_fusion_emitters": False, "xla_backend_optimization_level": 0}
 
 
 @pytest.fixture(scope="module")
@@ -120,14 +136,14 @@ def hessians():
     def psi_carrying_output(path):
         return lambda x, regime: path(x[:3], x[3:6], regime, x[6])[2][1]
 
-    programs = [
-        jax.jit(jax.hessian(psi_carrying_output(path))) for path in (_compiled_motion.working_motion, _jax_path)
-    ]
-    results = {}
-    for index in HESSIAN_POINTS:
-        point = jnp.concatenate([inertia[index], unit[index], tau[index : index + 1]])
-        results[index] = [np.asarray(program(point, regime[index])) for program in programs]
-    return results
+    points = {index: jnp.concatenate([inertia[index], unit[index], tau[index : index + 1]]) for index in HESSIAN_POINTS}
+    programs = []
+    for path in (_compiled_motion.working_motion, _jax_path):
+        lowered = jax.jit(jax.hessian(psi_carrying_output(path))).lower(points[0], regime[0])
+        # The JAX path's Hessian is a large program: with XLA:CPU's fusion emitters and LLVM's
+        # optimisations off it compiles faster (the same arithmetic).
+        programs.append(lowered.compile(compiler_options=FAST_COMPILE_OPTIONS))
+    return {index: [np.asarray(program(points[index], regime[index])) for program in programs] for index in points}
 
 
 @pytest.mark.parametrize("index", HESSIAN_POINTS)
@@ -176,9 +192,7 @@ def test_the_series_kernel_agrees_with_the_jax_series(dtype):
 
     inertia, unit, regime, tau = _bodies(400, dtype)
     moving = np.asarray(regime) != _regimes.UNIFORM
-    consts = _regimes.constants(inertia, unit, regime)
-    theirs_q, theirs_l = _regimes.evaluate(consts, tau)
-    theirs_q = quaternion.multiply(quaternion.conjugate(_regimes.reference(consts, unit)), theirs_q)
+    theirs_q, theirs_l = _jax_series(inertia, unit, regime, tau)
     record = _compiled_motion.series_record(inertia, unit, regime)
     ours_q, ours_l = _compiled_motion.series_motion(record, inertia, unit, regime, tau)
     start = _compiled_motion.working_motion(inertia, unit, regime, jnp.zeros_like(tau))[1]
