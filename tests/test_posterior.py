@@ -270,3 +270,42 @@ def test_to_arviz_without_arviz(monkeypatch):
     monkeypatch.setitem(sys.modules, "arviz", None)
     with pytest.raises(ImportError, match="arviz"):
         result.to_arviz()
+
+
+def test_tensor_with_gyro_data():
+    """``inertia="tensor"`` with gyro data: a body whose principal axes are tilted from the data's
+    axes (rotation vector (0.3, -0.2, 0.5)), moments 0.55 : 0.8 : 1, 40 attitudes at 1 mrad and body
+    rates at 1 mrad/s.  The inertia tensor (every entry) and the angular velocity at t = 0 inside the
+    posterior's 99% central intervals, converged chains.  Measured: all inside, R-hat 1.00, no
+    divergences, the tensor's largest posterior standard deviation 1.4e-4 without gyro data; 27 s
+    with its compilation (one more sampler program: the tensor's 11 parameters)."""
+    rng = np.random.default_rng(11)
+    moments = np.array([0.55, 0.8, 1.0])
+    axes_rotation = quaternion.exp_pure(jnp.array([0.3, -0.2, 0.5]))
+    axes = np.asarray(quaternion.as_matrix(axes_rotation))
+    omega = np.array([0.5, 0.2, 0.7])  # principal frame, t = 0
+    q_principal, omega_principal = motion(
+        jnp.asarray(moments), jnp.asarray(moments * omega), jnp.array([1.0, 0.0, 0.0, 0.0]), TIMES
+    )
+    # x_space = R_principal(t) axes^T x_data: the data frame's attitude is q(t) ⊗ conj(q_axes).
+    q = quaternion.multiply(q_principal, quaternion.conjugate(axes_rotation))
+    q = np.asarray(quaternion.multiply(q, quaternion.exp_pure(jnp.asarray(rng.normal(scale=NOISE, size=(40, 3))))))
+    rates = np.asarray(omega_principal) @ axes.T + rng.normal(scale=NOISE, size=(40, 3))
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", PosteriorWarning)
+        result = posterior(
+            TIMES, q, inertia="tensor", angular_velocity_data=rates, angular_velocity_sigma=NOISE, num_chains=2
+        )
+    assert result.parameters.shape == (2 * DRAWS, 11)
+    assert float(np.max(result.r_hat)) < 1.01 and int(np.sum(result.divergences)) == 0
+    tensors = np.einsum(
+        "sij,sj,skj->sik",
+        np.asarray(result.principal_axes),
+        np.asarray(result.inertia),
+        np.asarray(result.principal_axes),
+    )
+    low, high = np.quantile(tensors, [0.005, 0.995], axis=0)
+    truth = axes @ np.diag(moments) @ axes.T
+    assert np.all((low <= truth) & (truth <= high)), (truth, low, high)
+    low, high = np.quantile(np.asarray(result.angular_velocity), [0.005, 0.995], axis=0)
+    assert np.all((low <= axes @ omega) & (axes @ omega <= high))
