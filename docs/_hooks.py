@@ -35,6 +35,8 @@ FIGURES = (
     "torques_basilisk.png",
     "torques_energy.png",
     "torques_debris.png",
+    "posterior_vs_fit.png",
+    "posterior_samplers.png",
 )
 HELP_MARKER = re.compile(r"<!-- frbjax-help:(?P<arguments>[^>]*)-->")
 
