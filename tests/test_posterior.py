@@ -173,6 +173,27 @@ def test_recovery_of_a_triaxial_body():
     assert "r_hat" in str(summary)
 
 
+def test_two_modes_next_to_the_separatrix():
+    """A body 1.4e-4 from the separatrix on the long-axis side (moments 0.6 : 0.8 : 1, Omega(0) =
+    (0.6, 0.05, 0.4645), 2 E I2 / |L|^2 = 1.00014): with 10 mrad of noise the data cannot tell the
+    modes apart and the posterior holds both (measured: 18.5% short-axis, 81.5% long-axis, R-hat
+    1.001: the chains cross the separatrix, a surface inside one connected posterior); with 1 mrad
+    they can, and every draw is in long-axis mode.  The module's sampler program serves both (1.3 s
+    each)."""
+    moments, omega = np.array([0.6, 0.8, 1.0]), np.array([0.6, 0.05, 0.4645])
+    probabilities = {}
+    for noise in (1e-2, 1e-3):
+        q = observed(moments, omega, np.array([1.0, 0.0, 0.0, 0.0]), TIMES, np.random.default_rng(5), noise=noise)
+        with warnings.catch_warnings():
+            warnings.simplefilter("error", PosteriorWarning)
+            result = attitude_posterior(
+                TIMES, q, attitude_sigma=noise, num_chains=CHAINS, num_warmup=WARMUP, num_samples=DRAWS, progress=False
+            )
+        probabilities[noise] = result.mode_probabilities()
+    assert 0.05 < probabilities[1e-2]["short_axis"] < 0.5 < probabilities[1e-2]["long_axis"], probabilities
+    assert probabilities[1e-3]["long_axis"] == 1.0, probabilities
+
+
 # ----------------------------------------------------------------------------------- calibration
 
 
