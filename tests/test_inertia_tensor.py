@@ -464,7 +464,9 @@ DERIVATIVE_TOLERANCE = {
     "slightly_tilted_minor_axis": (4.5e-12, 3e-11),  # measured dL 2.7e-12, dq 1.4e-11
     "near_axisymmetric_oblate_1e-09": (1.4e-8, 4e-9),  # measured dL 9.0e-9, dq 2.5e-9
     "near_axisymmetric_prolate_1e-09": (4e-10, 6e-10),  # measured dL 2.5e-10, dq 4.0e-10
-    "near_axisymmetric_oblate_1e-06": (3e-10, 3.5e-10),  # measured dL 1.8e-10, dq 1.2e-10
+    # measured dL 1.8e-10 (JAX path), 3.16e-10 (compiled kernels), dq 1.2e-10, 1.29e-10: rounding over the
+    # gap g = 1e-6 between the two close moments, eps / g = 2.2e-10 (FORWARD_REVERSE_TOLERANCE below)
+    "near_axisymmetric_oblate_1e-06": (4e-10, 3.5e-10),
     "axisymmetric_oblate": (1.3e-12, 3.2e-12),  # measured dL 3.6e-13, dq 1.9e-12
     "axisymmetric_prolate": (7e-13, 2.7e-12),  # measured dL 4.8e-13, dq 1.8e-12
     "sphere": (5.5e-13, 1.4e-12),  # measured dL 3.6e-13, dq 9.1e-13
