@@ -605,6 +605,18 @@ def _with_omitted_rows(rows, omitted):
     return full
 
 
+def _reference_sample(times, quaternions):
+    """The data sorted by time (unit quaternions) and the reference sample: (order, sorted times,
+    sorted quaternions, the index of the time nearest 0, that time t_ref, the observed attitude there
+    with w >= 0)."""
+    order = np.argsort(times, kind="stable")
+    times_sorted, q_sorted = times[order], quaternions[order]
+    q_sorted = q_sorted / np.linalg.norm(q_sorted, axis=-1, keepdims=True)
+    index = int(np.argmin(np.abs(times_sorted)))
+    reference = q_sorted[index] * (1.0 if q_sorted[index, 0] >= 0 else -1.0)
+    return order, times_sorted, q_sorted, index, times_sorted[index], reference
+
+
 def fit_attitude(
     times,
     quaternions,
@@ -685,12 +697,7 @@ def fit_attitude(
         seed = int(jax.random.randint(key, (), 0, 2**31 - 1))
     rng = np.random.default_rng(seed)
 
-    order = np.argsort(times_np, kind="stable")
-    times_sorted, q_sorted = times_np[order], q_np[order]
-    q_sorted = q_sorted / np.linalg.norm(q_sorted, axis=-1, keepdims=True)
-    index = int(np.argmin(np.abs(times_sorted)))
-    t_ref = times_sorted[index]
-    reference = q_sorted[index] * (1.0 if q_sorted[index, 0] >= 0 else -1.0)
+    order, times_sorted, q_sorted, index, t_ref, reference = _reference_sample(times_np, q_np)
 
     # Angular velocity guesses from finite differences around t_ref (short and longer spans).
     rates = [_finite_difference_rate(times_sorted, q_sorted, index, span) for span in (1, 3)]

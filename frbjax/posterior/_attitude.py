@@ -19,6 +19,7 @@ from ..fit import (
     _finite_difference_rate,
     _normalised_inertia,
     _PRINCIPAL_PARAMETERS,
+    _reference_sample,
     _scaled_tensor,
     _TENSOR_PARAMETERS,
     AttitudeFit,
@@ -203,12 +204,7 @@ def attitude_posterior(
     n_parameters = _TENSOR_PARAMETERS if tensor else _PRINCIPAL_PARAMETERS
 
     # The fit's reference: the sample time nearest 0 and the observed attitude there (w >= 0).
-    order = np.argsort(times_np, kind="stable")
-    times_sorted, q_sorted = times_np[order], q_np[order]
-    q_sorted = q_sorted / np.linalg.norm(q_sorted, axis=-1, keepdims=True)
-    index = int(np.argmin(np.abs(times_sorted)))
-    reference_time = times_sorted[index]
-    reference = q_sorted[index] * (1.0 if q_sorted[index, 0] >= 0 else -1.0)
+    order, times_sorted, q_sorted, index, reference_time, reference = _reference_sample(times_np, q_np)
     rate = _finite_difference_rate(times_sorted, q_sorted, index, 3)
     rate_scale = DEFAULT_RATE_SCALE * max(float(np.linalg.norm(rate)), 1e-300)
     prior = _checked_prior(prior, tensor, rate_scale)
