@@ -32,6 +32,7 @@ FIGURES = (
     "torqued_work_precision.png",
     "torqued_energy.png",
     "lightcurve.png",
+    "lightcurve_periodogram.png",
     "torques_basilisk.png",
     "torques_energy.png",
     "torques_debris.png",

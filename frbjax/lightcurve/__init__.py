@@ -5,6 +5,8 @@
 - :func:`brightness`: the flux of a :class:`frbjax.FreeRigidBody` of a given shape lit by the Sun and
   seen by an observer (Lambert, Lommel-Seeliger and their combination; Kaasalainen & Torppa 2001).
 - :func:`tumbler_periods`: the two periods (precession P_psi, rotation P_phi) of a free motion.
+- :func:`tumbler_periodogram`: candidate ranges of the two periods from the light curves themselves
+  (a two-period Fourier periodogram, Pravec et al. 2005), for :func:`fit_lightcurve`'s ``periods``.
 - :func:`fit_lightcurve`: the spin state, inertia ratios and shape from relative photometry.
 
 Imported on first use (``frbjax.lightcurve``); it needs optimistix and scipy.
@@ -12,6 +14,7 @@ Imported on first use (``frbjax.lightcurve``); it needs optimistix and scipy.
 
 from ._brightness import brightness, facet_brightness, LAWS
 from ._fit import fit_lightcurve, LightcurveFit
+from ._periodogram import tumbler_periodogram, TumblerPeriodogram
 from ._periods import tumbler_periods
 from ._shape import ConvexShape, icosphere, mesh_inertia
 
@@ -20,10 +23,12 @@ __all__ = [
     "LAWS",
     "ConvexShape",
     "LightcurveFit",
+    "TumblerPeriodogram",
     "brightness",
     "facet_brightness",
     "fit_lightcurve",
     "icosphere",
     "mesh_inertia",
+    "tumbler_periodogram",
     "tumbler_periods",
 ]

@@ -634,7 +634,9 @@ def fit_lightcurve(
     best are refined by Levenberg-Marquardt on growing windows around ``epoch`` (default: the median
     time), each start held to its cell of the period grid by a prior until the last window (module
     docstring): choose the grid fine enough that a cell's phase drift over the first nights is well
-    under a cycle.  ``shape``: "convex" (log-areas on the facet normals of an icosphere of
+    under a cycle.  Without prior periods, :func:`tumbler_periodogram` proposes ranked ranges from the
+    light curves themselves (``periods=result.proposals[i]``, or ``**result.fit_options(i)``).
+    ``shape``: "convex" (log-areas on the facet normals of an icosphere of
     ``convex_subdivisions``, with ``regularisation`` = (closure weight, smoothness weight)) or
     "ellipsoid".  ``initial``: a :class:`frbjax.FreeRigidBody` (time from the epoch), e.g. an earlier
     fit, refined beside the search's best on all the data from the first window (its shape starts as

@@ -1,0 +1,417 @@
+"""Period ranges from the data: a two-period Fourier periodogram of a tumbler's light curves.
+
+The brightness of a torque-free body depends on its attitude R(t) = R_L Rz(psi(t)) B(t), where R_L
+takes the z axis to L, psi is the precession angle about L (advancing at the mean rate 2 pi / P_psi
+with a part periodic in P_phi) and B(t), the body's orientation relative to L, is periodic with the
+period P_phi of the body-frame motion (``tumbler_periods``).  Over a few nights, while the Sun and the
+observer stay put, the light curve is therefore a doubly periodic function of (t / P_psi, t / P_phi):
+a two-dimensional Fourier series whose frequencies are the lattice {j f_psi + k f_phi}, f = 1 / P
+(Kaasalainen 2001; Pravec et al. 2005, Icarus 173, 108, their eq. 1):
+
+    F(t) = C0 + sum_{j=1..m} [C_j0 cos 2 pi j f1 t + S_j0 sin 2 pi j f1 t]
+              + sum_{k=1..m} sum_{j=-m..m} [C_jk cos 2 pi (j f1 + k f2) t + S_jk sin 2 pi (j f1 + k f2) t].
+
+Pravec et al. fit this series by linear least squares over a grid of (f1, f2) and read the periods off
+the minimum of the residuals.  Any integer basis of the lattice gives the same frequencies, so the
+basis (f1, f2) the fit finds is not necessarily (f_psi, f_phi), and Pravec et al. relate them by mode:
+
+- long-axis mode (LAM): the long axis circulates L with the precession, the light curve is dominated
+  by 2 f_psi, and (f1, f2) = (f_psi, f_phi);
+- short-axis mode (SAM): the long axis turns about L at the rate of psi + phi, phi running backwards
+  (a near-principal-axis SAM has dphi/dt = -|L| (1/I1 - 1/I3)-ish): the light curve is dominated by
+  2 (f_psi - f_phi), and the strongest basis is f1 = f_psi - f_phi, with f_psi = f1 + f_phi (Apophis,
+  Pravec et al. 2014: P1 = 30.56 h, P_psi = 27.38 h, P_phi = 263 h).
+
+Relative photometry: each light curve (``lightcurve`` label, e.g. a night) has its own unknown scale,
+an additive offset in log flux (or magnitudes), fitted with the series (eliminated exactly by
+subtracting each curve's mean from the data and from every column).
+
+The search (all linear least squares, numpy, vectorised over frequencies):
+
+1. One-period scan: a Fourier series of the base frequency f with harmonics 1 and 2 over the band
+   1 / p_max <= f <= 1 / p_min, on a grid of step 1 / (``oversampling`` T), T the span of the data:
+   the full span's resolution (the minima are 1 / T wide).  Its deepest ``peaks`` local minima are the
+   candidate fundamentals f_a: the strongest lattice frequency and its aliases, among them those of
+   the 1 / day sampling of nights at the same hour (f_a +- 1 / day).  All are kept, and each is also
+   tried halved (f_a / 2: a dominant second harmonic read as a fundamental).
+2. Second frequency: for each candidate f1, the two-period series of ``order`` m is fitted on a grid
+   of f2 over (2 / T, f1 - 2 / T) (the lattice modulo f1: f2 and f2 + n f1 span the same lattice), and
+   its deepest minima are refined jointly in (f1, f2) on local grids shrinking to a twentieth of
+   1 / T (coarse-to-fine: the one-period scan is the coarse search, since a lattice is found from its
+   strongest frequency at the full resolution).
+3. The refined bases are ranked by their RMS; bases of one lattice (each one's vectors small integer
+   combinations of the other's) are merged.  For a principal-axis rotator no second frequency lowers
+   the RMS by more than the noise allows: the period 1 / f1 (and 2 / f1, the usual double-peaked
+   curve) is proposed as a principal-axis rotator's.
+4. Each of the best ``lattices_kept`` bases gives candidate period pairs, (f_psi, f_phi) = (f1 + c, c)
+   (the SAM reading) and (f1, c) (the LAM reading), for c among f2, f1 - f2, f1 + f2 and their halves
+   (a lattice found through its even harmonics).  Each reading is scored by the RMS of the series in
+   its own basis (f_psi, f_phi) after a small local refinement, and the readings are ranked by it; a
+   principal-axis reading takes the last slot (or the first two, 1 / f1 and 2 / f1, when no second
+   frequency is significant).  Each centre becomes a range of +- ``tolerance`` / T in frequency, the
+   periods' uncertainty at the full span, and the list is cut at ``max_proposals``.
+
+The ranges are for :func:`fit_lightcurve`'s ``periods``; ``mode`` tells which mode the reading assumed
+(fit with ``mode="both"`` to let the fit decide).  The lattice the light curves determine is only as
+good as the data's cover of it: with few nights aliases (+-1 / day, +-1 / T) of the true lattice may
+rank first, and the SAM and LAM readings of one lattice score alike (the periodogram cannot tell the
+mode: the full fit does); hence several ranked proposals.  The changing geometry over months shifts
+the observed psi frequency by the synodic rate (the phase angle bisector's motion, a fraction of
+1 / T for a few degrees a week), inside the ranges.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+
+from .. import _checks as checks
+
+
+__all__ = ["tumbler_periodogram", "TumblerPeriodogram"]
+
+
+@dataclasses.dataclass(frozen=True)
+class TumblerPeriodogram:
+    """Result of :func:`tumbler_periodogram` (numpy arrays; frequencies in 1 / the time unit).
+
+    - ``proposals``: ranked list of period ranges for :func:`fit_lightcurve`'s ``periods``:
+      ((P_psi_min, P_psi_max), (P_phi_min, P_phi_max)) for a tumbler, (P_min, P_max) for a
+      principal-axis rotator (``modes[i] == "PA"``: pass ``principal_axis=True``);
+    - ``modes``: the reading behind each proposal, "SAM", "LAM" or "PA";
+    - ``centres``: (P_psi, P_phi) at the centre of each proposal (P_phi infinite for "PA");
+    - ``scores``: the RMS of the residuals of the proposal's lattice (log flux; lower is better);
+    - ``bases``, ``basis_rms``: the refined lattice bases (f1, f2), best first, and their RMS;
+      ``rms_one_period``: the RMS of the best single-period series (the principal-axis comparison);
+    - ``frequencies``, ``rms``: the one-period scan (step 1); ``span``: T;
+    - ``map_f1``, ``map_f2``, ``map_rms``: the two-period RMS on a grid around the best basis
+      (+- ``map_halfwidth`` / T), for a figure.
+
+    ``fit_options(i)``: the keyword arguments of :func:`fit_lightcurve` for proposal ``i``.
+    """
+
+    proposals: list
+    modes: list
+    centres: np.ndarray
+    scores: np.ndarray
+    bases: np.ndarray
+    basis_rms: np.ndarray
+    rms_one_period: float
+    frequencies: np.ndarray
+    rms: np.ndarray
+    span: float
+    map_f1: np.ndarray
+    map_f2: np.ndarray
+    map_rms: np.ndarray
+
+    def fit_options(self, index: int = 0) -> dict:
+        """``periods``, ``principal_axis`` and ``mode`` for :func:`fit_lightcurve` from proposal ``index``."""
+        mode = self.modes[index]
+        if mode == "PA":
+            return dict(periods=self.proposals[index], principal_axis=True)
+        return dict(periods=self.proposals[index], mode="both")
+
+
+class _Data:
+    """Centred log brightness and the per-curve means needed to centre the columns."""
+
+    def __init__(self, times, values, labels, segments=1):
+        self.origin = 0.5 * (times.min() + times.max())
+        self.times = times - self.origin
+        _, index = np.unique(labels, return_inverse=True)
+        self.index = index
+        counts = np.bincount(index)
+        self.average = (np.eye(len(counts))[index] / counts).astype(float)  # (N, C)
+        self.values = values - (values @ self.average)[index]
+        self.total = float(self.values @ self.values)
+        self.dof = len(values) - len(counts)
+        # Segments: the curves in order of their mean time, cut into groups of equal count.
+        curve_times = self.times @ self.average
+        rank = np.argsort(np.argsort(curve_times))
+        segment_of_curve = np.minimum(rank * segments // len(counts), segments - 1)
+        self.segment = segment_of_curve[index]
+        self.segments = segments
+
+    def rss(self, frequencies, chunk=128):
+        """Residual sum of squares of the series with column frequencies ``frequencies`` (G, K) (one
+        cosine and one sine each, the curves' offsets free), for each of the G rows."""
+        frequencies = np.asarray(frequencies, float)
+        out = np.empty(len(frequencies))
+        for start in range(0, len(frequencies), chunk):
+            block = frequencies[start : start + chunk]
+            phase = np.exp(2j * np.pi * block[:, :, None] * self.times)  # (G, K, N)
+            phase = phase - (phase @ self.average)[..., self.index]
+            columns = np.concatenate([phase.real, phase.imag], 1)  # (G, 2K, N)
+            explained = 0.0
+            for s in range(self.segments):
+                rows = self.segment == s
+                part = columns[:, :, rows]
+                gram = part @ np.swapaxes(part, 1, 2)
+                moment = part @ self.values[rows]
+                scale = np.trace(gram, axis1=1, axis2=2)[:, None, None] / gram.shape[1]
+                gram = gram + (1e-10 * scale + 1e-300) * np.eye(gram.shape[1])
+                coefficients = np.linalg.solve(gram, moment[..., None])[..., 0]
+                explained = explained + np.sum(coefficients * moment, -1)
+            out[start : start + chunk] = self.total - explained
+        return np.maximum(out, 0.0)
+
+
+def _lattice_indices(order):
+    """(j, k) of the series of ``order`` m: (j, 0) for j = 1..m, (j, k) for k = 1..m, j = -m..m."""
+    return np.array(
+        [(j, 0) for j in range(1, order + 1)] + [(j, k) for k in range(1, order + 1) for j in range(-order, order + 1)]
+    )
+
+
+def _local_minima(values, count, separation):
+    """Indices of the ``count`` deepest local minima of ``values`` at least ``separation`` apart."""
+    inner = np.flatnonzero((values[1:-1] <= values[:-2]) & (values[1:-1] <= values[2:])) + 1
+    candidates = inner[np.argsort(values[inner])]
+    chosen = []
+    for i in candidates:
+        if all(abs(i - c) >= separation for c in chosen):
+            chosen.append(i)
+        if len(chosen) == count:
+            break
+    return chosen
+
+
+def _refine(data, indices, f1, f2, step, levels=3, points=7):
+    """(f1, f2, rss) at the minimum of local grids around (f1, f2) shrinking by 3 each level."""
+    best = (f1, f2, np.inf)
+    for _ in range(levels):
+        offsets = (np.arange(points) - points // 2) * step
+        g1, g2 = np.meshgrid(best[0] + offsets, best[1] + offsets, indexing="ij")
+        rss = data.rss(indices[:, 0] * g1.reshape(-1, 1) + indices[:, 1] * g2.reshape(-1, 1))
+        k = int(np.argmin(rss))
+        if rss[k] < best[2]:
+            best = (float(g1.reshape(-1)[k]), float(g2.reshape(-1)[k]), float(rss[k]))
+        step /= 3
+    return best
+
+
+def _same_lattice(a, b, tolerance, largest=4):
+    """True when the vectors of basis ``b`` are integer combinations (|coefficients| <= largest) of ``a``'s,
+    and the two lattices have the same density (|det| = 1), within ``tolerance`` in frequency."""
+    coefficients = np.arange(-largest, largest + 1)
+    combos = coefficients[:, None] * a[0] + coefficients[None, :] * a[1]
+    pairs = []
+    for v in b:
+        hits = np.argwhere(np.abs(combos - v) < tolerance)
+        if len(hits) == 0:
+            return False
+        pairs.append(coefficients[hits[0]])
+    return abs(round(np.linalg.det(np.array(pairs, float)))) == 1
+
+
+def _readings(f1, f2):
+    """Candidate (f_psi, f_phi, mode) of a lattice basis (f1, f2), 0 < f2 < f1, in the order of their
+    rank (module docstring, step 4)."""
+    out = []
+    for half in (False, True):
+        base = f1 / 2 if half else f1
+        vectors = sorted({round(c, 12) for c in (f2 % base, base - f2 % base)})
+        for c in vectors:
+            out.append((base + c, c, "SAM"))
+        for c in vectors:
+            out.append((base, c, "LAM"))
+        out.append((base + base + vectors[0], base + vectors[0], "SAM"))
+    return out
+
+
+def tumbler_periodogram(
+    times,
+    brightness,
+    *,
+    lightcurve=None,
+    magnitudes: bool = False,
+    period_range=None,
+    order: int = 2,
+    oversampling: float = 5.0,
+    peaks: int = 4,
+    tolerance: float = 1.0,
+    max_proposals: int = 8,
+    map_halfwidth: float = 6.0,
+    lattices_kept: int = 6,
+    second_minima: int = 4,
+) -> TumblerPeriodogram:
+    """Candidate ranges of a tumbler's two periods (P_psi, P_phi) from its light curves (module
+    docstring): a two-period Fourier periodogram after Pravec et al. (2005, Icarus 173, 108).
+
+    Arguments: ``times`` (N,); ``brightness`` (N,) fluxes (> 0), or magnitudes with ``magnitudes=True``;
+    ``lightcurve`` (N,) label of each sample's light curve (one unknown additive offset in log flux
+    each, e.g. a night of relative photometry; default: one curve).  ``period_range`` = (p_min, p_max):
+    the band searched for the light curve's basis periods 1 / f1 and 1 / f2 (the time unit of
+    ``times``); P_phi may come out longer (f_phi is a difference of lattice frequencies).
+
+    ``order``: m of the two-period series (2: 2 m^2 + 2 m = 12 frequencies, Pravec et al.'s usual
+    choice); ``oversampling``: grid points per 1 / T in the scans (T the data's span); ``peaks``: the
+    one-period minima followed up; ``tolerance``: the half-width of each period's range in frequency,
+    in units of 1 / T (1: a full resolution element, several times the error of the minima on the
+    synthetic family of ``benchmarks/lightcurve_periodogram.py``); ``max_proposals``: the length of the
+    list; ``map_halfwidth``: the extent of the RMS map around the best basis, in units of 1 / T.
+
+    Returns a :class:`TumblerPeriodogram`: ``proposals`` (ranked, each ready for
+    ``fit_lightcurve(..., periods=proposal)``; a principal-axis one with ``principal_axis=True``:
+    ``result.fit_options(i)``), their ``modes``, ``centres`` and ``scores``, and the scans.
+
+    Refused with a ValueError naming the argument: times not one-dimensional, not finite or all
+    equal, brightness not finite, of another shape, or <= 0 without ``magnitudes``, labels of another
+    shape, a ``period_range`` that is missing or not positive and increasing, fewer samples than the
+    series has parameters, counts below 1, non-positive ``oversampling`` or ``tolerance``.  numpy
+    only (float64); seconds for a thousand samples.
+    """
+    times = checks.real_array("times", times)
+    if times.ndim != 1:
+        raise ValueError(f"times must be one-dimensional (N,), got shape {times.shape}")
+    checks.check_finite("times", times)
+    n = len(times)
+    values = checks.real_array("brightness", brightness)
+    if values.shape != (n,):
+        raise ValueError(f"brightness must have shape (N,) = ({n},) like times, got {values.shape}")
+    if magnitudes:
+        checks.check_finite("brightness", values)
+        values = -0.4 * np.log(10.0) * values.astype(float)
+    else:
+        checks.check_positive("brightness", values)
+        values = np.log(values.astype(float))
+    labels = np.zeros(n, int) if lightcurve is None else np.asarray(lightcurve)
+    if labels.shape != (n,):
+        raise ValueError(f"lightcurve must have shape (N,) = ({n},) like times, got {labels.shape}")
+    if period_range is None:
+        raise ValueError("period_range: give the band (p_min, p_max) of periods to search, in the unit of times")
+    p_min, p_max = checks.interval("period_range", period_range)
+    order = checks.integer("order", order, minimum=1)
+    peaks = checks.integer("peaks", peaks, minimum=1)
+    max_proposals = checks.integer("max_proposals", max_proposals, minimum=1)
+    oversampling = checks.scalar("oversampling", oversampling, positive=True)
+    tolerance = checks.scalar("tolerance", tolerance, positive=True)
+    map_halfwidth = checks.scalar("map_halfwidth", map_halfwidth, positive=True, allow_zero=True)
+    times = times.astype(float)
+    span = float(times.max() - times.min())
+    if span <= 0:
+        raise ValueError("times must span an interval: all are equal")
+    indices = _lattice_indices(order)
+    parameters = 2 * len(indices) + len(np.unique(labels))
+    if n <= parameters:
+        raise ValueError(
+            f"times: {n} samples cannot fit a two-period series of order {order} and {len(np.unique(labels))} "
+            f"offsets ({parameters} parameters)"
+        )
+    data = _Data(times, values, labels)
+    resolution = 1 / span
+    step = resolution / oversampling
+
+    # ---- 1. one-period scan (harmonics 1 and 2) at the full resolution
+    f_low, f_high = 1 / p_max, 1 / p_min
+    frequencies = np.arange(f_low, f_high + step, step)
+    harmonics = np.arange(1, 3)
+    rss_one = data.rss(frequencies[:, None] * harmonics)
+    separation = max(int(round(2 * oversampling)), 1)
+    fundamentals = [frequencies[i] for i in _local_minima(rss_one, peaks, separation)]
+    if not fundamentals:
+        fundamentals = [frequencies[int(np.argmin(rss_one))]]
+    # Each fundamental to a fiftieth of 1 / T: at a high signal-to-noise ratio the second scan's
+    # landscape (f1 held) changes over a small fraction of the grid step.
+    fine = np.linspace(-1, 1, 21) * step
+    fundamentals = [float(fa + fine[int(np.argmin(data.rss((fa + fine)[:, None] * harmonics)))]) for fa in fundamentals]
+
+    # ---- 2. the second frequency for each candidate f1, then joint refinement
+    found = []
+    for fa in fundamentals:
+        for f1 in (fa, fa / 2):
+            if f1 <= 4 * resolution:
+                continue
+            grid = np.arange(2 * resolution, f1 - 2 * resolution, step * oversampling / 3)
+            if len(grid) < 3:
+                continue
+            rss_two = data.rss(indices[:, 0] * f1 + indices[:, 1] * grid[:, None])
+            for i in _local_minima(rss_two, second_minima, 3):
+                found.append(_refine(data, indices, f1, float(grid[i]), step, levels=2, points=5))
+    found.sort(key=lambda item: item[2])
+    dof = data.dof - 2 * len(indices)
+
+    def rms(rss):
+        return float(np.sqrt(rss / max(dof, 1)))
+
+    # ---- 3. readings of the best bases as (f_psi, f_phi), each scored in its own basis
+    readings = []
+    for f1, f2, _ in found[:lattices_kept]:
+        for c in (f2, f1 - f2, f1 + f2, f2 / 2, (f1 - f2) / 2, (f1 + f2) / 2):
+            if c <= 2 * resolution:
+                continue
+            for f_psi, f_phi, mode in ((f1 + c, c, "SAM"), (f1, c, "LAM")):
+                if any(abs(f_psi - r[0]) < 0.5 * resolution and abs(f_phi - r[1]) < 0.5 * resolution for r in readings):
+                    continue
+                best = _refine(data, indices, f_psi, f_phi, 0.25 * resolution, levels=1, points=3)
+                readings.append((best[0], best[1], mode, best[2]))
+    readings.sort(key=lambda item: item[3])
+    lattices = [(r[0], r[1], r[3]) for r in readings]
+
+    # Principal-axis comparison: the best single period with 2 m harmonics.
+    best_one = frequencies[int(np.argmin(rss_one))]
+    one_period = []
+    for f in [f for fa in fundamentals for f in (fa, fa / 2) if f > 2 * resolution]:
+        offsets = (np.arange(9) - 4) * step / 2
+        trial = data.rss((f + offsets)[:, None] * np.arange(1, 4 * order + 1))
+        one_period.append((float(np.min(trial)), float(f + offsets[int(np.argmin(trial))])))
+    rss_pa, f_pa = min(one_period) if one_period else (float(rss_one.min()), float(best_one))
+    noise = (readings[0][3] if readings else rss_pa) / max(dof, 1)
+    extra = 2 * (len(indices) - 4 * order)
+    tumbling = bool(readings) and (rss_pa - readings[0][3]) / noise > 5 * max(extra, 1)
+
+    # ---- 4. ranges
+    width = tolerance * resolution
+    proposals, modes, centres, scores = [], [], [], []
+
+    def interval(f, n):
+        return (1 / (f + n * width), 1 / max(f - n * width, f / 3))
+
+    def add(f_psi, f_phi, mode, score):
+        proposal = (interval(f_psi, 1), interval(f_phi, 1))
+        proposals.append(proposal)
+        modes.append(mode)
+        centres.append((1 / f_psi, 1 / f_phi))
+        scores.append(score)
+
+    def add_principal(f, score):
+        proposals.append(interval(f, 1))
+        modes.append("PA")
+        centres.append((1 / f, np.inf))
+        scores.append(score)
+
+    if not tumbling:
+        add_principal(f_pa, rms(rss_pa))
+        add_principal(f_pa / 2, rms(rss_pa))
+    for f_psi, f_phi, mode, rss in readings:
+        add(f_psi, f_phi, mode, rms(rss))
+    proposals, modes, centres, scores = (x[:max_proposals] for x in (proposals, modes, centres, scores))
+    if tumbling and max_proposals >= 4:
+        # The last slot: the best single period, as a principal-axis rotator's.
+        del proposals[-1], modes[-1], centres[-1], scores[-1]
+        add_principal(f_pa, rms(rss_pa))
+
+    best = lattices[0] if lattices else (f_pa, f_pa / 2, rss_pa)
+    if map_halfwidth > 0:
+        offsets = np.linspace(-map_halfwidth, map_halfwidth, 41) * resolution
+        map_f1, map_f2 = np.meshgrid(best[0] + offsets, best[1] + offsets, indexing="ij")
+        map_rss = data.rss(indices[:, 0] * map_f1.reshape(-1, 1) + indices[:, 1] * map_f2.reshape(-1, 1))
+        map_rms = np.sqrt(map_rss / max(dof, 1)).reshape(map_f1.shape)
+    else:
+        map_f1 = map_f2 = map_rms = np.zeros((0, 0))
+    return TumblerPeriodogram(
+        proposals=proposals,
+        modes=modes,
+        centres=np.array(centres, float).reshape(-1, 2),
+        scores=np.array(scores, float),
+        bases=np.array([item[:2] for item in lattices], float).reshape(-1, 2),
+        basis_rms=np.array([rms(item[2]) for item in lattices], float),
+        rms_one_period=rms(rss_pa),
+        frequencies=frequencies,
+        rms=np.sqrt(rss_one / max(data.dof - 4, 1)),
+        span=span,
+        map_f1=map_f1,
+        map_f2=map_f2,
+        map_rms=map_rms,
+    )

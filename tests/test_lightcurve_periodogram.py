@@ -1,0 +1,148 @@
+"""frbjax.lightcurve.tumbler_periodogram: period ranges for fit_lightcurve from the light curves.
+
+A pure two-period Fourier series is recovered to a fraction of the resolution 1 / T; members of the
+synthetic family of benchmarks/_tumbler_family.py at the size of CI (12 nights, every second sample)
+have their true periods inside the proposals; the proposals pass fit_lightcurve's option check (a fit
+itself takes minutes: benchmarks/lightcurve_periodogram.py and the fit's own tests cover that); bad
+input is refused naming the argument.
+"""
+
+from __future__ import annotations
+
+import importlib.util
+import pathlib
+import sys
+
+import jax
+import numpy as np
+import pytest
+
+from frbjax.lightcurve import tumbler_periodogram, TumblerPeriodogram
+from frbjax.lightcurve._fit import _check_options
+
+
+jax.config.update("jax_enable_x64", True)
+
+ROOT = pathlib.Path(__file__).resolve().parents[1]
+_spec = importlib.util.spec_from_file_location("_tumbler_family", ROOT / "benchmarks" / "_tumbler_family.py")
+family = importlib.util.module_from_spec(_spec)
+sys.modules["_tumbler_family"] = family  # dataclasses look their module up
+_spec.loader.exec_module(family)
+
+FIT_DEFAULTS = dict(
+    principal_axis=False,
+    period_grid=(16, 16),
+    inertia_range=(0.3, 0.98),
+    shape="convex",
+    convex_subdivisions=1,
+    law="lommel_seeliger_lambert",
+    c=0.1,
+    sigma=0.01,
+    regularisation=(10.0, 1.0),
+    epoch=None,
+    starts_per_period=16,
+    n_refine=8,
+    seed=0,
+    rtol=1e-8,
+    atol=1e-8,
+    max_steps=100,
+    search_chunk=256,
+    mode="both",
+    initial=None,
+)
+
+
+def nights(count, per_night, span, seed):
+    rng = np.random.default_rng(seed)
+    days = np.sort(rng.choice(int(span), count, replace=False)) + 0.2
+    times = (days[:, None] + np.sort(rng.uniform(0, 0.3, (count, per_night)), -1)).reshape(-1)
+    return times, np.repeat(np.arange(count), per_night), rng
+
+
+def rank(result, periods):
+    """Index of the first (tumbler) proposal whose ranges hold ``periods``, or None."""
+    for k, (proposal, mode) in enumerate(zip(result.proposals, result.modes)):
+        if mode != "PA" and all(low <= p <= high for (low, high), p in zip(proposal, periods)):
+            return k
+    return None
+
+
+def two_period_signal():
+    """Log flux of a SAM-like tumbler's series: f_psi - f_phi dominant (and its harmonic), f_psi, f_phi."""
+    f_psi, f_phi = 1.7, 0.41
+    times, night, rng = nights(16, 24, 60, seed=1)
+    f1 = f_psi - f_phi
+    signal = (
+        0.3 * np.cos(2 * np.pi * 2 * f1 * times)
+        + 0.1 * np.sin(2 * np.pi * f1 * times + 0.4)
+        + 0.08 * np.cos(2 * np.pi * f_psi * times + 1.0)
+        + 0.05 * np.cos(2 * np.pi * (2 * f1 + f_phi) * times + 2.0)
+        + 0.04 * np.cos(2 * np.pi * f_phi * times + 0.3)
+    )
+    values = signal + 0.005 * rng.normal(size=len(times)) + rng.normal(size=16)[night]
+    return times, np.exp(values), night, (1 / f_psi, 1 / f_phi)
+
+
+def test_two_period_series_recovered():
+    times, flux, night, periods = two_period_signal()
+    result = tumbler_periodogram(times, flux, lightcurve=night, period_range=(0.2, 5.0))
+    assert isinstance(result, TumblerPeriodogram)
+    span = result.span
+    # The truth's SAM reading is among the first proposals (the LAM reading of the same lattice may
+    # score alike: the series cannot tell the modes), its centre within a fraction of 1 / T.
+    found = rank(result, periods)
+    error = np.abs(1 / result.centres[found] - 1 / np.array(periods)) * span
+    print("rank", found, result.modes, "centre error in units of 1/T", error)
+    assert found <= 2 and result.modes[found] == "SAM"  # measured: rank 1 (the LAM reading first)
+    assert np.all(error < 0.05)  # measured: 0.020 and 0.020
+    assert len(result.proposals) <= 8
+
+
+@pytest.mark.parametrize("index", [8, 19])
+def test_family_members_inside_proposals(index):
+    case = family.tumbler(index, nights=12, per_night=0.5)
+    result = tumbler_periodogram(case.times, case.flux, lightcurve=case.night, period_range=(0.1, 5.0))
+    found = rank(result, case.periods)
+    print(case.kind, case.periods, "rank", found, result.modes)
+    assert found is not None and found <= 5  # measured: rank 0 (member 8) and 4 (member 19)
+
+
+def test_proposals_pass_fit_lightcurve_checks():
+    times, flux, night, periods = two_period_signal()
+    result = tumbler_periodogram(times, flux, lightcurve=night, period_range=(0.2, 5.0))
+    for k in range(len(result.proposals)):
+        options = dict(FIT_DEFAULTS)
+        options.update(result.fit_options(k))
+        _check_options(**options)
+
+
+def test_bad_input_names_the_argument():
+    times, flux, night, _ = two_period_signal()
+    band = (0.2, 5.0)
+    with pytest.raises(ValueError, match="brightness must be > 0"):
+        tumbler_periodogram(times, -flux, period_range=band)
+    with pytest.raises(ValueError, match="brightness must be finite"):
+        tumbler_periodogram(times, np.where(np.arange(len(flux)) == 3, np.nan, flux), period_range=band)
+    with pytest.raises(ValueError, match="brightness must have shape"):
+        tumbler_periodogram(times, flux[:-1], period_range=band)
+    with pytest.raises(ValueError, match="times must be finite"):
+        tumbler_periodogram(np.where(np.arange(len(times)) == 5, np.inf, times), flux, period_range=band)
+    with pytest.raises(ValueError, match="times must be one-dimensional"):
+        tumbler_periodogram(times[:, None], flux, period_range=band)
+    with pytest.raises(ValueError, match="lightcurve must have shape"):
+        tumbler_periodogram(times, flux, lightcurve=night[:-1], period_range=band)
+    with pytest.raises(ValueError, match="period_range"):
+        tumbler_periodogram(times, flux)
+    with pytest.raises(ValueError, match="upside down"):
+        tumbler_periodogram(times, flux, period_range=(5.0, 0.2))
+    with pytest.raises(ValueError, match="period_range must be > 0"):
+        tumbler_periodogram(times, flux, period_range=(-1.0, 2.0))
+    with pytest.raises(ValueError, match="order must be >= 1"):
+        tumbler_periodogram(times, flux, period_range=band, order=0)
+    with pytest.raises(ValueError, match="tolerance must be > 0"):
+        tumbler_periodogram(times, flux, period_range=band, tolerance=0.0)
+    with pytest.raises(ValueError, match="cannot fit"):
+        tumbler_periodogram(times[:20], flux[:20], period_range=band)
+    # Magnitudes may be negative.
+    result = tumbler_periodogram(times, -2.5 * np.log10(flux), magnitudes=True, lightcurve=night, period_range=band)
+    assert len(result.proposals) >= 1
