@@ -100,3 +100,48 @@ def test_a_fit_that_does_not_converge_raises(monkeypatch):
         fit_lightcurve(*arguments, lightcurve=night[kept], **OPTIONS)
     assert isinstance(error.value.result, LightcurveFit) and not error.value.result.success
     assert not fit_lightcurve(*arguments, lightcurve=night[kept], throw=False, **OPTIONS).success
+
+
+def test_progress_bars_count_the_search_and_the_windows(monkeypatch):
+    """``progress=True``: the search's bar counts every start (one advance per chunk, from the host)
+    and the refinement's every window solved (from inside the compiled programs, by
+    ``jax.debug.callback``), each reaching its total before the bar is closed; nothing more is
+    compiled (the module's programs, as above).  A recording stand-in for tqdm sees the updates."""
+    import tqdm.auto
+
+    from frbjax.lightcurve import _fit
+
+    bars = []
+
+    class Recording:
+        def __init__(self, total, desc, unit):
+            self.total, self.n, self.updates, self.description = total, 0, [], desc
+            bars.append(self)
+
+        def __enter__(self):
+            return self
+
+        def __exit__(self, *exception):
+            return False
+
+        def set_description(self, description, refresh=True):
+            self.description = description
+
+        def update(self, count):
+            self.updates.append(count)
+            self.n += count
+
+    monkeypatch.setattr(tqdm.auto, "tqdm", Recording)
+    monkeypatch.setattr(_fit, "_CONTINUATIONS", 0)
+    (times, flux, sun, observer, night), mask = spoiled()
+    kept = ~mask
+    arguments = (times[kept], flux[kept], sun[kept], observer[kept])
+    fit_lightcurve(*arguments, lightcurve=night[kept], throw=False, progress=True, **OPTIONS)
+    search, refinement = bars
+    assert search.description == "light-curve search" and search.total == 9 * 8
+    assert refinement.description == "light-curve refinement"
+    # Every count came from an advance: the closing update (the rest up to the total) is zero.
+    for bar in bars:
+        assert bar.n == bar.total and bar.updates[-1] == 0 and len(bar.updates) > 1, (bar.total, bar.updates)
+    with pytest.raises(ValueError, match="progress must be True, False or None"):
+        fit_lightcurve(*arguments, lightcurve=night[kept], progress="yes", **OPTIONS)

@@ -68,7 +68,7 @@ import numpy as np
 import optimistix as optx
 from jaxtyping import Array, Float
 
-from .. import _checks as checks, _quaternion as quaternion
+from .. import _checks as checks, _progress, _quaternion as quaternion
 from .._body import FreeRigidBody, quaternion_with_elliptic_derivatives
 from .._errors import FitError
 from .._multistart import solve_each
@@ -272,6 +272,8 @@ def _solve_start(parameters, reference, prior, data, masks, prior_weights, confi
         solution = optx.least_squares(fn, solver, current, args=args, has_aux=True, max_steps=max_steps, throw=False)
         finite = jnp.all(jnp.isfinite(solution.value))
         value = jnp.where(finite, solution.value, current)
+        # One window of one start done: the refinement's progress bar (``frbjax._progress``).
+        jax.debug.callback(_progress.advance, "lightcurve refinement", 1)
         return value, solution.result == optx.RESULTS.successful
 
     parameters, ok = jax.lax.scan(stage, parameters, (masks, prior_weights))
@@ -292,20 +294,39 @@ def _refine(parameters, references, priors, data, masks, prior_weights, config, 
     return solve_each(solve, (parameters, references, priors, masks))
 
 
-@functools.partial(jax.jit, static_argnames=("config", "chunk"))
-def _search_costs(parameters, references, start_areas, data, mask, config, chunk):
-    """Cost of each start on the first window with its own shape (the ellipsoid of its inertia)."""
+@functools.partial(jax.jit, static_argnames="config")
+def _search_costs(parameters, references, start_areas, data, mask, config):
+    """Cost of each start of a chunk on the first window with its own shape (the ellipsoid of its
+    inertia)."""
     _, law, c, _, _ = config
 
-    def cost(item):
-        theta, reference, areas = item
+    def cost(theta, reference, areas):
         per_facet = _facet_fluxes(theta[:8], reference, data["search_normals"], data, law, c)
         difference = data["log_brightness"] - _safe_log(per_facet @ areas)
         residual = mask * (difference - _curve_mean(difference, mask, data["curves"])) / data["sigma"]
         value = 0.5 * jnp.sum(residual**2)
         return jnp.where(jnp.isfinite(value), value, jnp.inf)
 
-    return jax.lax.map(cost, (parameters, references, start_areas), batch_size=chunk)
+    return jax.vmap(cost)(parameters, references, start_areas)
+
+
+def _search(parameters, references, start_areas, data, mask, config, chunk, progress):
+    """Every start's cost (``_search_costs``), ``chunk`` starts per call of one compiled program (the
+    last chunk padded with the first start), each chunk a step of the search's progress bar."""
+    count = len(parameters)
+    chunk = min(chunk, count)
+    costs = []
+    with _progress.bar("lightcurve search", count, "light-curve search", "start", shown=progress) as bar:
+        for start in range(0, count, chunk):
+            rows = np.arange(start, start + chunk)
+            rows = np.where(rows < count, rows, 0)
+            take = lambda tree: jax.tree.map(lambda x: x[rows], tree)  # noqa: E731
+            costs.append(
+                np.asarray(_search_costs(take(parameters), take(references), take(start_areas), data, mask, config))
+            )
+            if bar is not None:
+                _progress.advance("lightcurve search", min(chunk, count - start))
+    return np.concatenate(costs)[:count]
 
 
 @functools.partial(jax.jit, static_argnames="principal_axis")
@@ -619,6 +640,7 @@ def fit_lightcurve(
     initial: FreeRigidBody | None = None,
     nan_policy: str = "raise",
     throw: bool = True,
+    progress: bool | None = None,
 ) -> LightcurveFit:
     """Fit a tumbling (or principal-axis) body and its convex shape to light curves.
 
@@ -651,6 +673,10 @@ def fit_lightcurve(
     :class:`frbjax.FitError` (default), whose ``result`` is the unconverged fit; ``throw=False``
     returns it (``success`` False).
 
+    ``progress``: progress bars (tqdm) for the search (starts costed, a chunk of ``search_chunk`` at a
+    time) and the refinement (windows solved); by default shown in a terminal or an IPython/Jupyter
+    session and not elsewhere.
+
     Refused with a ValueError naming the argument and the first offending entry: brightness <= 0
     (without ``magnitudes``), directions that are not unit vectors or are opposite (phase angle 180
     degrees), period ranges that are not finite, positive and increasing (a range given upside down),
@@ -660,6 +686,7 @@ def fit_lightcurve(
     Runs in float64 when JAX has it enabled (recommended).  Module docstring: the parameters, the
     residuals and the search.
     """
+    progress = _progress.check_option(progress)
     _check_options(
         periods=periods,
         principal_axis=principal_axis,
@@ -802,16 +829,15 @@ def fit_lightcurve(
 
     # ---- the search: every start's cost on the first window
     as_jax = lambda tree: jax.tree.map(lambda x: jnp.asarray(x, dtype), tree)  # noqa: E731
-    costs = np.asarray(
-        _search_costs(
-            as_jax(theta),
-            as_jax(references),
-            as_jax(start_areas),
-            data,
-            jnp.asarray(masks[0], dtype),
-            config,
-            int(search_chunk),
-        )
+    costs = _search(
+        as_jax(theta),
+        as_jax(references),
+        as_jax(start_areas),
+        data,
+        jnp.asarray(masks[0], dtype),
+        config,
+        int(search_chunk),
+        progress,
     )
     costs = np.where(valid, costs, np.inf)
     best = np.argsort(costs, kind="stable")[:n_refine]
@@ -835,55 +861,61 @@ def fit_lightcurve(
     ellipsoid_config = ("ellipsoid",) + config[1:]
     parameters0 = np.concatenate([theta[best], ellipsoid_start[best]], 1)
     solver_settings = dict(rtol=float(rtol), atol=float(atol), max_steps=int(max_steps))
-    out = _refine(
-        as_jax(parameters0),
-        as_jax(refs),
-        as_jax(priors),
-        ellipsoid_data,
-        jnp.asarray(start_masks, dtype),
-        jnp.asarray(prior_weights, dtype),
-        ellipsoid_config,
-        **solver_settings,
-    )
-    if shape == "convex":
-        fitted = np.asarray(out[0])
-        fitted_axes = np.concatenate([np.ones((len(best), 1)), np.exp(fitted[:, 8:])], 1)
-        log_areas = np.log(_gaussian_image_areas(fitted_axes, normals, solid_angles))
-        log_areas -= log_areas.mean(-1, keepdims=True)
-        parameters0 = np.concatenate([fitted[:, :8], log_areas], 1)
-        # All the data, no prior.
+    # The refinement's progress bar counts the windows solved (each start's continuation windows, its
+    # convex stage, the leader's continued solves).
+    windows = len(best) * (len(masks) + (1 if shape == "convex" else 0))
+    with _progress.bar("lightcurve refinement", windows, "light-curve refinement", "window", shown=progress) as bar:
         out = _refine(
             as_jax(parameters0),
             as_jax(refs),
-            None,
-            data,
-            jnp.asarray(start_masks[:, -1:], dtype),
-            None,
-            config,
+            as_jax(priors),
+            ellipsoid_data,
+            jnp.asarray(start_masks, dtype),
+            jnp.asarray(prior_weights, dtype),
+            ellipsoid_config,
             **solver_settings,
         )
-    # A leader that stopped at max_steps still moving is solved on from where it stopped (all the data,
-    # no prior), alone: Levenberg-Marquardt on a convex shape's hundreds of areas can take more than
-    # max_steps to meet rtol (the LAM test's leader: three more solves).
-    final_data, final_config = (data, config) if shape == "convex" else (ellipsoid_data, ellipsoid_config)
-    out = [np.array(x) for x in out]  # writable copies
-    for _ in range(_CONTINUATIONS):
-        leader = int(np.argmin(np.where(np.isfinite(out[1]), out[1], np.inf)))
-        if out[2][leader] or not np.isfinite(out[1][leader]):
-            break
-        alone = slice(leader, leader + 1)
-        continued = _refine(
-            jnp.asarray(out[0][alone], dtype),
-            tuple(jnp.asarray(r[alone], dtype) for r in refs),
-            None,
-            final_data,
-            jnp.asarray(start_masks[alone, -1:], dtype),
-            None,
-            final_config,
-            **solver_settings,
-        )
-        for full, part in zip(out, continued):
-            full[leader] = np.asarray(part)[0]
+        if shape == "convex":
+            fitted = np.asarray(out[0])
+            fitted_axes = np.concatenate([np.ones((len(best), 1)), np.exp(fitted[:, 8:])], 1)
+            log_areas = np.log(_gaussian_image_areas(fitted_axes, normals, solid_angles))
+            log_areas -= log_areas.mean(-1, keepdims=True)
+            parameters0 = np.concatenate([fitted[:, :8], log_areas], 1)
+            # All the data, no prior.
+            out = _refine(
+                as_jax(parameters0),
+                as_jax(refs),
+                None,
+                data,
+                jnp.asarray(start_masks[:, -1:], dtype),
+                None,
+                config,
+                **solver_settings,
+            )
+        # A leader that stopped at max_steps still moving is solved on from where it stopped (all the data,
+        # no prior), alone: Levenberg-Marquardt on a convex shape's hundreds of areas can take more than
+        # max_steps to meet rtol (the LAM test's leader: three more solves).
+        final_data, final_config = (data, config) if shape == "convex" else (ellipsoid_data, ellipsoid_config)
+        out = [np.array(x) for x in out]  # writable copies
+        for _ in range(_CONTINUATIONS):
+            leader = int(np.argmin(np.where(np.isfinite(out[1]), out[1], np.inf)))
+            if out[2][leader] or not np.isfinite(out[1][leader]):
+                break
+            alone = slice(leader, leader + 1)
+            if bar is not None:
+                bar.total += 1
+            continued = _refine(
+                jnp.asarray(out[0][alone], dtype),
+                tuple(jnp.asarray(r[alone], dtype) for r in refs),
+                None,
+                final_data,
+                jnp.asarray(start_masks[alone, -1:], dtype),
+                None,
+                final_config,
+                **solver_settings,
+            )
+            for full, part in zip(out, continued):
+                full[leader] = np.asarray(part)[0]
     fitted, refine_costs, oks, residual_rows, jacobians = out
     winner = int(np.argmin(np.where(np.isfinite(refine_costs), refine_costs, np.inf)))
     p = fitted[winner].astype(float)

@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import sys
 import warnings
 
 import jax
@@ -11,7 +10,7 @@ import numpy as np
 import numpyro.distributions as dist
 from jax.typing import ArrayLike
 
-from .. import _checks as checks
+from .. import _checks as checks, _progress
 from .._errors import FitError
 from .._multistart import starts_in_sequence
 from ..fit import (
@@ -42,22 +41,6 @@ from ._result import (
 # Jacobian is rank-deficient has zero variance along its null direction, which must still move).
 _COVARIANCE_FLOOR = 1e-10
 _CHAIN_METHODS = ("vectorized", "sequential")
-
-
-def _interactive() -> bool:
-    """True in a terminal or an IPython/Jupyter session: where a progress bar is wanted."""
-    if "IPython" in sys.modules:
-        try:
-            from IPython import get_ipython
-
-            if get_ipython() is not None:
-                return True
-        except ImportError:  # pragma: no cover
-            pass
-    try:
-        return sys.stdout.isatty()
-    except (AttributeError, ValueError):
-        return False
 
 
 def _checked_prior(prior, tensor, rate_scale):
@@ -195,8 +178,7 @@ def attitude_posterior(
     num_samples = checks.integer("num_samples", num_samples, minimum=4)
     num_warmup = checks.integer("num_warmup", num_warmup, minimum=0)
     seed = checks.integer("seed", seed, minimum=0)
-    if progress is not None and not isinstance(progress, bool):
-        raise ValueError(f"progress must be True, False or None, got {progress!r}")
+    progress = _progress.check_option(progress)
     if initial is not None and not isinstance(initial, AttitudeFit):
         raise ValueError(f"initial must be an AttitudeFit (from fit_attitude) or None, got {type(initial).__name__}")
     times_np, q_np, gyro_np, _, dtype = _checked_data(times, quaternions, angular_velocity_data, "raise")
@@ -259,7 +241,7 @@ def attitude_posterior(
         num_warmup=num_warmup,
         num_samples=num_samples,
         vectorized=chain_method == "vectorized",
-        progress=_interactive() if progress is None else progress,
+        progress=progress,
     )
     return _result(out, initial, reference_time, tensor, num_chains, dtype)
 

@@ -7,13 +7,14 @@ few leapfrog steps per draw).  The map is linear, so its Jacobian is a constant 
 of theta is that of z.  numpyro's diagonal mass matrix adaptation corrects what the fit's
 covariance misses.
 
-The program (``_run``) is jitted once per (samples, parameters, chains, warmup, draws, chain method,
-progress) and takes everything else as arguments: the data, the whitening and the prior's
+The program (``_run``) is jitted once per (samples, parameters, chains, warmup, draws, chain method)
+and takes everything else as arguments: the data, the whitening and the prior's
 distributions (numpyro distributions are pytrees), so a second posterior of the same sizes runs
 without compiling.  It holds numpyro's ``init_kernel`` and ``sample_kernel`` (``numpyro.infer.hmc.hmc``,
 algorithm NUTS) in one ``lax.fori_loop`` over warmup and draws, the chains by ``jax.vmap``
 ("vectorized") or one after another by ``lax.map`` ("sequential"), and the motion at t = 0 of every
-draw.  The progress bar (tqdm, numpyro's dependency) is advanced by ``jax.debug.callback``.
+draw.  It advances the progress bar (``frbjax._progress``) through ``jax.debug.callback`` every
+fiftieth of the run, whether a bar is shown or not.
 """
 
 from __future__ import annotations
@@ -24,6 +25,7 @@ import jax
 import jax.numpy as jnp
 from numpyro.infer.hmc import hmc
 
+from .. import _progress
 from ..fit import _attitude_residual, _model
 from ._prior import PARAMETER_BLOCKS
 
@@ -81,18 +83,6 @@ def _kernels(num_warmup):
     return hmc(potential_fn_gen=_potential_generator, algo="NUTS")
 
 
-# The progress bar of the running sampler (set by ``run``; the compiled program calls ``_advance``).
-_progress = {"bar": None}
-
-
-def _advance(count):
-    bar = _progress["bar"]
-    if bar is not None:
-        if bar.n == 0:
-            bar.set_description("NUTS", refresh=False)
-        bar.update(int(count))
-
-
 def _chain_loop(z0, key, data, prior, num_warmup, num_samples, progress_every, vectorized):
     """Warmup and draws of one chain, or of a batch of chains (``vectorized``: leading axis)."""
     init_kernel, sample_kernel = _kernels(num_warmup)
@@ -133,7 +123,7 @@ def _chain_loop(z0, key, data, prior, num_warmup, num_samples, progress_every, v
         if progress_every:
             jax.lax.cond(
                 (i + 1) % progress_every == 0,
-                lambda: jax.debug.callback(_advance, progress_every),
+                lambda: jax.debug.callback(_progress.advance, "posterior", progress_every),
                 lambda: None,
             )
         return state, collection
@@ -179,24 +169,14 @@ def _run(z0, keys, data, prior, *, num_warmup, num_samples, progress_every, vect
 def run(z0, keys, data, prior, *, num_warmup, num_samples, vectorized, progress):
     """The chains' draws (dict of arrays, leading axes (chains, draws)), with a tqdm bar if ``progress``."""
     total = num_warmup + num_samples
-    progress_every = max(total // 50, 1) if progress else 0
+    # The bar's callbacks are in the program whether it is shown or not: showing it compiles nothing.
+    progress_every = max(total // 50, 1)
     arguments = dict(
         num_warmup=num_warmup,
         num_samples=num_samples,
         progress_every=progress_every,
         vectorized=vectorized,
     )
-    if not progress:
-        return jax.device_get(_run(z0, keys, data, prior, **arguments))
-    from tqdm.auto import tqdm
-
     chains = z0.shape[0]
-    with tqdm(total=total * (1 if vectorized else chains), desc="NUTS (compiling)", unit="it") as bar:
-        _progress["bar"] = bar
-        try:
-            out = jax.device_get(jax.block_until_ready(_run(z0, keys, data, prior, **arguments)))
-        finally:
-            _progress["bar"] = None
-        bar.set_description("NUTS", refresh=False)
-        bar.update(bar.total - bar.n)
-    return out
+    with _progress.bar("posterior", total * (1 if vectorized else chains), "NUTS", "it", shown=progress):
+        return jax.device_get(jax.block_until_ready(_run(z0, keys, data, prior, **arguments)))
