@@ -204,7 +204,7 @@ def samplers_part(sizes):
     potential = _sampler._potential_generator(data, prior)
 
     def starts(count, seed):
-        return _attitude._chain_starts(center, chol, prior, jax.random.key(seed), count, jnp.float64)
+        return _attitude._chain_starts(center, chol, prior, jax.random.key(seed), count, jnp.float64)[0]
 
     def thetas_of(z):
         return center + np.asarray(z, float) @ chol.T

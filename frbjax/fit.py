@@ -134,8 +134,10 @@ class AttitudeFit(eqx.Module):
     - ``residuals`` (N, 3) attitude residuals (rad, unweighted, least-squares form) and
       ``angular_velocity_residuals`` (N, 3) (zeros without gyro data);
     - ``cost``: half the sum of the squared (weighted, robustified) residuals at the solution;
-    - ``success``: the solver converged for the chosen start; ``start_costs``, ``start_success``:
-      per start; ``reference_time``: t_ref; ``loss_scale``: c of the robust loss.
+    - ``success``: the solver converged for the chosen start; ``start_costs``, ``start_success``,
+      ``start_parameters`` (S, P): per start, where each ended (the runner-up basins, from which
+      :func:`frbjax.posterior.attitude_posterior` starts chains); ``reference_time``: t_ref;
+      ``loss_scale``: c of the robust loss.
     """
 
     inertia: Float[Array, 3]
@@ -156,6 +158,7 @@ class AttitudeFit(eqx.Module):
     success: Array
     start_costs: Float[Array, " S"]
     start_success: Array
+    start_parameters: Float[Array, "S P"]
     reference_time: Float[Array, ""]
     loss_scale: Float[Array, ""]
 
@@ -339,6 +342,7 @@ def _fit(thetas0, references, data, masks, final_loss, loss_scale, rtol, atol, m
     q_obs, w_obs = data[1][:-1], data[2][:-1]
     return dict(
         theta=theta,
+        thetas=thetas,
         costs=costs,
         oks=oks,
         best=best,
@@ -805,6 +809,7 @@ def fit_attitude(
         success=jnp.asarray(oks[best]),
         start_costs=as_float(costs),
         start_success=jnp.asarray(oks),
+        start_parameters=as_float(out["thetas"].astype(float) * unscale),
         reference_time=as_float(t_ref),
         loss_scale=as_float(out["scale"]),
     )

@@ -194,6 +194,48 @@ def test_two_modes_next_to_the_separatrix():
     assert probabilities[1e-3]["long_axis"] == 1.0, probabilities
 
 
+def test_chains_start_in_the_fits_runner_up_basins():
+    """Chains 1, 2, ... start at the fit's distinct runner-up basins: converged starts within
+    ``_MODE_COST_GAP`` of the fit's cost and more than ``_MODE_SEPARATION`` of its standard
+    deviations from it and from each other.  The fit's starts here all end in one basin (so does
+    every calibration data set below: measured, none has a runner-up); three made-up ones are put
+    beside them: a distinct basin 3 above the fit's cost (kept), the same basin again (dropped as a
+    duplicate), and a basin 50 above (dropped: no mass worth a chain).  No sampling."""
+    import equinox as eqx
+
+    from frbjax import fit_attitude
+    from frbjax.posterior import _attitude
+
+    rng = np.random.default_rng(4)
+    q = observed(np.array([0.6, 0.8, 1.0]), np.array(PRIOR_RATE), np.array([1.0, 0.0, 0.0, 0.0]), TIMES, rng)
+    fit = fit_attitude(TIMES, q, attitude_sigma=NOISE, triangle_inequality=False)
+    assert _attitude._runner_up_modes(fit, False) == []
+    sigma = np.sqrt(np.diag(np.asarray(fit.covariance)))
+    best = np.asarray(fit.parameters)
+    other = best + 40 * sigma * np.array([0, 0, 1, -1, 0, 0, 0, 0])
+    made_up = np.stack([other, other + 0.1 * sigma, best + 30 * sigma * np.eye(8)[1]])
+    cost = float(fit.cost)
+    fit = eqx.tree_at(
+        lambda f: (f.start_parameters, f.start_costs, f.start_success),
+        fit,
+        (
+            jnp.concatenate([fit.start_parameters, jnp.asarray(made_up)]),
+            jnp.concatenate([fit.start_costs, jnp.asarray([cost + 3, cost + 3.5, cost + 50])]),
+            jnp.concatenate([fit.start_success, jnp.ones(3, bool)]),
+        ),
+    )
+    modes = _attitude._runner_up_modes(fit, False)
+    assert len(modes) == 1 and np.allclose(modes[0], other)
+    center, chol = _attitude._whitening(fit.parameters, fit.covariance)
+    prior = _attitude.default_prior(1.0)
+    starts, mode_chains = _attitude._chain_starts(center, chol, prior, jax.random.key(0), 4, jnp.float64, modes)
+    thetas = center + np.asarray(starts) @ chol.T
+    assert mode_chains == 1
+    np.testing.assert_allclose(thetas[0], best, rtol=0, atol=1e-12)
+    np.testing.assert_allclose(thetas[1], other, rtol=0, atol=1e-9)
+    assert all(np.linalg.norm(np.linalg.solve(chol, theta - other)) > 5 for theta in thetas[2:])
+
+
 # ----------------------------------------------------------------------------------- calibration
 
 

@@ -139,8 +139,10 @@ def attitude_posterior(
     $\theta = \hat\theta + C^{1/2} z$, with $\hat\theta$ and $C$ the fit's parameters and
     covariance (``initial``, or :func:`frbjax.fit_attitude` run on the data with the same sigmas and
     ``inertia`` option, without its triangle-inequality penalty: the prior brings that).  Chain 0
-    starts at the fit; the others at $z$ drawn from a standard normal (``seed``): the fit's
-    covariance, since ``fit_attitude`` does not return the parameters of its runner-up starts.
+    starts at the fit; chains 1, 2, ... at the fit's distinct runner-up basins (converged starts
+    within 10 of the fit's cost and more than 5 of its standard deviations from it and from each
+    other), so that a second mode that the fit's starts found is explored; the remaining chains at
+    $z$ drawn from a standard normal (``seed``), the fit's covariance.
     A fit outside a bounded prior's support (a truth next to its edge) starts the chains, block by
     block, just inside the edge (on the way to the nearest of 512 prior draws); a fit further than
     20 of its standard deviations from the support is refused (the prior excludes the data).
@@ -231,7 +233,9 @@ def attitude_posterior(
     )
     key = jax.random.key(seed)
     start_key, chain_key = jax.random.split(key)
-    z0 = _chain_starts(center, chol, prior, start_key, num_chains, dtype)
+    z0, mode_chains = _chain_starts(
+        center, chol, prior, start_key, num_chains, dtype, _runner_up_modes(initial, tensor)
+    )
     keys = jax.random.split(chain_key, num_chains)
     out = sampler.run(
         jnp.asarray(z0, dtype),
@@ -243,7 +247,7 @@ def attitude_posterior(
         vectorized=chain_method == "vectorized",
         progress=progress,
     )
-    return _result(out, initial, reference_time, tensor, num_chains, dtype)
+    return _result(out, initial, reference_time, tensor, num_chains, dtype, mode_chains)
 
 
 _log_priors = jax.jit(jax.vmap(sampler.log_prior, in_axes=(0, None)))
@@ -252,6 +256,14 @@ _SUPPORT_CANDIDATES = 512
 # A fit further outside the prior's support than this (in its whitened units, the nearest prior draw)
 # is an error (a prior that excludes the data), not a truth next to the prior's edge.
 _OUTSIDE_LIMIT = 20.0
+
+# Runner-up basins of the fit that start chains: converged starts whose cost is within this of the
+# best (a posterior density exp(-cost) at most e^-10 of the fit's: below that a basin holds no mass
+# worth a chain unless it is far broader), and further than this from the fit and from each other,
+# in the fit's standard deviations (closer ones are the fit's own basin, which the jittered chains
+# explore anyway).
+_MODE_COST_GAP = 10.0
+_MODE_SEPARATION = 5.0
 
 
 def _edge_point(theta, block, inside_value, prior, dtype, steps=50):
@@ -270,10 +282,48 @@ def _edge_point(theta, block, inside_value, prior, dtype, steps=50):
     return outside_value + high * (inside_value - outside_value)
 
 
-def _chain_starts(center, chol, prior, key, num_chains, dtype):
-    """Whitened starts (num_chains, P): chain 0 at the fit, the others jittered by a standard normal
-    (halved until inside the prior's support).  A fit outside the support (a truth next to a bounded
-    prior's edge) starts instead, block by block, just inside the edge (``_edge_point``)."""
+def _runner_up_modes(fit, tensor):
+    """The parameters of the fit's distinct runner-up basins (best first; ``_MODE_COST_GAP``,
+    ``_MODE_SEPARATION``).  Distances: the parameters whitened by the fit's covariance; for a tensor
+    fit the tensor's entries (in their standard deviations) in place of the moments and the axes'
+    rotation vector, which name one tensor in several ways (axes relabelled or reversed)."""
+    costs = np.asarray(fit.start_costs, float)
+    parameters = np.asarray(fit.start_parameters, float)
+    covariance = np.asarray(fit.covariance, float)
+    candidates = np.flatnonzero(
+        np.asarray(fit.start_success) & np.isfinite(costs) & (costs <= float(fit.cost) + _MODE_COST_GAP)
+    )
+    candidates = candidates[np.argsort(costs[candidates], kind="stable")]
+    motion = slice(2, 8)  # the angular velocity and the attitude's tangent: one meaning in every fit
+    motion_root = np.linalg.cholesky(covariance[motion, motion] + 1e-300 * np.eye(6))
+    if tensor:
+        tensor_covariance = np.asarray(fit.inertia_tensor_covariance, float)
+        tensor_sigma = np.sqrt(np.maximum(np.einsum("ijij->ij", tensor_covariance), 1e-300))
+
+    def signature(theta):
+        whitened_motion = np.linalg.solve(motion_root, theta[motion])
+        if tensor:
+            return np.concatenate([(_scaled_tensor(theta)[2] / tensor_sigma).reshape(-1), whitened_motion])
+        shape_root = np.linalg.cholesky(covariance[:2, :2] + 1e-300 * np.eye(2))
+        return np.concatenate([np.linalg.solve(shape_root, theta[:2]), whitened_motion])
+
+    kept = [signature(np.asarray(fit.parameters, float))]
+    modes = []
+    for index in candidates:
+        candidate = signature(parameters[index])
+        if all(np.linalg.norm(candidate - other) > _MODE_SEPARATION for other in kept):
+            kept.append(candidate)
+            modes.append(parameters[index])
+    return modes
+
+
+def _chain_starts(center, chol, prior, key, num_chains, dtype, modes=()):
+    """(whitened starts (num_chains, P), how many chains start at runner-up basins): chain 0 at the
+    fit, chains 1, 2, ... at the runner-up basins ``modes`` (those inside the prior's support, as
+    many as there are chains), the others jittered
+    about the fit by a standard normal (halved until inside the prior's support).  A fit outside the
+    support (a truth next to a bounded prior's edge) starts instead, block by block, just inside the
+    edge (``_edge_point``)."""
     start = np.asarray(center, float).copy()
     if not np.isfinite(float(_log_priors(jnp.asarray(start[None], dtype), prior)[0])):
         for name, distribution in prior.items():
@@ -306,10 +356,14 @@ def _chain_starts(center, chol, prior, key, num_chains, dtype):
         starts[outside] = z_start + (starts[outside] - z_start) / 2
     else:
         starts[outside] = z_start
-    return jnp.asarray(starts, dtype)
+    inside = [m for m in modes if np.isfinite(float(_log_priors(jnp.asarray(np.asarray(m)[None], dtype), prior)[0]))]
+    inside = inside[: num_chains - 1]
+    for chain, mode in enumerate(inside, start=1):
+        starts[chain] = np.linalg.solve(chol, np.asarray(mode, float) - center)
+    return jnp.asarray(starts, dtype), len(inside)
 
 
-def _result(out, fit, reference_time, tensor, num_chains, dtype):
+def _result(out, fit, reference_time, tensor, num_chains, dtype, mode_chains=0):
     """AttitudePosterior from the sampler's draws (numpy), with its diagnostics and warning."""
     parameters = np.asarray(out["parameters"], float)  # (C, D, P)
     draws_per_chain, n_parameters = parameters.shape[1:]
@@ -362,6 +416,12 @@ def _result(out, fit, reference_time, tensor, num_chains, dtype):
         problems.append(f"largest split R-hat {worst:.4f} > {R_HAT_LIMIT} ({names[int(np.nanargmax(r_hat))]})")
     if divergences.sum():
         problems.append(f"{int(divergences.sum())} divergent transitions (per chain {divergences.tolist()})")
+    if mode_chains and not worst <= R_HAT_LIMIT:
+        problems.append(
+            f"chains 1 to {mode_chains} started in the fit's runner-up basins and did not mix with chain 0: the "
+            "pooled draws weight each basin by its number of chains, not by its probability (compare the chains: "
+            "`chain`)"
+        )
     if problems:
         warnings.warn(
             "attitude_posterior: "
