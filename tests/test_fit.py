@@ -132,6 +132,10 @@ def test_recovers_moments_and_angular_velocity(fit, seed, separatrix):
     # The covariance: symmetric positive definite, and the errors within a few standard deviations.
     assert result.covariance.shape == (8, 8) and result.inertia_covariance.shape == (3, 3)
     assert result.residuals.shape == (CI_SAMPLES, 3) and result.start_costs.shape == (N_STARTS,)
+    assert result.start_parameters.shape == (N_STARTS, result.parameters.shape[0])
+    np.testing.assert_array_equal(
+        np.asarray(result.start_parameters)[int(np.argmin(result.start_costs))], result.parameters
+    )
     covariance = np.asarray(result.covariance)
     assert np.allclose(covariance, covariance.T) and np.all(np.linalg.eigvalsh(covariance) > 0)
     sigma = np.sqrt(np.diag(np.asarray(result.inertia_covariance)))
