@@ -387,6 +387,9 @@ class LightcurveFit(eqx.Module):
     search_periods: Float[Array, "S 2"]
     search_costs: Float[Array, " S"]
     refine_costs: Float[Array, " K"]
+    # The frame about which ``parameters`` are counted (the winner's start: its attitude, the inertial
+    # direction of L and two unit vectors across it): for the posterior (frbjax.posterior).
+    _reference: tuple = ()
 
     def predict(self, times, sun, observer):
         """The model brightness (unscaled: multiply by a light curve's scale) at ``times``."""
@@ -986,6 +989,7 @@ def fit_lightcurve(
         search_periods=jnp.asarray(np.stack([period_psi, period_phi], -1), dtype),
         search_costs=jnp.asarray(costs, dtype),
         refine_costs=jnp.asarray(refine_costs, dtype),
+        _reference=reference,
     )
     if throw and not (bool(oks[winner]) and np.isfinite(refine_costs[winner])):
         raise FitError(

@@ -12,7 +12,15 @@ from numpyro.diagnostics import effective_sample_size, split_gelman_rubin
 from ..fit import AttitudeFit
 
 
-__all__ = ["AttitudePosterior", "PosteriorSummary", "PosteriorWarning", "bulk_ess", "split_r_hat", "tail_ess"]
+__all__ = [
+    "AttitudePosterior",
+    "LightcurvePosterior",
+    "PosteriorSummary",
+    "PosteriorWarning",
+    "bulk_ess",
+    "split_r_hat",
+    "tail_ess",
+]
 
 # Convergence thresholds of the warning (Vehtari et al. 2021: R-hat below 1.01).
 R_HAT_LIMIT = 1.01
@@ -67,6 +75,43 @@ def long_axis_mode(inertia: np.ndarray, angular_velocity: np.ndarray) -> np.ndar
     """
     middle = np.median(inertia, axis=-1, keepdims=True)
     return np.sum(inertia * angular_velocity**2 * (inertia - middle), axis=-1) < 0
+
+
+def _summary(quantities, by_chain) -> PosteriorSummary:
+    """``summary()`` of named draws (S,), ``by_chain`` reshaping draws to (chains, draws)."""
+    rows = PosteriorSummary()
+    for name, draws in quantities.items():
+        chains = by_chain(draws)
+        low, median, high = np.quantile(draws, _QUANTILES)
+        varies = bool(np.ptp(draws) > 0)  # the largest moment is 1 in every draw
+        with np.errstate(invalid="ignore", divide="ignore"):
+            r_hat, ess_bulk, ess_tail = (
+                (float(split_r_hat(chains)), float(bulk_ess(chains)), float(tail_ess(chains)))
+                if varies
+                else (np.nan, np.nan, np.nan)
+            )
+        rows[name] = {
+            "mean": float(np.mean(draws)),
+            "sd": float(np.std(draws, ddof=1)),
+            "5%": float(low),
+            "50%": float(median),
+            "95%": float(high),
+            "r_hat": r_hat,
+            "ess_bulk": ess_bulk,
+            "ess_tail": ess_tail,
+        }
+    return rows
+
+
+def _mode_probabilities(long_axis_mode, by_chain) -> dict:
+    """``mode_probabilities()`` of the draws' long-axis flags."""
+    long_axis = np.asarray(long_axis_mode, float)
+    probability = float(np.mean(long_axis))
+    return {
+        "short_axis": 1.0 - probability,
+        "long_axis": probability,
+        "long_axis_by_chain": by_chain(long_axis).mean(axis=1),
+    }
 
 
 class PosteriorSummary(dict):
@@ -155,28 +200,7 @@ class AttitudePosterior(eqx.Module):
         A dict ``{name: {"mean", "sd", "5%", "50%", "95%", "r_hat", "ess_bulk", "ess_tail"}}``;
         ``print`` shows it as a table.
         """
-        rows = PosteriorSummary()
-        for name, draws in self.quantities().items():
-            chains = self._by_chain(draws)
-            low, median, high = np.quantile(draws, _QUANTILES)
-            varies = bool(np.ptp(draws) > 0)  # the largest moment is 1 in every draw
-            with np.errstate(invalid="ignore", divide="ignore"):
-                r_hat, ess_bulk, ess_tail = (
-                    (float(split_r_hat(chains)), float(bulk_ess(chains)), float(tail_ess(chains)))
-                    if varies
-                    else (np.nan, np.nan, np.nan)
-                )
-            rows[name] = {
-                "mean": float(np.mean(draws)),
-                "sd": float(np.std(draws, ddof=1)),
-                "5%": float(low),
-                "50%": float(median),
-                "95%": float(high),
-                "r_hat": r_hat,
-                "ess_bulk": ess_bulk,
-                "ess_tail": ess_tail,
-            }
-        return rows
+        return _summary(self.quantities(), self._by_chain)
 
     def mode_probabilities(self) -> dict:
         """The posterior probability of each rotation mode: ``{"short_axis": p, "long_axis": 1 - p,
@@ -188,13 +212,7 @@ class AttitudePosterior(eqx.Module):
         (``long_axis_by_chain``) have found different modes, and the pooled fraction is then only
         as good as the chains' starts.
         """
-        long_axis = np.asarray(self.long_axis_mode, float)
-        probability = float(np.mean(long_axis))
-        return {
-            "short_axis": 1.0 - probability,
-            "long_axis": probability,
-            "long_axis_by_chain": self._by_chain(long_axis).mean(axis=1),
-        }
+        return _mode_probabilities(self.long_axis_mode, self._by_chain)
 
     def to_arviz(self):
         """The draws as an ``arviz`` InferenceData (groups posterior and sample_stats, dims (chain,
@@ -218,3 +236,63 @@ class AttitudePosterior(eqx.Module):
             return arviz.from_dict(posterior=posterior, sample_stats=sample_stats)
         except TypeError:  # arviz 1.0 takes one dict of groups
             return arviz.from_dict({"posterior": posterior, "sample_stats": sample_stats})
+
+
+class LightcurvePosterior(eqx.Module):
+    r"""Result of :func:`lightcurve_posterior`: posterior draws and the sampler's diagnostics.
+
+    Draws (S = ``num_chains`` x draws per chain, chain after chain): ``periods`` (S, 2), (P_psi, P_phi)
+    (principal axis: (P, inf)); ``inertia`` (S, 3), the moments (I1, I2, I3) scaled so that the largest
+    is 1; ``long_axis_mode`` (S,); ``parameters`` (S, 8), the motion's parameters of
+    :func:`frbjax.lightcurve.fit_lightcurve` at the epoch (the shape held at the fit's);
+    ``chain``, ``diverging`` (S,).  Diagnostics of the sampled parameters (``parameter_names``):
+    ``r_hat``, ``ess_bulk``, ``ess_tail``; ``divergences`` (C,) per chain.  ``fit``: the
+    :class:`frbjax.lightcurve.LightcurveFit` about which the chains ran.
+    """
+
+    inertia: Float[Array, "S 3"]
+    periods: Float[Array, "S 2"]
+    long_axis_mode: Bool[Array, " S"]
+    parameters: Float[Array, "S 8"]
+    chain: Int[Array, " S"]
+    diverging: Bool[Array, " S"]
+    r_hat: Float[Array, " F"]
+    ess_bulk: Float[Array, " F"]
+    ess_tail: Float[Array, " F"]
+    divergences: Int[Array, " C"]
+    fit: eqx.Module
+    parameter_names: tuple[str, ...] = eqx.field(static=True)
+    num_chains: int = eqx.field(static=True)
+
+    def _by_chain(self, draws) -> np.ndarray:
+        draws = np.asarray(draws)
+        return draws.reshape((self.num_chains, -1) + draws.shape[1:])
+
+    def quantities(self) -> dict[str, np.ndarray]:
+        """Every scalar quantity's draws (S,): ``P_psi``, ``P_phi`` (finite ones), ``I_1..3`` and the
+        sampled parameters."""
+        named = {"P_psi": np.asarray(self.periods[:, 0])}
+        if np.all(np.isfinite(np.asarray(self.periods[:, 1]))):
+            named["P_phi"] = np.asarray(self.periods[:, 1])
+        for i in range(3):
+            named[f"I_{i + 1}"] = np.asarray(self.inertia[:, i])
+        columns = {
+            name: i
+            for i, name in enumerate(
+                ("log_I1", "log_I2", "log_L", "delta_1", "delta_2", "delta_3", "direction_1", "direction_2")
+            )
+        }
+        for name in self.parameter_names:
+            named[name] = np.asarray(self.parameters[:, columns[name]])
+        return named
+
+    def summary(self) -> PosteriorSummary:
+        """As :meth:`AttitudePosterior.summary`, of ``quantities()``."""
+        return _summary(self.quantities(), self._by_chain)
+
+    def mode_probabilities(self) -> dict:
+        """As :meth:`AttitudePosterior.mode_probabilities`, and ``"periods_by_chain"`` (C, 2): each
+        chain's median periods, which differ when chains sit at different period aliases."""
+        result = _mode_probabilities(self.long_axis_mode, self._by_chain)
+        result["periods_by_chain"] = np.median(self._by_chain(self.periods), axis=1)
+        return result
