@@ -31,7 +31,15 @@ from numpyro.infer import MCMC, NUTS
 
 from .. import _checks as checks, _progress
 from ..lightcurve._fit import _curve_mean, _facet_fluxes, _periods, _safe_log, _validate, LightcurveFit
-from ._result import bulk_ess, LightcurvePosterior, PosteriorWarning, R_HAT_LIMIT, split_r_hat, tail_ess
+from ._result import (
+    bulk_ess,
+    LIGHTCURVE_PARAMETER_NAMES,
+    LightcurvePosterior,
+    PosteriorWarning,
+    R_HAT_LIMIT,
+    split_r_hat,
+    tail_ess,
+)
 
 
 # The blocks of theta that a user's prior may give distributions for.
@@ -41,7 +49,6 @@ LIGHTCURVE_BLOCKS = {
     "attitude": slice(3, 6),
     "momentum_direction": slice(6, 8),
 }
-_NAMES = ("log_I1", "log_I2", "log_L", "delta_1", "delta_2", "delta_3", "direction_1", "direction_2")
 
 
 def _triangle_inequality(log_moments):
@@ -209,7 +216,7 @@ def lightcurve_posterior(
         ess_tail=as_array(ess_tail),
         divergences=jnp.asarray(divergences),
         fit=initial,
-        parameter_names=tuple(_NAMES[i] for i in free),
+        parameter_names=tuple(LIGHTCURVE_PARAMETER_NAMES[i] for i in free),
         num_chains=num_chains,
     )
     problems = []

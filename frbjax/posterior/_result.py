@@ -77,6 +77,12 @@ def long_axis_mode(inertia: np.ndarray, angular_velocity: np.ndarray) -> np.ndar
     return np.sum(inertia * angular_velocity**2 * (inertia - middle), axis=-1) < 0
 
 
+def _by_chain(draws, num_chains) -> np.ndarray:
+    """Draws (S, ...), chain after chain, as (chains, draws per chain, ...)."""
+    draws = np.asarray(draws)
+    return draws.reshape((num_chains, -1) + draws.shape[1:])
+
+
 def _summary(quantities, by_chain) -> PosteriorSummary:
     """``summary()`` of named draws (S,), ``by_chain`` reshaping draws to (chains, draws)."""
     rows = PosteriorSummary()
@@ -178,8 +184,7 @@ class AttitudePosterior(eqx.Module):
     num_chains: int = eqx.field(static=True)
 
     def _by_chain(self, draws) -> np.ndarray:
-        draws = np.asarray(draws)
-        return draws.reshape((self.num_chains, -1) + draws.shape[1:])
+        return _by_chain(draws, self.num_chains)
 
     def quantities(self) -> dict[str, np.ndarray]:
         """Every scalar quantity's draws (S,), by name: the moments ``I_1..3``, the angular velocity at
@@ -238,6 +243,19 @@ class AttitudePosterior(eqx.Module):
             return arviz.from_dict({"posterior": posterior, "sample_stats": sample_stats})
 
 
+# The motion's parameters of a light-curve fit (frbjax.lightcurve's module docstring), by name.
+LIGHTCURVE_PARAMETER_NAMES = (
+    "log_I1",
+    "log_I2",
+    "log_L",
+    "delta_1",
+    "delta_2",
+    "delta_3",
+    "direction_1",
+    "direction_2",
+)
+
+
 class LightcurvePosterior(eqx.Module):
     r"""Result of :func:`lightcurve_posterior`: posterior draws and the sampler's diagnostics.
 
@@ -265,8 +283,7 @@ class LightcurvePosterior(eqx.Module):
     num_chains: int = eqx.field(static=True)
 
     def _by_chain(self, draws) -> np.ndarray:
-        draws = np.asarray(draws)
-        return draws.reshape((self.num_chains, -1) + draws.shape[1:])
+        return _by_chain(draws, self.num_chains)
 
     def quantities(self) -> dict[str, np.ndarray]:
         """Every scalar quantity's draws (S,): ``P_psi``, ``P_phi`` (finite ones), ``I_1..3`` and the
@@ -276,14 +293,8 @@ class LightcurvePosterior(eqx.Module):
             named["P_phi"] = np.asarray(self.periods[:, 1])
         for i in range(3):
             named[f"I_{i + 1}"] = np.asarray(self.inertia[:, i])
-        columns = {
-            name: i
-            for i, name in enumerate(
-                ("log_I1", "log_I2", "log_L", "delta_1", "delta_2", "delta_3", "direction_1", "direction_2")
-            )
-        }
         for name in self.parameter_names:
-            named[name] = np.asarray(self.parameters[:, columns[name]])
+            named[name] = np.asarray(self.parameters[:, LIGHTCURVE_PARAMETER_NAMES.index(name)])
         return named
 
     def summary(self) -> PosteriorSummary:
