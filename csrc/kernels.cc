@@ -17,6 +17,7 @@
 #include <string>
 
 #include "carlson.hpp"
+#include "free_flow.hpp"
 #include "jacobi.hpp"
 #include "motion.hpp"
 #include "parallel.hpp"
@@ -341,6 +342,89 @@ FRBJAX_MOTION_HANDLER(Momentum, 0, false);
 FRBJAX_MOTION_HANDLER(Momentum, 1, false);
 FRBJAX_MOTION_HANDLER(Momentum, 2, false);
 
+// The whole free flow of bodies with principal moments at one time per point (free_flow.hpp): inputs
+// inertia (..., 3), angular momentum (..., 3), attitude (..., 4) and t (...), all of the results' dtype
+// and of one batch; results L(t) (..., 3) and q(t) (..., 4).  Values only: frbjax/_free_flow.py takes
+// the derivatives of the JAX composite.
+template <class R>
+ffi::Error run_free_flow(ffi::ThreadPool& pool, const ffi::AnyBuffer& inertia, const ffi::AnyBuffer& momentum,
+                         const ffi::AnyBuffer& attitude, const ffi::AnyBuffer& time, ffi::AnyBuffer& momentum_out,
+                         ffi::AnyBuffer& attitude_out) {
+  const std::size_t count = time.element_count();
+  const ffi::DataType dtype = momentum_out.element_type();
+  const ffi::AnyBuffer* buffers[] = {&inertia, &momentum, &attitude, &time, &attitude_out};
+  for (const ffi::AnyBuffer* buffer : buffers)
+    if (buffer->element_type() != dtype)
+      return ffi::Error::InvalidArgument("free_flow: every argument and result must have one dtype");
+  if (inertia.element_count() != 3 * count || momentum.element_count() != 3 * count ||
+      attitude.element_count() != 4 * count || momentum_out.element_count() != 3 * count ||
+      attitude_out.element_count() != 4 * count)
+    return ffi::Error::InvalidArgument("free_flow: shapes (..., 3), (..., 3), (..., 4), (...) of one batch");
+  const R* j = static_cast<const R*>(inertia.untyped_data());
+  const R* l = static_cast<const R*>(momentum.untyped_data());
+  const R* q = static_cast<const R*>(attitude.untyped_data());
+  const R* t = static_cast<const R*>(time.untyped_data());
+  R* l_out = static_cast<R*>(momentum_out.untyped_data());
+  R* q_out = static_cast<R*>(attitude_out.untyped_data());
+  parallel_for(pool, count, grain(0) / 4, [&](std::size_t begin, std::size_t end) {
+    for (std::size_t i = begin; i < end; ++i) free_flow<R>(j + 3 * i, l + 3 * i, q + 4 * i, t[i], l_out + 3 * i, q_out + 4 * i);
+  });
+  return ffi::Error::Success();
+}
+
+ffi::Error free_flow_values(ffi::ThreadPool pool, ffi::AnyBuffer inertia, ffi::AnyBuffer momentum,
+                            ffi::AnyBuffer attitude, ffi::AnyBuffer time, ffi::Result<ffi::AnyBuffer> momentum_out,
+                            ffi::Result<ffi::AnyBuffer> attitude_out) {
+  switch (momentum_out->element_type()) {
+    case ffi::DataType::F64:
+      return run_free_flow<double>(pool, inertia, momentum, attitude, time, *momentum_out, *attitude_out);
+    case ffi::DataType::F32:
+      return run_free_flow<float>(pool, inertia, momentum, attitude, time, *momentum_out, *attitude_out);
+    default:
+      return ffi::Error::InvalidArgument("free_flow: float32 or float64 only");
+  }
+}
+
+XLA_FFI_DEFINE_HANDLER(FreeFlow, free_flow_values,
+                       ffi::Ffi::Bind()
+                           .Ctx<ffi::ThreadPool>()
+                           .Arg<ffi::AnyBuffer>()
+                           .Arg<ffi::AnyBuffer>()
+                           .Arg<ffi::AnyBuffer>()
+                           .Arg<ffi::AnyBuffer>()
+                           .Ret<ffi::AnyBuffer>()
+                           .Ret<ffi::AnyBuffer>());
+
+// For the tests: free_flow.hpp's working frame and regime per body, inertia and angular momentum
+// (..., 3) -> (..., 8) (free_flow_frame).
+template <class R>
+ffi::Error run_free_flow_frame(const ffi::AnyBuffer& inertia, const ffi::AnyBuffer& momentum, ffi::AnyBuffer& result) {
+  const std::size_t count = result.element_count() / kFreeFlowFrameOutputs;
+  if (inertia.element_type() != result.element_type() || momentum.element_type() != result.element_type() ||
+      inertia.element_count() != 3 * count || momentum.element_count() != 3 * count ||
+      result.element_count() != kFreeFlowFrameOutputs * count)
+    return ffi::Error::InvalidArgument("free_flow_frame: inertia and momentum (..., 3), result (..., 8), one dtype");
+  const R* j = static_cast<const R*>(inertia.untyped_data());
+  const R* l = static_cast<const R*>(momentum.untyped_data());
+  R* out = static_cast<R*>(result.untyped_data());
+  for (std::size_t i = 0; i < count; ++i) free_flow_frame<R>(j + 3 * i, l + 3 * i, out + kFreeFlowFrameOutputs * i);
+  return ffi::Error::Success();
+}
+
+ffi::Error free_flow_frame_values(ffi::AnyBuffer inertia, ffi::AnyBuffer momentum, ffi::Result<ffi::AnyBuffer> result) {
+  switch (result->element_type()) {
+    case ffi::DataType::F64:
+      return run_free_flow_frame<double>(inertia, momentum, *result);
+    case ffi::DataType::F32:
+      return run_free_flow_frame<float>(inertia, momentum, *result);
+    default:
+      return ffi::Error::InvalidArgument("free_flow_frame: float32 or float64 only");
+  }
+}
+
+XLA_FFI_DEFINE_HANDLER(FreeFlowFrame, free_flow_frame_values,
+                       ffi::Ffi::Bind().Arg<ffi::AnyBuffer>().Arg<ffi::AnyBuffer>().Ret<ffi::AnyBuffer>());
+
 // A body's series record (series.hpp): inputs J1, J2, J3, l1, l2, l3 and the regime (int32) of one
 // size; the result (..., SeriesLayout<R>::size).
 template <class R>
@@ -436,6 +520,7 @@ const Entry kHandlers[] = {
     {"frbjax_series_record", SeriesRecord}, {"frbjax_series_motion", SeriesMotion},
     {"frbjax_series_momentum", SeriesMomentum},
     {"frbjax_momentum_0", Momentum_0}, {"frbjax_momentum_1", Momentum_1}, {"frbjax_momentum_2", Momentum_2},
+    {"frbjax_free_flow", FreeFlow},    {"frbjax_free_flow_frame", FreeFlowFrame},
 };
 
 PyObject* handlers(PyObject*, PyObject*) {

@@ -93,6 +93,38 @@ def selected(inertia) -> bool:
     return choice == "compiled" and _compiled.selected(inertia)
 
 
+def free_flow(inertia, angular_momentum, attitude, t):
+    """(L(t), q(t)) of bodies with principal moments, one kernel for the whole flow (csrc/free_flow.hpp):
+    the values of ``_body._motion_once(inertia, angular_momentum, attitude, t)`` (axes None), the
+    checks, working frame, regime, uniform rotation and quaternion products included.  ``inertia``,
+    ``angular_momentum`` (..., 3), ``attitude`` (..., 4) and ``t`` (...) broadcast together, of one
+    float dtype.  Values only: ``frbjax._free_flow`` gives it the composite's derivatives."""
+    if _compiled._module() is None:
+        raise RuntimeError("frbjax's compiled kernels are not available (see frbjax.special._compiled)")
+    batch = jnp.broadcast_shapes(inertia.shape[:-1], angular_momentum.shape[:-1], attitude.shape[:-1], jnp.shape(t))
+    dtype = inertia.dtype
+    arguments = (
+        jnp.broadcast_to(inertia, batch + (3,)),
+        jnp.broadcast_to(angular_momentum.astype(dtype), batch + (3,)),
+        jnp.broadcast_to(attitude.astype(dtype), batch + (4,)),
+        jnp.broadcast_to(jnp.asarray(t, dtype), batch),
+    )
+    results = (jax.ShapeDtypeStruct(batch + (3,), dtype), jax.ShapeDtypeStruct(batch + (4,), dtype))
+    return jax.ffi.ffi_call("frbjax_free_flow", results, vmap_method="broadcast_all")(*arguments)
+
+
+def free_flow_frame(inertia, angular_momentum):
+    """The kernel's working frame per body, for the tests: (sorted inertia, unit working L, |L|,
+    regime), to compare bit for bit with ``_body._prepare``'s."""
+    if _compiled._module() is None:
+        raise RuntimeError("frbjax's compiled kernels are not available (see frbjax.special._compiled)")
+    batch = jnp.broadcast_shapes(inertia.shape[:-1], angular_momentum.shape[:-1])
+    inertia, angular_momentum = (jnp.broadcast_to(a, batch + (3,)) for a in (inertia, angular_momentum))
+    result = jax.ShapeDtypeStruct(batch + (8,), inertia.dtype)
+    out = jax.ffi.ffi_call("frbjax_free_flow_frame", result, vmap_method="broadcast_all")(inertia, angular_momentum)
+    return out[..., 2:5], out[..., 5:8], out[..., 1], out[..., 0].astype(jnp.int32)
+
+
 # -------------------------------------------------------------------------------------- the series
 
 

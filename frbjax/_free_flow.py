@@ -7,13 +7,17 @@ splitting integrators (``frbjax._splitting``) goes through it.
 
 from __future__ import annotations
 
+import functools
+
 import jax
 import jax.numpy as jnp
 from jaxtyping import Array, Float
 
+from . import _compiled_motion
 from ._body import _validate, _working_dtype, motion_once
 from ._checks import check_finite, on_host, real_array
 from ._inertia import InertiaTensor, through_principal_frame
+from ._precession import jvp_of_moved
 
 
 def _state_in_principal_frame(inertia, angular_momentum, attitude, t, axes):
@@ -42,11 +46,39 @@ def _tensor_free_flow(matrix, moments, axes, angular_momentum, attitude, t):
     return through_principal_frame(motion, evaluate, matrix, prepared, arguments)
 
 
+@jax.custom_jvp
+def _compiled_state(inertia, angular_momentum, attitude, t):
+    """``motion_once``'s (L(t), q(t)) from one compiled kernel (csrc/free_flow.hpp), its derivatives
+    those of ``motion_once`` itself.
+
+    On the CPU the composite runs the working-frame kernel and around it some 150 small XLA kernels
+    (the checks, the working frame, the classification, the uniform rotation, the quaternion
+    products); here the whole flow is one custom call, which is what a splitting method's many
+    steps of one body pay for.  The derivatives stay the composite's, conventions included (the
+    uniform rotation's variational solution, docs/theory.md §6; the regular precession of symmetric
+    bodies next to the plane of their equal moments, ``_precession``): the JVP rule is the JVP of
+    ``motion_once``, its values the kernel's (equal to rounding: the same formulas)."""
+    return _compiled_motion.free_flow(inertia, angular_momentum, attitude, t)
+
+
+@functools.partial(_compiled_state.defjvp, symbolic_zeros=True)
+def _compiled_state_jvp(primals, tangents):
+    # Only the inputs that move are differentiated (a derivative in t alone, as a splitting method's
+    # adjoint takes, differentiates nothing of the body).
+    _, tangent = jvp_of_moved(motion_once, primals, tangents)
+    return _compiled_state(*primals), tangent
+
+
 @jax.jit
 def _free_flow(inertia, angular_momentum, attitude, t):
     batch = jnp.broadcast_shapes(inertia.shape[:-1], angular_momentum.shape[:-1], attitude.shape[:-1], t.shape)
     inertia, angular_momentum = (jnp.broadcast_to(a, batch + (3,)) for a in (inertia, angular_momentum))
-    return motion_once(inertia, angular_momentum, jnp.broadcast_to(attitude, batch + (4,)), t)
+    attitude = jnp.broadcast_to(attitude, batch + (4,))
+    dtype = _working_dtype(inertia, angular_momentum)
+    inertia, angular_momentum, attitude = (a.astype(dtype) for a in (inertia, angular_momentum, attitude))
+    if _compiled_motion.selected(inertia):
+        return _compiled_state(inertia, angular_momentum, attitude, t)
+    return motion_once(inertia, angular_momentum, attitude, t)
 
 
 def free_flow(inertia, angular_momentum, attitude, t) -> tuple[Float[Array, "... 3"], Float[Array, "... 4"]]:

@@ -151,7 +151,7 @@ def precession(band, inertia, momentum, t, axes=None, attitude=True):
     return angular_momentum, jnp.concatenate([w[..., None], vector], -1)
 
 
-def _jvp(function, primals, tangents):
+def jvp_of_moved(function, primals, tangents):
     """jax.jvp over the arguments whose tangents are not symbolic zeros (the others held fixed), so that
     a derivative in t alone does not differentiate a prebuilt body's per-body data."""
     leaves, tree = jax.tree.flatten(primals)
@@ -195,11 +195,11 @@ def with_precession_derivatives(function, outputs, band_of, inputs_of):
     wrapped = jax.custom_jvp(function)
 
     def rule(primals, tangents):
-        value, tangent = _jvp(function, primals, tangents)
+        value, tangent = jvp_of_moved(function, primals, tangents)
         band = band_of(*primals)
 
         def along_precession(tangent):
-            inputs, d_inputs = _jvp(inputs_of, primals, tangents)
+            inputs, d_inputs = jvp_of_moved(inputs_of, primals, tangents)
             _, precessing = jax.jvp(_expansion(band, outputs), inputs, d_inputs)
             return jax.tree.map(lambda new, old: jnp.where(band[..., None], new, old), precessing, tangent)
 
