@@ -39,17 +39,23 @@ The search (all linear least squares, numpy, vectorised over frequencies):
    its deepest minima are refined jointly in (f1, f2) on local grids shrinking to a twentieth of
    1 / T (coarse-to-fine: the one-period scan is the coarse search, since a lattice is found from its
    strongest frequency at the full resolution).
-3. The refined bases are ranked by their RMS; bases of one lattice (each one's vectors small integer
-   combinations of the other's) are merged.  For a principal-axis rotator no second frequency lowers
-   the RMS by more than the noise allows: the period 1 / f1 (and 2 / f1, the usual double-peaked
-   curve) is proposed as a principal-axis rotator's.
-4. Each of the best ``lattices_kept`` bases gives candidate period pairs, (f_psi, f_phi) = (f1 + c, c)
-   (the SAM reading) and (f1, c) (the LAM reading), for c among f2, f1 - f2, f1 + f2 and their halves
-   (a lattice found through its even harmonics).  Each reading is scored by the RMS of the series in
-   its own basis (f_psi, f_phi) after a small local refinement, and the readings are ranked by it; a
-   principal-axis reading takes the last slot (or the first two, 1 / f1 and 2 / f1, when no second
-   frequency is significant).  Each centre becomes a range of +- ``tolerance`` / T in frequency, the
-   periods' uncertainty at the full span, and the list is cut at ``max_proposals``.
+3. The refined bases are ranked by their RMS and bases of one lattice (each one's vectors small
+   integer combinations of the other's) are merged.
+4. Each of the best ``lattices_kept`` lattices gives candidate period pairs, (f_psi, f_phi) =
+   (f1 + c, c) (the SAM reading) and (f1, c) (the LAM reading), for c among f2, f1 - f2, f1 + f2 and
+   their halves (a lattice found through its even harmonics).  Each reading is scored in its own
+   basis by a series with the few psi harmonics a body's attitude about L gives (|j| <= ``psi_order``)
+   and more phi harmonics (|k| <= ``phi_order``), its coefficients drifting slowly over the span
+   (each column times the Legendre polynomials of time up to degree ``drift``: the months of changing
+   geometry, the synodic drift of the psi phase among them), after a local refinement; the best
+   ``refined_readings`` of the unrefined scores are refined, and the readings are ranked by their RMS.
+5. Principal-axis comparison: the best single period with 2 (psi_order + phi_order) harmonics,
+   drifting alike, moved to its double while that fits within the noise's allowance (a period's
+   half fits as well).  When no reading lowers its RMS by more than the noise allows, the period,
+   its double and its half are proposed first as a principal-axis rotator's; otherwise the single
+   period takes the last slot.  Each centre becomes a range of +- ``tolerance`` / T in frequency (the
+   periods' uncertainty at the full span), at most +- ``max_width`` relative, and the list is cut at
+   ``max_proposals``.
 
 The ranges are for :func:`fit_lightcurve`'s ``periods``; ``mode`` tells which mode the reading assumed
 (fit with ``mode="both"`` to let the fit decide).  The lattice the light curves determine is only as
@@ -57,7 +63,12 @@ good as the data's cover of it: with few nights aliases (+-1 / day, +-1 / T) of 
 rank first, and the SAM and LAM readings of one lattice score alike (the periodogram cannot tell the
 mode: the full fit does); hence several ranked proposals.  The changing geometry over months shifts
 the observed psi frequency by the synodic rate (the phase angle bisector's motion, a fraction of
-1 / T for a few degrees a week), inside the ranges.
+1 / T for a few degrees a week), inside the ranges, and the drifting coefficients absorb it.
+
+How far this goes (``benchmarks/lightcurve_periodogram.py``, docs/lightcurves.md): for the slower
+tumblers of a one-site campaign (frequencies within a few times 1 / day of 0) many lattices, the
+truth's sub- and superlattices and their 1 / day aliases, fit the data to the noise; the ranking among
+them is then close to chance and the truth may fall outside the list.
 """
 
 from __future__ import annotations
@@ -81,7 +92,9 @@ class TumblerPeriodogram:
       principal-axis rotator (``modes[i] == "PA"``: pass ``principal_axis=True``);
     - ``modes``: the reading behind each proposal, "SAM", "LAM" or "PA";
     - ``centres``: (P_psi, P_phi) at the centre of each proposal (P_phi infinite for "PA");
-    - ``scores``: the RMS of the residuals of the proposal's lattice (log flux; lower is better);
+    - ``scores``: the RMS of the residuals of the proposal's series (log flux; lower is better): the
+      reading's series with drifting coefficients (module docstring, step 4), the single period's
+      for "PA";
     - ``bases``, ``basis_rms``: the refined lattice bases (f1, f2), best first, and their RMS;
       ``rms_one_period``: the RMS of the best single-period series (the principal-axis comparison);
     - ``frequencies``, ``rms``: the one-period scan (step 1); ``span``: T;
@@ -116,9 +129,13 @@ class TumblerPeriodogram:
 class _Data:
     """Centred log brightness and the per-curve means needed to centre the columns."""
 
-    def __init__(self, times, values, labels, segments=1):
+    def __init__(self, times, values, labels, segments=1, drift=0):
         self.origin = 0.5 * (times.min() + times.max())
         self.times = times - self.origin
+        # Slow drift of the coefficients: each column times the Legendre polynomials 0..drift of the
+        # time over the span (the changing geometry over months), fitted with the series.
+        x = self.times / max(0.5 * float(np.ptp(times)), 1e-300)
+        self.drift = np.stack([np.polynomial.legendre.legval(x, np.eye(drift + 1)[d]) for d in range(drift + 1)])
         _, index = np.unique(labels, return_inverse=True)
         self.index = index
         counts = np.bincount(index)
@@ -141,6 +158,8 @@ class _Data:
         for start in range(0, len(frequencies), chunk):
             block = frequencies[start : start + chunk]
             phase = np.exp(2j * np.pi * block[:, :, None] * self.times)  # (G, K, N)
+            if len(self.drift) > 1:
+                phase = (phase[:, :, None, :] * self.drift).reshape(len(block), -1, len(self.times))
             phase = phase - (phase @ self.average)[..., self.index]
             columns = np.concatenate([phase.real, phase.imag], 1)  # (G, 2K, N)
             explained = 0.0
@@ -205,6 +224,13 @@ def _same_lattice(a, b, tolerance, largest=4):
     return abs(round(np.linalg.det(np.array(pairs, float)))) == 1
 
 
+def _reading_indices(psi_order, phi_order):
+    """(j, k) of a reading's series: |j| <= psi_order, |k| <= phi_order, one of each +- pair."""
+    return np.array(
+        [(j, k) for j in range(0, psi_order + 1) for k in range(-phi_order, phi_order + 1) if j > 0 or k > 0]
+    )
+
+
 def _readings(f1, f2):
     """Candidate (f_psi, f_phi, mode) of a lattice basis (f1, f2), 0 < f2 < f1, in the order of their
     rank (module docstring, step 4)."""
@@ -229,12 +255,17 @@ def tumbler_periodogram(
     period_range=None,
     order: int = 2,
     oversampling: float = 5.0,
-    peaks: int = 4,
+    peaks: int = 6,
     tolerance: float = 1.0,
-    max_proposals: int = 8,
+    max_proposals: int = 12,
     map_halfwidth: float = 6.0,
-    lattices_kept: int = 6,
+    lattices_kept: int = 8,
     second_minima: int = 4,
+    psi_order: int = 2,
+    phi_order: int = 3,
+    drift: int = 1,
+    max_width: float = 0.1,
+    refined_readings: int = 32,
 ) -> TumblerPeriodogram:
     """Candidate ranges of a tumbler's two periods (P_psi, P_phi) from its light curves (module
     docstring): a two-period Fourier periodogram after Pravec et al. (2005, Icarus 173, 108).
@@ -249,8 +280,13 @@ def tumbler_periodogram(
     choice); ``oversampling``: grid points per 1 / T in the scans (T the data's span); ``peaks``: the
     one-period minima followed up; ``tolerance``: the half-width of each period's range in frequency,
     in units of 1 / T (1: a full resolution element, several times the error of the minima on the
-    synthetic family of ``benchmarks/lightcurve_periodogram.py``); ``max_proposals``: the length of the
-    list; ``map_halfwidth``: the extent of the RMS map around the best basis, in units of 1 / T.
+    synthetic family of ``benchmarks/lightcurve_periodogram.py``), capped at ``max_width`` (relative
+    half-width of each range, < 1); ``max_proposals``: the length of the list; ``map_halfwidth``: the
+    extent of the RMS map around the best basis, in units of 1 / T; ``lattices_kept``: the lattices
+    read as periods; ``second_minima``: the minima of each second-frequency scan refined;
+    ``psi_order``, ``phi_order``, ``drift``: the readings' series (harmonics of psi and of phi, the
+    degree of the coefficients' polynomial drift over the span; module docstring, step 4);
+    ``refined_readings``: the readings refined locally.
 
     Returns a :class:`TumblerPeriodogram`: ``proposals`` (ranked, each ready for
     ``fit_lightcurve(..., periods=proposal)``; a principal-axis one with ``principal_axis=True``:
@@ -259,8 +295,9 @@ def tumbler_periodogram(
     Refused with a ValueError naming the argument: times not one-dimensional, not finite or all
     equal, brightness not finite, of another shape, or <= 0 without ``magnitudes``, labels of another
     shape, a ``period_range`` that is missing or not positive and increasing, fewer samples than the
-    series has parameters, counts below 1, non-positive ``oversampling`` or ``tolerance``.  numpy
-    only (float64); seconds for a thousand samples.
+    series has parameters, counts or orders below 1 (``drift`` below 0), non-positive ``oversampling``
+    or ``tolerance``, ``max_width`` outside (0, 1).  numpy
+    only (float64); about ten seconds for a thousand samples on one core.
     """
     times = checks.real_array("times", times)
     if times.ndim != 1:
@@ -287,17 +324,27 @@ def tumbler_periodogram(
     max_proposals = checks.integer("max_proposals", max_proposals, minimum=1)
     oversampling = checks.scalar("oversampling", oversampling, positive=True)
     tolerance = checks.scalar("tolerance", tolerance, positive=True)
+    max_width = checks.scalar("max_width", max_width, positive=True)
+    if max_width >= 1:
+        raise ValueError(f"max_width must be < 1 (a relative half-width), got {max_width}")
+    psi_order = checks.integer("psi_order", psi_order, minimum=1)
+    phi_order = checks.integer("phi_order", phi_order, minimum=1)
+    drift = checks.integer("drift", drift, minimum=0)
+    lattices_kept = checks.integer("lattices_kept", lattices_kept, minimum=1)
+    second_minima = checks.integer("second_minima", second_minima, minimum=1)
+    refined_readings = checks.integer("refined_readings", refined_readings, minimum=1)
     map_halfwidth = checks.scalar("map_halfwidth", map_halfwidth, positive=True, allow_zero=True)
     times = times.astype(float)
     span = float(times.max() - times.min())
     if span <= 0:
         raise ValueError("times must span an interval: all are equal")
     indices = _lattice_indices(order)
-    parameters = 2 * len(indices) + len(np.unique(labels))
+    curves = len(np.unique(labels))
+    parameters = max(2 * len(indices), 2 * len(_reading_indices(psi_order, phi_order)) * (drift + 1)) + curves
     if n <= parameters:
         raise ValueError(
-            f"times: {n} samples cannot fit a two-period series of order {order} and {len(np.unique(labels))} "
-            f"offsets ({parameters} parameters)"
+            f"times: {n} samples cannot fit a two-period series of order {order} (psi_order {psi_order}, "
+            f"phi_order {phi_order}, drift {drift}) and {curves} offsets ({parameters} parameters)"
         )
     data = _Data(times, values, labels)
     resolution = 1 / span
@@ -330,74 +377,108 @@ def tumbler_periodogram(
             for i in _local_minima(rss_two, second_minima, 3):
                 found.append(_refine(data, indices, f1, float(grid[i]), step, levels=2, points=5))
     found.sort(key=lambda item: item[2])
-    dof = data.dof - 2 * len(indices)
+    lattices = []  # distinct lattices, best first
+    for item in found:
+        if not any(_same_lattice(np.array(item[:2]), np.array(kept[:2]), 0.3 * resolution) for kept in lattices):
+            lattices.append(item)
 
-    def rms(rss):
+    # ---- 3. readings of the best lattices as (f_psi, f_phi), each scored in its own basis by the
+    # reading's series (psi harmonics |j| <= psi_order, phi harmonics |k| <= phi_order) with
+    # coefficients drifting over the span (Legendre polynomials of time up to ``drift``).
+    rich = _Data(times, values, labels, drift=drift)
+    reading_indices = _reading_indices(psi_order, phi_order)
+    reading_dof = rich.dof - 2 * len(reading_indices) * (drift + 1)
+
+    def rms(rss, dof=reading_dof):
         return float(np.sqrt(rss / max(dof, 1)))
 
-    # ---- 3. readings of the best bases as (f_psi, f_phi), each scored in its own basis
-    readings = []
-    for f1, f2, _ in found[:lattices_kept]:
+    candidates = []
+    for f1, f2, _ in lattices[:lattices_kept]:
         for c in (f2, f1 - f2, f1 + f2, f2 / 2, (f1 - f2) / 2, (f1 + f2) / 2):
             if c <= 2 * resolution:
                 continue
             for f_psi, f_phi, mode in ((f1 + c, c, "SAM"), (f1, c, "LAM")):
-                if any(abs(f_psi - r[0]) < 0.5 * resolution and abs(f_phi - r[1]) < 0.5 * resolution for r in readings):
-                    continue
-                best = _refine(data, indices, f_psi, f_phi, 0.25 * resolution, levels=1, points=3)
-                readings.append((best[0], best[1], mode, best[2]))
+                near = [r for r in candidates if max(abs(f_psi - r[0]), abs(f_phi - r[1])) < 0.5 * resolution]
+                if not near:
+                    candidates.append((f_psi, f_phi, mode))
+    if candidates:
+        first = rich.rss(
+            np.array([reading_indices[:, 0] * fp + reading_indices[:, 1] * fq for fp, fq, _ in candidates])
+        )
+        order_first = np.argsort(first)[:refined_readings]
+    else:
+        order_first = []
+    readings = []
+    for k in order_first:
+        f_psi, f_phi, mode = candidates[k]
+        best = _refine(rich, reading_indices, f_psi, f_phi, 0.15 * resolution, levels=2, points=5)
+        if any(max(abs(best[0] - r[0]), abs(best[1] - r[1])) < 0.5 * resolution for r in readings):
+            continue
+        readings.append((best[0], best[1], mode, best[2]))
     readings.sort(key=lambda item: item[3])
-    lattices = [(r[0], r[1], r[3]) for r in readings]
 
-    # Principal-axis comparison: the best single period with 2 m harmonics.
+    # Principal-axis comparison: the best single period with 2 (psi_order + phi_order) harmonics,
+    # drifting alike.
     best_one = frequencies[int(np.argmin(rss_one))]
+    pa_harmonics = np.arange(1, 2 * (psi_order + phi_order) + 1)
     one_period = []
     for f in [f for fa in fundamentals for f in (fa, fa / 2) if f > 2 * resolution]:
         offsets = (np.arange(9) - 4) * step / 2
-        trial = data.rss((f + offsets)[:, None] * np.arange(1, 4 * order + 1))
+        trial = rich.rss((f + offsets)[:, None] * pa_harmonics)
         one_period.append((float(np.min(trial)), float(f + offsets[int(np.argmin(trial))])))
     rss_pa, f_pa = min(one_period) if one_period else (float(rss_one.min()), float(best_one))
-    noise = (readings[0][3] if readings else rss_pa) / max(dof, 1)
-    extra = 2 * (len(indices) - 4 * order)
+    pa_dof = rich.dof - 2 * len(pa_harmonics) * (drift + 1)
+    # A period's multiples fit as well as it does (its harmonics are theirs): the shortest period
+    # that fits within the noise's allowance is taken.
+    for _ in range(2):
+        offsets = (np.arange(9) - 4) * step / 2
+        trial = rich.rss((2 * f_pa + offsets)[:, None] * pa_harmonics)
+        allowance = 8 * len(pa_harmonics) * (drift + 1) * rss_pa / max(pa_dof, 1)
+        if 2 * f_pa > f_high or float(np.min(trial)) > rss_pa + allowance:
+            break
+        rss_pa, f_pa = float(np.min(trial)), float(2 * f_pa + offsets[int(np.argmin(trial))])
+    noise = (readings[0][3] if readings else rss_pa) / max(reading_dof, 1)
+    extra = 2 * (len(reading_indices) - len(pa_harmonics)) * (drift + 1)
     tumbling = bool(readings) and (rss_pa - readings[0][3]) / noise > 5 * max(extra, 1)
 
-    # ---- 4. ranges
-    width = tolerance * resolution
+    # ---- 4. ranges: +- tolerance / T in frequency, at most +- max_width relative
     proposals, modes, centres, scores = [], [], [], []
 
-    def interval(f, n):
-        return (1 / (f + n * width), 1 / max(f - n * width, f / 3))
+    def interval(f):
+        width = min(tolerance * resolution, max_width * f)
+        return (1 / (f + width), 1 / (f - width))
 
     def add(f_psi, f_phi, mode, score):
-        proposal = (interval(f_psi, 1), interval(f_phi, 1))
-        proposals.append(proposal)
+        proposals.append((interval(f_psi), interval(f_phi)))
         modes.append(mode)
         centres.append((1 / f_psi, 1 / f_phi))
         scores.append(score)
 
     def add_principal(f, score):
-        proposals.append(interval(f, 1))
+        proposals.append(interval(f))
         modes.append("PA")
         centres.append((1 / f, np.inf))
         scores.append(score)
 
     if not tumbling:
-        add_principal(f_pa, rms(rss_pa))
-        add_principal(f_pa / 2, rms(rss_pa))
+        add_principal(f_pa, rms(rss_pa, pa_dof))
+        add_principal(f_pa / 2, rms(rss_pa, pa_dof))
+        if 2 * f_pa <= f_high:
+            add_principal(2 * f_pa, rms(rss_pa, pa_dof))
     for f_psi, f_phi, mode, rss in readings:
         add(f_psi, f_phi, mode, rms(rss))
     proposals, modes, centres, scores = (x[:max_proposals] for x in (proposals, modes, centres, scores))
     if tumbling and max_proposals >= 4:
         # The last slot: the best single period, as a principal-axis rotator's.
         del proposals[-1], modes[-1], centres[-1], scores[-1]
-        add_principal(f_pa, rms(rss_pa))
-
+        add_principal(f_pa, rms(rss_pa, pa_dof))
     best = lattices[0] if lattices else (f_pa, f_pa / 2, rss_pa)
+    basis_dof = data.dof - 2 * len(indices)
     if map_halfwidth > 0:
         offsets = np.linspace(-map_halfwidth, map_halfwidth, 41) * resolution
         map_f1, map_f2 = np.meshgrid(best[0] + offsets, best[1] + offsets, indexing="ij")
         map_rss = data.rss(indices[:, 0] * map_f1.reshape(-1, 1) + indices[:, 1] * map_f2.reshape(-1, 1))
-        map_rms = np.sqrt(map_rss / max(dof, 1)).reshape(map_f1.shape)
+        map_rms = np.sqrt(map_rss / max(basis_dof, 1)).reshape(map_f1.shape)
     else:
         map_f1 = map_f2 = map_rms = np.zeros((0, 0))
     return TumblerPeriodogram(
@@ -406,8 +487,8 @@ def tumbler_periodogram(
         centres=np.array(centres, float).reshape(-1, 2),
         scores=np.array(scores, float),
         bases=np.array([item[:2] for item in lattices], float).reshape(-1, 2),
-        basis_rms=np.array([rms(item[2]) for item in lattices], float),
-        rms_one_period=rms(rss_pa),
+        basis_rms=np.array([rms(item[2], basis_dof) for item in lattices], float),
+        rms_one_period=rms(rss_pa, pa_dof),
         frequencies=frequencies,
         rms=np.sqrt(rss_one / max(data.dof - 4, 1)),
         span=span,
