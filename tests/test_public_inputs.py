@@ -287,6 +287,14 @@ ENTRIES = {
         dict(inertia="positive3", angular_momentum="finite3"),
         lambda inertia, angular_momentum: lightcurve.tumbler_periods(inertia, angular_momentum)[0],
     ),
+    "tumbler_periodogram": Entry(
+        dict(times=times(6), brightness=vectors(6, 0.5, 2.0), period_range=st.just(np.array([0.2, 2.0]))),
+        dict(times="times", brightness="positive", period_range="range"),
+        lambda times, brightness, period_range: lightcurve.tumbler_periodogram(
+            times, brightness, period_range=period_range
+        ),
+        call=None,
+    ),
     "GravityGradient": Entry(
         dict(inertia=moments(), mu=positive_scalar()),
         dict(inertia="positive3", mu="positive"),
@@ -481,6 +489,7 @@ def test_every_public_callable_is_in_the_harness():
     results = {
         "AttitudeFit",
         "LightcurveFit",
+        "TumblerPeriodogram",
         "FitError",
         "SPLITTING_METHODS",
         "LAWS",
