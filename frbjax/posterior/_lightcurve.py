@@ -3,10 +3,11 @@ r"""The posterior of a light-curve fit's spin state and inertia ratios (``lightc
 The parameters are those of :func:`frbjax.lightcurve.fit_lightcurve` (its module docstring): the
 motion $\theta$ = (log I1, log I2 with I3 = 1, log |L|, the attitude's rotation vector about the
 fit's reference attitude, L's inertial direction as a tangent of the sphere about its reference)
-at the epoch.  The shape is held at its fitted values (its hundreds of facet areas are nuisance
-parameters that the data determine far better than the spin state; sampling them is left out), and
-so are the light curves' unknown scales in the sense of a flat prior on each log-scale, which is
-integrated out exactly: for Gaussian noise in log flux the integral over one curve's offset leaves
+at the epoch.  The shape is held at its fitted values (sampling its hundreds of facet areas is left
+out), so the posterior is conditional on the shape: on a full-size tumbler its periods' standard
+deviations were 0.33 and 0.41 of the fit's sigmas, which carry the shape's uncertainty too
+(benchmarks/lightcurve_posterior.py).  The light curves' unknown scales, under a flat prior on each
+log-scale, are integrated out exactly: for Gaussian noise in log flux the integral over one curve's offset leaves
 the residuals about the curve's mean, the residuals of the fit, and a constant.  The log likelihood
 is then
 
@@ -103,8 +104,9 @@ def lightcurve_posterior(
     ``observer``, ``lightcurve``, ``magnitudes``, ``nan_policy``); ``initial``: the
     :class:`frbjax.lightcurve.LightcurveFit` of these data, about which the parameters are whitened
     and the chains started; ``sigma``: the relative noise (the standard deviation of the log flux).
-    The shape is held at ``initial``'s, the light curves' scales are integrated out (module
-    docstring); a principal-axis fit keeps its fixed parameters and samples the rest.
+    The shape is held at ``initial``'s (the intervals are conditional on it: narrower than the fit's
+    on a tumbler, module docstring), the light curves' scales are integrated out; a principal-axis
+    fit keeps its fixed parameters and samples the rest.
 
     ``prior``: the default is flat in the parameters (log moments, log |L|, the attitude's and L's
     tangent coordinates) with the moments within the triangle inequality; a dict of numpyro
