@@ -21,17 +21,16 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
+from _compile_options import FAST_COMPILE_OPTIONS
 
 import frbjax
 from frbjax import _body, _compiled_motion
 from frbjax._free_flow import _free_flow
 
 
-pytestmark = pytest.mark.skipif(
-    not _compiled_motion.selected(np.zeros(3)), reason="the compiled kernels are not selected here"
-)
+# The compiled kernels are built by the install and selected on the CPU (tests/special/test_kernels.py
+# asserts it): every test here runs the kernel.
 
-FAST_COMPILE_OPTIONS = {"xla_cpu_use_fusion_emitters": False, "xla_backend_optimization_level": 0}
 # The JAX formulas' whole flow compiles in a third of the time without XLA:CPU's fusion emitters (the
 # same arithmetic).  Not with LLVM's optimisations off too: at xla_backend_optimization_level 0
 # (jaxlib 0.10.2) that program gave wrong values at large |L t| and next to the separatrix (errors of

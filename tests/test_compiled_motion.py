@@ -16,6 +16,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
+from _compile_options import FAST_COMPILE_OPTIONS
 
 from frbjax import _compiled_motion, _regimes
 from frbjax._body import working_frame
@@ -85,9 +86,6 @@ def test_the_values_agree_in_every_regime(dtype):
         assert error.max() <= VALUE_TOLERANCE[dtype] * scale.max() and (error / scale).max() <= VALUE_TOLERANCE[dtype]
     # A uniform rotation's L is the given one (its motion is formed in JAX around the kernel).
     np.testing.assert_array_equal(np.asarray(compiled[0])[~moving], np.asarray(unit)[~moving])
-
-
-FAST_COMPILE_OPTIONS = {"xla_cpu_use_fusion_emitters": False, "xla_backend_optimization_level": 0}
 
 
 def _diagonal_jacobians(path, inertia, unit, regime, tau, compiler_options=None):

@@ -54,6 +54,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
+from _compile_options import FAST_COMPILE_OPTIONS
 
 from frbjax import _quaternion as quaternion, FreeRigidBody
 
@@ -84,7 +85,6 @@ ONE_SIDED_BRANCH_POINTS = ("separatrix",)
 
 # Compiler options on CPU (module docstring); other backends compile with their defaults.
 FORWARD_OPTIONS = {"xla_cpu_use_fusion_emitters": False}
-FAST_COMPILE_OPTIONS = {"xla_cpu_use_fusion_emitters": False, "xla_backend_optimization_level": 0}
 
 
 # FreeRigidBody's two paths (both checked at every point): a body at one time (the one-time path)

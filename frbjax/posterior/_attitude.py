@@ -300,11 +300,12 @@ def _runner_up_modes(fit, tensor):
         tensor_covariance = np.asarray(fit.inertia_tensor_covariance, float)
         tensor_sigma = np.sqrt(np.maximum(np.einsum("ijij->ij", tensor_covariance), 1e-300))
 
+    shape_root = np.linalg.cholesky(covariance[:2, :2] + 1e-300 * np.eye(2))
+
     def signature(theta):
         whitened_motion = np.linalg.solve(motion_root, theta[motion])
         if tensor:
             return np.concatenate([(_scaled_tensor(theta)[2] / tensor_sigma).reshape(-1), whitened_motion])
-        shape_root = np.linalg.cholesky(covariance[:2, :2] + 1e-300 * np.eye(2))
         return np.concatenate([np.linalg.solve(shape_root, theta[:2]), whitened_motion])
 
     kept = [signature(np.asarray(fit.parameters, float))]
