@@ -47,6 +47,7 @@ import argparse
 import json
 import os
 import platform
+import re
 import sys
 import time
 from pathlib import Path
@@ -119,14 +120,16 @@ TARGETS = {
 
 def kernels(compiled):
     """XLA's kernels of a compiled CPU program: fused loops, conditionals and while loops (every
-    branch and loop body included).  XLA:CPU compiles each fused loop separately (about 15 ms each on
-    this machine class, whatever its size) and launches each one per call, so that the count, rather
-    than the arithmetic, sets compile time and one-body latency."""
+    branch and loop body included), and calls of frbjax's compiled kernels (csrc/).  XLA:CPU compiles
+    each fused loop separately (about 15 ms each on this machine class, whatever its size) and
+    launches each one per call, so that the count, rather than the arithmetic, sets compile time and
+    one-body latency; a compiled kernel costs XLA one custom call, whatever it computes."""
     text = compiled.as_text()
     return {
         "fusions": text.count(" fusion("),
         "conditionals": text.count(" conditional("),
         "while_loops": text.count(" while("),
+        "compiled_kernels": len(re.findall(r'custom_call_target="frbjax_', text)),
     }
 
 

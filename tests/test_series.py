@@ -48,10 +48,26 @@ CASES = [
 
 SERIES_DATA = pathlib.Path(__file__).parent / "data" / "series_references.json"
 
+# The series as the body runs them: compiled once (per argument shape) and shared by every case.  Run
+# eagerly, each call re-traced and compiled the series' loops (about 6 s per test).  The forced
+# complementary series is its own program, traced while ``_largest_nome`` is patched (see
+# test_complementary_series_against_mpmath).
+_coefficients = {False: jax.jit(lambda m, mc, chi: _series.coefficients(m, mc, chi))}
+_evaluate_series = jax.jit(_series.evaluate_series)
+_at_separatrix = jax.jit(_series.at_separatrix)
+
+
+def coefficients(m, mc, chi, forced=False):
+    """``_series.coefficients`` at float64 scalars, compiled (``forced``: the program traced with
+    the complementary series forced, under the test's patch)."""
+    if forced not in _coefficients:
+        _coefficients[forced] = jax.jit(lambda m, mc, chi: _series.coefficients(m, mc, chi))
+    return _coefficients[forced](jnp.float64(m), jnp.float64(mc), jnp.float64(chi))
+
 
 def evaluate(data, mc, chi, u, whole_integral=None):
     """(sn, cn, dn, expanded integral) from the series, continued as the body continues them."""
-    sn_r, cn_r, dn, reduced, turns = _series.evaluate_series(data, jnp.float64(mc), jnp.asarray(u))
+    sn_r, cn_r, dn, reduced, turns = _evaluate_series(data, jnp.float64(mc), jnp.asarray(u))
     turns = np.asarray(turns)
     parity = 1 - 2 * np.mod(turns, 2)
     if np.any(turns):
@@ -80,7 +96,7 @@ def errors(mc, chi, data, u, theirs, whole_integral=None):
 @pytest.mark.parametrize("m, chi", CASES)
 def test_series_against_mpmath(m, chi):
     mc = 1 - m  # exact for these m (and consistent with mpmath's 1 - m)
-    data = _series.coefficients(jnp.float64(m), jnp.float64(mc), jnp.float64(chi))
+    data = coefficients(m, mc, chi)
     quarter = data.quarter
     # K(m) = R_F(0, mc, 1): measured two ulp (4.4e-16) at worst over these cases.
     assert abs(float(quarter) / float(mpmath.ellipk(m)) - 1) <= 6.7e-16
@@ -110,7 +126,7 @@ def test_third_kind_relative_to_its_scale_for_large_characteristics(m, chi):
     gave 2.4e-14 at chi = -1.5e6, a 20-ulp attitude error at t = 0 for a body with moments (1, 1, 2).)
     """
     mc = 1 - m
-    data = _series.coefficients(jnp.float64(m), jnp.float64(mc), jnp.float64(chi))
+    data = coefficients(m, mc, chi)
     quarter = data.quarter
     u = np.concatenate([[1e-12, 1e-8, 1e-5, 1e-3, -3e-4, 0.1], np.linspace(-1, 1, 9) * float(quarter)])
     ours = evaluate(data, mc, chi, u)[:, 3]
@@ -138,7 +154,7 @@ def test_complementary_series_against_mpmath(mc, forced, monkeypatch):
     worst = [0.0, 0.0]
     for case in cases:
         chi = case["chi"]
-        data = _series.coefficients(jnp.float64(m), jnp.float64(mc), jnp.float64(chi))
+        data = coefficients(m, mc, chi, forced)
         assert bool(data.complementary) == (forced or mc < 7e-5)
         # The committed arguments are multiples of mpmath's K: the series' own is the same to rounding.
         assert abs(float(data.quarter) - case["quarter"]) <= 4e-16 * case["quarter"]
@@ -161,10 +177,10 @@ def test_separatrix_limit_against_mpmath(chi):
     """
     minus_chi = mpmath.mpf(-chi)
     gap = 1 + minus_chi
-    data = _series.coefficients(jnp.float64(0.5), jnp.float64(0.5), jnp.float64(chi))
+    data = coefficients(0.5, 0.5, chi)
     removed = chi >= -1
     separatrix = jnp.asarray(True)
-    data = _series.at_separatrix(
+    data = _at_separatrix(
         data,
         separatrix,
         jnp.float64(mpmath.sqrt(minus_chi / gap)),
@@ -174,7 +190,7 @@ def test_separatrix_limit_against_mpmath(chi):
     )
     u = np.array([0.0, 1e-9, -3e-4, 0.2, -1.0, 3.0, 17.0, -40.0, 350.0, 800.0])
     sn, cn, dn, reduced, turns = (
-        np.asarray(v) for v in _series.evaluate_series(data, jnp.float64(0.0), jnp.asarray(u))
+        np.asarray(v) for v in _evaluate_series(data, jnp.float64(0.0), jnp.asarray(u))
     )
     assert np.all(turns == 0)
     theirs = []

@@ -29,8 +29,11 @@ def test_setup_cost_quick(tmp_path):
     compile_row = result["rows"]["compile"]
     for name in ("frbjax_forward", "frbjax_value_and_grad", "diffrax_dopri8_forward", "diffrax_dopri8_value_and_grad"):
         assert compile_row[f"{name}_kernels"]["fusions"] > 0, name
-    for name in ("free_flow", "FreeRigidBody"):
-        assert result["rows"]["one_body"][name]["kernels"]["fusions"] > 0, name
+    # free_flow of one body is one compiled kernel on the CPU (csrc/free_flow.hpp): no fused loop of
+    # XLA's of its own; FreeRigidBody's evaluation calls the series kernel among XLA's loops.
+    free_flow_kernels = result["rows"]["one_body"]["free_flow"]["kernels"]
+    assert free_flow_kernels["compiled_kernels"] == 1 and free_flow_kernels["fusions"] == 0, free_flow_kernels
+    assert result["rows"]["one_body"]["FreeRigidBody"]["kernels"]["compiled_kernels"] >= 1
     # Example 1 runs with XLA's default loop settings.
     assert "xla_backend_extra_options" not in result["rows"]["calgo903_example1"]["xla_flags"]
     assert result["rows"]["state_at_T"]["diffrax_ok"]
