@@ -17,10 +17,13 @@
 
 from __future__ import annotations
 
+import functools
+
 import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
+from _compile_options import FAST_COMPILE_OPTIONS
 from scipy.spatial import ConvexHull
 from scipy.spatial.transform import Rotation
 
@@ -70,6 +73,17 @@ def unit(v):
     return v / np.linalg.norm(v, axis=-1, keepdims=True)
 
 
+def jitted_inertia(vertices, faces):
+    """mesh_inertia as one compiled program (called eagerly, each mesh's size compiled its operations
+    one by one)."""
+    return tuple(np.asarray(x) for x in jax.jit(lambda v: mesh_inertia(v, faces))(vertices))
+
+
+def jitted_shape(vertices, faces):
+    """ConvexShape.from_mesh as one compiled program (as jitted_inertia)."""
+    return jax.jit(lambda v: ConvexShape.from_mesh(v, faces))(vertices)
+
+
 # ------------------------------------------------------------------------------------ conventions
 
 
@@ -99,10 +113,12 @@ def test_gradient_finite_where_no_facet_is_lit_and_seen():
             FreeRigidBody(inertia, momentum), shape, t, jnp.array([1.0, 0.0, 0.0]), jnp.array([0.0, 1.0, 0.0])
         )[0]
 
-    # At t = 0 every facet has mu = 0 or mu0 = 0: the kink of max(mu, 0).
-    gradients = jax.grad(flux, argnums=(0, 1, 2, 3))(jnp.zeros(1), *body_args, jnp.asarray(vertices))
+    # At t = 0 every facet has mu = 0 or mu0 = 0: the kink of max(mu, 0).  One compiled program
+    # (called eagerly, the gradient's hundreds of operations were compiled one by one).
+    value_and_gradients = jax.jit(jax.value_and_grad(flux, argnums=(0, 1, 2, 3)))
+    value, gradients = value_and_gradients(jnp.zeros(1), *body_args, jnp.asarray(vertices))
     assert all(bool(jnp.all(jnp.isfinite(g))) for g in gradients)
-    assert float(flux(jnp.zeros(1), *body_args, jnp.asarray(vertices))) == 0.0
+    assert float(value) == 0.0
 
 
 # ------------------------------------------------------------------------------------ ellipsoid
@@ -134,16 +150,21 @@ def test_faceted_ellipsoid_converges_to_the_smooth_one():
     axes = (1.3, 1.0, 0.7)
     body = FreeRigidBody(np.array([0.6, 0.9, 1.0]), np.array([0.1, 0.2, 0.9]), ATTITUDE)
     rotation = Rotation.from_quat(np.roll(ATTITUDE, -1))
+    # The geometries as three samples at t = 0, the shape and the laws in one compiled program per
+    # facet count (called eagerly, each facet count compiled the operations one by one).
+    suns, observers = (np.stack(directions) for directions in zip(*GEOMETRIES))
+
+    def fluxes(subdivisions):
+        shape = ConvexShape.ellipsoid(*axes, subdivisions=subdivisions)
+        return jnp.stack([brightness(body, shape, jnp.zeros(len(suns)), suns, observers, law) for law in LAWS])
+
+    expected = np.array(
+        [[ellipsoid_flux_reference(axes, rotation, sun, observer, law) for sun, observer in GEOMETRIES] for law in LAWS]
+    )
     worst = {}
     for subdivisions in FACET_ERRORS:
-        shape = ConvexShape.ellipsoid(*axes, subdivisions=subdivisions)
-        errors = []
-        for law in LAWS:
-            for sun, observer in GEOMETRIES:
-                flux = float(brightness(body, shape, np.zeros(1), sun, observer, law=law)[0])
-                expected = ellipsoid_flux_reference(axes, rotation, sun, observer, law)
-                errors.append(abs(flux / expected - 1))
-        worst[subdivisions] = max(errors)
+        flux = np.asarray(jax.jit(fluxes, static_argnums=0)(subdivisions))
+        worst[subdivisions] = np.max(np.abs(flux / expected - 1))
     for subdivisions, bound in FACET_ERRORS.items():
         assert worst[subdivisions] < bound, worst
     # Second order: each refinement divides the error by about 4.
@@ -181,9 +202,16 @@ def test_gradients_against_finite_differences():
         observer,
         times,
     ]
-    function = jax.jit(_flux_sum, static_argnames="law")
-    gradients = jax.jit(jax.jacfwd(_flux_sum, argnums=tuple(range(8))), static_argnames="law")(*args, law=law)
-    reverse = jax.jit(jax.grad(_flux_sum, argnums=(3, 4, 5, 6)), static_argnames="law")(*args, law=law)
+    # The finite differences' reference values by a program compiled without XLA's optimisations
+    # (tests/_compile_options.py); both modes of the derivatives in one program, compiled as users'.
+    function = jax.jit(functools.partial(_flux_sum, law=law)).lower(*args).compile(FAST_COMPILE_OPTIONS)
+
+    @jax.jit
+    def derivatives(*args):
+        forward = jax.jacfwd(_flux_sum, argnums=tuple(range(8)))(*args, law=law)
+        return forward, jax.grad(_flux_sum, argnums=(3, 4, 5, 6))(*args, law=law)
+
+    gradients, reverse = derivatives(*args)
     for forward, backward in zip(gradients[3:7], reverse):
         np.testing.assert_allclose(np.asarray(backward), np.asarray(forward), rtol=1e-12, atol=1e-13)
     step = 1e-6
@@ -199,41 +227,38 @@ def test_gradients_against_finite_differences():
                 v.reshape(args[index].shape) if i == index else a  # noqa: E731
                 for i, a in enumerate(args)
             ]
-            numeric = (float(function(*shifted(plus), law=law)) - float(function(*shifted(minus), law=law))) / (
-                2 * step
-            )
+            numeric = (float(function(*shifted(plus))) - float(function(*shifted(minus)))) / (2 * step)
             analytic = float(np.asarray(gradients[index]).reshape(-1)[k])
             worst = max(worst, abs(analytic - numeric) / max(1.0, abs(numeric)))
-    # Measured 4.9e-10 (finite-difference truncation and rounding); a facet crossing the terminator
-    # within +-step would show as an O(1) error.
+    # Measured 4.4e-10 (5.6e-10 with the reference compiled with XLA's optimisations): finite-difference
+    # truncation and rounding; a facet crossing the terminator within +-step would show as an O(1) error.
     assert worst < 1e-9
 
 
+def _flux_of_arrays(inertia, momentum, attitude, normals, areas, times, sun, observer):
+    return brightness(FreeRigidBody(inertia, momentum, attitude), ConvexShape(normals, areas), times, sun, observer)
+
+
 def test_float32_and_batches():
+    """Two bodies and two shapes in one batch against each alone, and float32 against float64: one
+    compiled program per batch shape and dtype (the bodies and shapes built inside it; built eagerly,
+    each of their operations was compiled one by one)."""
     times = np.linspace(0.0, 20.0, 11)
     sun = unit(np.stack([np.cos(times / 50), np.sin(times / 50), 0.1 + 0 * times], -1))
     observer = unit(sun + np.array([0.0, 0.3, 0.1]))
     inertia = np.array([[0.6, 0.9, 1.0], [0.5, 1.0, 0.8]])
     momentum = np.array([[0.2, 0.1, 0.9], [0.7, 0.1, -0.2]])
-    pair = (ConvexShape.ellipsoid(1.3, 1.0, 0.7, 2), ConvexShape.ellipsoid(1.0, 0.9, 0.5, 2))
-    shapes = ConvexShape(jnp.stack([s.normals for s in pair]), jnp.stack([s.areas for s in pair]))
-    bodies = FreeRigidBody(inertia, momentum, np.stack([ATTITUDE, [1.0, 0, 0, 0]]))
-    batched = np.asarray(brightness(bodies, shapes, times, sun, observer))
+    attitude = np.stack([ATTITUDE, [1.0, 0, 0, 0]])
+    pair = jax.jit(lambda: [ConvexShape.ellipsoid(1.3, 1.0, 0.7, 2), ConvexShape.ellipsoid(1.0, 0.9, 0.5, 2)])()
+    normals, areas = (np.stack([np.asarray(getattr(s, name)) for s in pair]) for name in ("normals", "areas"))
+    flux = jax.jit(_flux_of_arrays)
+    batched = np.asarray(flux(inertia, momentum, attitude, normals, areas, times, sun, observer))
     assert batched.shape == (2, 11)
     for k in range(2):
-        one = brightness(
-            FreeRigidBody(inertia[k], momentum[k], np.asarray(bodies.initial_attitude[k])),
-            ConvexShape(shapes.normals[k], shapes.areas[k]),
-            times,
-            sun,
-            observer,
-        )
+        one = flux(inertia[k], momentum[k], attitude[k], normals[k], areas[k], times, sun, observer)
         np.testing.assert_allclose(batched[k], np.asarray(one), rtol=1e-13)
-    single = jax.tree.map(lambda x: np.asarray(x, np.float32), (inertia[0], momentum[0], ATTITUDE))
-    shape32 = ConvexShape(np.asarray(shapes.normals[0], np.float32), np.asarray(shapes.areas[0], np.float32))
-    flux32 = brightness(
-        FreeRigidBody(*single), shape32, times.astype(np.float32), sun.astype(np.float32), observer.astype(np.float32)
-    )
+    single = (inertia[0], momentum[0], ATTITUDE, normals[0], areas[0], times, sun, observer)
+    flux32 = flux(*(np.asarray(x, np.float32) for x in single))
     assert flux32.dtype == jnp.float32
     # Measured 7.1e-7: float32 rounding of the motion over 20 time units and of the sums.
     np.testing.assert_allclose(np.asarray(flux32), batched[0], rtol=2e-6)
@@ -259,7 +284,7 @@ def test_bad_directions_name_the_argument():
 
 def test_inertia_of_box_and_ellipsoid():
     a, b, c = 1.0, 2.0, 0.5
-    volume, centre, inertia = (np.asarray(x) for x in mesh_inertia(*box_mesh(a, b, c)))
+    volume, centre, inertia = jitted_inertia(*box_mesh(a, b, c))
     mass = 8 * a * b * c
     expected = mass / 3 * np.diag([b * b + c * c, a * a + c * c, a * a + b * b])
     np.testing.assert_allclose(volume, mass, rtol=1e-14)
@@ -269,7 +294,7 @@ def test_inertia_of_box_and_ellipsoid():
     # m/5 (b^2 + c^2), ... (measured relative errors 2.2e-3 and 3.6e-3 at 5120 facets).
     axes = np.array([1.3, 1.0, 0.7])
     vertices, faces = icosphere(4)
-    volume, _, inertia = (np.asarray(x) for x in mesh_inertia(vertices * axes, faces))
+    volume, _, inertia = jitted_inertia(vertices * axes, faces)
     exact_volume = 4 / 3 * np.pi * np.prod(axes)
     exact = (
         exact_volume
@@ -285,11 +310,11 @@ def test_minkowski_reconstruction_recovers_the_polytope():
     rng = np.random.default_rng(5)
     points = rng.normal(size=(40, 3)) * np.array([1.4, 1.0, 0.7])
     hull = ConvexHull(points)
-    original = ConvexShape.from_mesh(points, hull.simplices)
+    original = jitted_shape(points, hull.simplices)
     vertices, faces = original.polyhedron()
-    rebuilt = ConvexShape.from_mesh(vertices, faces)
-    v0, _, i0 = (np.asarray(x) for x in mesh_inertia(points, hull.simplices))
-    v1, c1, i1 = (np.asarray(x) for x in mesh_inertia(vertices, faces))
+    rebuilt = jitted_shape(vertices, faces)
+    v0, _, i0 = jitted_inertia(points, hull.simplices)
+    v1, c1, i1 = jitted_inertia(vertices, faces)
     # Measured: volume 2.5e-10, inertia 1.7e-9 relative, centroid at the origin to 1.4e-16.
     assert abs(v1 / v0 - 1) < 1e-9
     assert np.max(np.abs(i1 - i0)) < 5e-9 * np.max(np.abs(i0))
@@ -304,7 +329,7 @@ def test_minkowski_reconstruction_of_an_image_that_is_not_closed():
     """A fitted Gaussian image is closed only as far as its regularisation holds it: the polyhedron
     of the nearest closed image.  This image (an ellipsoid's on the 320 normals of the fit's model,
     log-areas perturbed by 0.4 N(0, 1), closure 0.8% of its area) made qhull fail before."""
-    model = ConvexShape.from_mesh(*icosphere(2))
+    model = jitted_shape(*icosphere(2))
     normals = np.asarray(model.normals)
     axes = np.array([1.35, 1.0, 0.8])
     # The ellipsoid's area per solid angle is (abc)^2 / h(n)^4, h its support function.
@@ -314,7 +339,7 @@ def test_minkowski_reconstruction_of_an_image_that_is_not_closed():
     image = ConvexShape(normals, areas)
     assert np.max(np.abs(np.asarray(image.closure()))) > 5e-3
     vertices, faces = image.polyhedron()
-    rebuilt = ConvexShape.from_mesh(vertices, faces)
+    rebuilt = jitted_shape(vertices, faces)
     # Each of the polyhedron's triangles lies on a face of one of the image's normals: the areas per
     # normal against the image's (measured: rms 2.2%, largest 3.9% of the mean area), the total the
     # image's, the polyhedron's image closed (3.5e-17).
@@ -374,11 +399,18 @@ def test_apophis_periods_from_its_published_spin_state():
 def test_momentum_from_periods_round_trip():
     inertia = jnp.array([[0.61, 0.965, 1.0], [0.4, 0.8, 1.0]])
     targets = jnp.array([[1.1, 11.0], [3.0, 10.0]])
-    momentum, exists = momentum_from_periods(
-        inertia, targets[:, 0], targets[:, 1], jnp.array([False, True]), jnp.array([0.3, 1.0])
-    )
+
+    # One compiled program (eagerly, the bisection's loops and the periods' operations were each
+    # compiled on their own).
+    @jax.jit
+    def round_trip(inertia, targets):
+        momentum, exists = momentum_from_periods(
+            inertia, targets[:, 0], targets[:, 1], jnp.array([False, True]), jnp.array([0.3, 1.0])
+        )
+        return exists, tumbler_periods(inertia, momentum)
+
+    exists, (p_psi, p_phi, long_axis) = round_trip(inertia, targets)
     assert bool(jnp.all(exists))
-    p_psi, p_phi, long_axis = tumbler_periods(inertia, momentum)
     np.testing.assert_allclose(np.asarray(p_psi), targets[:, 0], rtol=1e-10)
     np.testing.assert_allclose(np.asarray(p_phi), targets[:, 1], rtol=1e-10)
     np.testing.assert_array_equal(np.asarray(long_axis), [False, True])
