@@ -10,6 +10,8 @@ time, flux, Sun or observer direction, or an infinite flux).
 
 from __future__ import annotations
 
+import jax
+import jax.numpy as jnp
 import numpy as np
 import pytest
 
@@ -23,6 +25,16 @@ OPTIONS = dict(
 )
 
 
+@jax.jit
+def _model_flux(times, sun, observer):
+    """The rotator's flux, one compiled program (eagerly, its operations were compiled one by one)."""
+    rotator = FreeRigidBody(
+        jnp.array([0.6, 0.8, 1.0]), jnp.array([0.0, 0.0, 2 * np.pi / 0.3]), jnp.array([0.9, 0.2, -0.3, 0.2])
+    )
+    shape = ConvexShape.ellipsoid(1.0, 0.7, 0.5, subdivisions=2)
+    return brightness(rotator, shape, times, sun, observer)
+
+
 def observations():
     rng = np.random.default_rng(0)
     nights = np.sort(rng.uniform(0.0, 30.0, NIGHTS))
@@ -32,11 +44,7 @@ def observations():
     sun = np.stack([np.cos(longitude), np.sin(longitude), 0 * times], -1)
     observer = np.stack([np.cos(longitude + 0.3), np.sin(longitude + 0.3), 0.1 + 0 * times], -1)
     observer /= np.linalg.norm(observer, axis=-1, keepdims=True)
-    rotator = FreeRigidBody(
-        np.array([0.6, 0.8, 1.0]), np.array([0.0, 0.0, 2 * np.pi / 0.3]), np.array([0.9, 0.2, -0.3, 0.2])
-    )
-    shape = ConvexShape.ellipsoid(1.0, 0.7, 0.5, subdivisions=2)
-    flux = np.asarray(brightness(rotator, shape, times - np.median(times), sun, observer))
+    flux = np.asarray(_model_flux(times - np.median(times), sun, observer))
     flux = flux * np.exp(0.01 * rng.normal(size=flux.shape)) * np.exp(rng.normal(size=NIGHTS))[night]
     return times, flux, sun, observer, night
 

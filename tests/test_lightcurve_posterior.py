@@ -40,10 +40,13 @@ def test_bad_input_refused(data_and_fit):
 
 
 def test_period_posterior_of_a_rotator(data_and_fit):
-    """2 chains of 100 + 100 draws (the program's compilation is most of the time): the period's
-    posterior standard deviation within 25% of the fit's sigma (measured 1.3e-5 against 1.30e-5 at
-    larger sizes), the truth inside its 99.9% interval, converged chains, and the fixed parameters of a
-    principal-axis rotation (its moments) not sampled."""
+    """2 chains of 200 + 200 draws (the compilations are most of the time: numpyro compiles the
+    sampling loop once per chain; 300 + 300 took 0.3 s more than 200 + 200): the period's posterior standard
+    deviation within 25% of the fit's sigma (measured ratio 1.042; 1.3e-5 against 1.30e-5 at larger
+    sizes), the truth inside its 99.9% interval, converged chains (split R-hat 0.9994, no divergence),
+    and the fixed parameters of a principal-axis rotation (its moments) not sampled.  100 + 100 is too
+    few for the convergence check: its R-hat was 1.0077, and 1.0166 (a PosteriorWarning, over 1.01)
+    once the data's model flux changed by 2e-16 (compiled as one program)."""
     arguments, night, fit = data_and_fit
     with warnings.catch_warnings():
         warnings.simplefilter("error", PosteriorWarning)
@@ -53,11 +56,11 @@ def test_period_posterior_of_a_rotator(data_and_fit):
             initial=fit,
             sigma=0.01,
             num_chains=2,
-            num_warmup=100,
-            num_samples=100,
+            num_warmup=200,
+            num_samples=200,
             progress=False,
         )
-    assert isinstance(result, LightcurvePosterior) and result.periods.shape == (200, 2)
+    assert isinstance(result, LightcurvePosterior) and result.periods.shape == (400, 2)
     period = np.asarray(result.periods[:, 0])
     sigma = float(fit.period_sigma[0])
     assert 0.75 < period.std(ddof=1) / sigma < 1.25, (period.std(ddof=1), sigma)
