@@ -356,6 +356,10 @@ def test_minkowski_reconstruction_of_an_image_that_is_not_closed():
 # ------------------------------------------------------------------------------------ periods
 
 
+# One compiled program for the periods of one body (eagerly, their operations were compiled one by one).
+periods_of = jax.jit(tumbler_periods)
+
+
 def test_periods_against_the_motion():
     for inertia, momentum in [
         ((0.61, 0.965, 1.0), (0.19, 0.05, 0.98)),  # SAM
@@ -363,7 +367,7 @@ def test_periods_against_the_motion():
         ((1.0, 0.5, 0.8), (0.2, 0.95, -0.1)),
     ]:  # LAM, axes in any order
         inertia, momentum = np.asarray(inertia), 2.3 * unit(momentum)
-        p_psi, p_phi, long_axis = (np.asarray(x) for x in tumbler_periods(inertia, momentum))
+        p_psi, p_phi, long_axis = (np.asarray(x) for x in periods_of(inertia, momentum))
         body = FreeRigidBody(inertia, momentum, ATTITUDE)
         momentum_after = np.asarray(body.angular_momentum(np.array([float(p_phi)])))[0]
         np.testing.assert_allclose(momentum_after, momentum, atol=1e-12)
@@ -386,9 +390,9 @@ def test_apophis_periods_from_its_published_spin_state():
     energy_ratio = 1.024
     l1_squared = (energy_ratio - 1) / (1 / inertia[0] - 1)  # l2 = 0: a point of the orbit
     direction = np.array([np.sqrt(l1_squared), 0.0, np.sqrt(1 - l1_squared)])
-    p_psi, p_phi, long_axis = tumbler_periods(inertia, direction)
+    p_psi, p_phi, long_axis = periods_of(inertia, direction)
     scale = float(p_psi) / 27.38  # |L| in 1/h
-    p_psi, p_phi, _ = tumbler_periods(inertia, scale * direction)
+    p_psi, p_phi, _ = periods_of(inertia, scale * direction)
     assert not bool(long_axis)
     assert abs(float(p_phi) - 263.0) < 6.0  # 264.6 h
     np.testing.assert_allclose(float(p_psi), 27.38, rtol=1e-12)
