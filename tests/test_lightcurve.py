@@ -251,6 +251,12 @@ def test_float32_and_batches():
     attitude = np.stack([ATTITUDE, [1.0, 0, 0, 0]])
     pair = jax.jit(lambda: [ConvexShape.ellipsoid(1.3, 1.0, 0.7, 2), ConvexShape.ellipsoid(1.0, 0.9, 0.5, 2)])()
     normals, areas = (np.stack([np.asarray(getattr(s, name)) for s in pair]) for name in ("normals", "areas"))
+    # A batch of ellipsoids from arrays of semi-axes (rank-safe: the suite raises on rank promotion).
+    batch = jax.jit(lambda a, b, c: ConvexShape.ellipsoid(a, b, c, 2))(
+        np.array([1.3, 1.0]), np.array([1.0, 0.9]), np.array([0.7, 0.5])
+    )
+    np.testing.assert_allclose(np.asarray(batch.normals), normals, rtol=0, atol=1e-15)
+    np.testing.assert_allclose(np.asarray(batch.areas), areas, rtol=1e-15)
     flux = jax.jit(_flux_of_arrays)
     batched = np.asarray(flux(inertia, momentum, attitude, normals, areas, times, sun, observer))
     assert batched.shape == (2, 11)

@@ -189,9 +189,7 @@ def test_separatrix_limit_against_mpmath(chi):
         jnp.float64((-minus_chi if removed else 1) / gap),
     )
     u = np.array([0.0, 1e-9, -3e-4, 0.2, -1.0, 3.0, 17.0, -40.0, 350.0, 800.0])
-    sn, cn, dn, reduced, turns = (
-        np.asarray(v) for v in _evaluate_series(data, jnp.float64(0.0), jnp.asarray(u))
-    )
+    sn, cn, dn, reduced, turns = (np.asarray(v) for v in _evaluate_series(data, jnp.float64(0.0), jnp.asarray(u)))
     assert np.all(turns == 0)
     theirs = []
     for x in u:

@@ -211,6 +211,8 @@ class ConvexShape(eqx.Module):
                 checks.check_positive(name, checks.real_array(name, value))
         unit_vertices, faces = icosphere(subdivisions)
         axes = jnp.stack(jnp.broadcast_arrays(jnp.asarray(a), jnp.asarray(b), jnp.asarray(c)), -1)
+        # The icosphere's (V, 3) given the batch's leading axes explicitly (rank-safe broadcasting).
+        unit_vertices = jnp.expand_dims(jnp.asarray(unit_vertices), tuple(range(axes.ndim - 1)))
         vertices = unit_vertices * axes[..., None, :].astype(jnp.result_type(axes, float))
         return cls.from_mesh(vertices, faces)
 

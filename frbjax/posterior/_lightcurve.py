@@ -17,21 +17,24 @@ $$\log p(\text{data} \mid \theta) = -\frac{1}{2\sigma^2} \sum_i \big(r_i - \bar 
 $m_i$ the model flux of the fitted shape (Kaasalainen & Torppa 2001) through the exact motion, and
 $\sigma$ the relative noise.  numpyro's NUTS samples it in whitened coordinates
 $\theta = \hat\theta + C^{1/2} z$, $C$ the fit's covariance of $\theta$ conditional on the shape
-(the inverse of the precision's motion block), with numpyro's own progress bar.
+(the inverse of the precision's motion block), in the attitude posterior's program
+(``_sampler``: the chains one after another in one compiled loop, the data and the whitening as its
+arguments, so that a second posterior of the same sizes and scattering law compiles nothing).
 """
 
 from __future__ import annotations
 
+import functools
 import warnings
 
 import jax
 import jax.numpy as jnp
 import numpy as np
 import numpyro
-from numpyro.infer import MCMC, NUTS
 
 from .. import _checks as checks, _progress
 from ..lightcurve._fit import _curve_mean, _facet_fluxes, _periods, _safe_log, _validate, LightcurveFit
+from . import _sampler as sampler
 from ._result import (
     bulk_ess,
     LIGHTCURVE_PARAMETER_NAMES,
@@ -67,6 +70,26 @@ def _log_prior(theta, prior):
         inside = jnp.all(distribution.support(value))
         total = total + jnp.where(inside, jnp.sum(distribution.log_prob(value)), -jnp.inf)
     return total
+
+
+@functools.cache
+def _potential_generator(law):
+    """The potential of the whitened parameters z for the scattering ``law`` (one function per law,
+    so that the sampler's program is found compiled by a later call): ``data`` holds the light
+    curves, the held shape, the whitening and the noise."""
+
+    def generator(data, prior):
+        def potential(z):
+            theta = data["fixed"].at[data["free"]].set(data["centre"] + data["root"] @ z)
+            fluxes = _facet_fluxes(theta, data["reference"], data["normals"], data, law, data["c"])
+            difference = data["log_brightness"] - _safe_log(fluxes @ data["areas"])
+            residual = (difference - _curve_mean(difference, data["ones"], data["curves"])) / data["sigma"]
+            value = 0.5 * jnp.sum(residual * residual) - _log_prior(theta, prior)
+            return jnp.where(jnp.isnan(value), jnp.inf, value)
+
+        return potential
+
+    return generator
 
 
 def _conditional_whitening(fit_parameters, covariance, free):
@@ -153,6 +176,7 @@ def lightcurve_posterior(
     principal_axis = not np.isfinite(float(initial.periods[1]))
 
     as_array = lambda value: jnp.asarray(value, dtype)  # noqa: E731
+    reference = initial._reference
     data = dict(
         times=as_array(times - initial.epoch),
         sun=as_array(sun),
@@ -160,40 +184,40 @@ def lightcurve_posterior(
         log_brightness=as_array(log_brightness),
         curves=as_array(curves),
         ones=jnp.ones(len(times), dtype),
+        normals=initial.shape.normals,
+        areas=initial.shape.areas,
+        reference=reference,
+        c=as_array(initial.c),
+        sigma=as_array(sigma),
+        fixed=as_array(fit_theta),
+        free=jnp.asarray(free),
+        centre=as_array(centre),
+        root=as_array(root),
     )
-    normals, areas = initial.shape.normals, initial.shape.areas
-    reference = initial._reference
-    fixed, free_index = as_array(fit_theta), jnp.asarray(free)
-    centre_j, root_j = as_array(centre), as_array(root)
-
-    def theta_of(z):
-        return fixed.at[free_index].set(centre_j + root_j @ z)
-
-    def potential(z):
-        theta = theta_of(z)
-        model = _safe_log(_facet_fluxes(theta, reference, normals, data, initial.law, initial.c) @ areas)
-        difference = data["log_brightness"] - model
-        residual = (difference - _curve_mean(difference, data["ones"], data["curves"])) / sigma
-        value = 0.5 * jnp.sum(residual * residual) - _log_prior(theta, prior)
-        return jnp.where(jnp.isnan(value), jnp.inf, value)
 
     key = jax.random.key(seed)
     start_key, chain_key = jax.random.split(key)
     z0 = np.array(jax.random.normal(start_key, (num_chains, len(free)), dtype), float)
     z0[0] = 0.0
-    kernel = NUTS(potential_fn=potential, forward_mode_differentiation=True)
-    mcmc = MCMC(
-        kernel,
-        num_warmup=num_warmup,
-        num_samples=num_samples,
-        num_chains=num_chains,
-        chain_method="sequential",
-        progress_bar=progress,
-    )
     with numpyro.validation_enabled(False):
-        mcmc.run(chain_key, init_params=jnp.asarray(z0, dtype), extra_fields=("diverging",))
-    z = np.asarray(mcmc.get_samples(group_by_chain=True))  # (C, D, free)
-    diverging = np.asarray(mcmc.get_extra_fields(group_by_chain=True)["diverging"])
+        out = sampler.run(
+            jnp.asarray(z0, dtype),
+            jax.random.split(chain_key, num_chains),
+            data,
+            prior,
+            num_warmup=num_warmup,
+            num_samples=num_samples,
+            vectorized=False,
+            progress=progress,
+            potential_generator=_potential_generator(initial.law),
+        )
+    z = np.asarray(out["draws"])  # (C, D, free)
+    diverging = np.asarray(out["diverging"])
+    fixed, free_index = data["fixed"], data["free"]
+
+    def theta_of(z):
+        return fixed.at[free_index].set(data["centre"] + data["root"] @ z)
+
     thetas = np.asarray(jax.jit(jax.vmap(theta_of))(jnp.asarray(z.reshape(-1, z.shape[-1]), dtype)))
     periods, long_axis = (
         np.asarray(x)

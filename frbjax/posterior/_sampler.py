@@ -77,15 +77,16 @@ def _potential_generator(data, prior):
 
 
 @functools.cache
-def _kernels(num_warmup):
-    """numpyro's NUTS (init_kernel, sample_kernel) for potentials of (data, prior).  One pair per
-    warmup length: ``hmc`` keeps the warmup's settings of the last ``init_kernel`` trace."""
-    return hmc(potential_fn_gen=_potential_generator, algo="NUTS")
+def _kernels(num_warmup, potential_generator):
+    """numpyro's NUTS (init_kernel, sample_kernel) for the potentials ``potential_generator(data,
+    prior)``.  One pair per warmup length: ``hmc`` keeps the warmup's settings of the last
+    ``init_kernel`` trace."""
+    return hmc(potential_fn_gen=potential_generator, algo="NUTS")
 
 
-def _chain_loop(z0, key, data, prior, num_warmup, num_samples, progress_every, vectorized):
+def _chain_loop(z0, key, data, prior, num_warmup, num_samples, progress_every, vectorized, potential_generator):
     """Warmup and draws of one chain, or of a batch of chains (``vectorized``: leading axis)."""
-    init_kernel, sample_kernel = _kernels(num_warmup)
+    init_kernel, sample_kernel = _kernels(num_warmup, potential_generator)
 
     def init(z, key):
         return init_kernel(
@@ -140,15 +141,21 @@ def _chain_loop(z0, key, data, prior, num_warmup, num_samples, progress_every, v
     )
 
 
+def _chains(z0, keys, data, prior, num_warmup, num_samples, progress_every, vectorized, potential_generator):
+    """Every chain's (draws, diverging, num_steps, step size, acceptance), leading axis the chain."""
+    if vectorized:
+        return _chain_loop(z0, keys, data, prior, num_warmup, num_samples, progress_every, True, potential_generator)
+    return jax.lax.map(
+        lambda start: _chain_loop(
+            *start, data, prior, num_warmup, num_samples, progress_every, False, potential_generator
+        ),
+        (z0, keys),
+    )
+
+
 @functools.partial(jax.jit, static_argnames=("num_warmup", "num_samples", "progress_every", "vectorized"))
 def _run(z0, keys, data, prior, *, num_warmup, num_samples, progress_every, vectorized):
-    if vectorized:
-        out = _chain_loop(z0, keys, data, prior, num_warmup, num_samples, progress_every, True)
-    else:
-        out = jax.lax.map(
-            lambda start: _chain_loop(*start, data, prior, num_warmup, num_samples, progress_every, False),
-            (z0, keys),
-        )
+    out = _chains(z0, keys, data, prior, num_warmup, num_samples, progress_every, vectorized, _potential_generator)
     draws = out[0]
     thetas = parameters_of(draws, data)
     # The motion of each draw at t = 0 (the data's times are relative to the reference time).
@@ -166,8 +173,23 @@ def _run(z0, keys, data, prior, *, num_warmup, num_samples, progress_every, vect
     )
 
 
-def run(z0, keys, data, prior, *, num_warmup, num_samples, vectorized, progress):
-    """The chains' draws (dict of arrays, leading axes (chains, draws)), with a tqdm bar if ``progress``."""
+@functools.partial(
+    jax.jit, static_argnames=("num_warmup", "num_samples", "progress_every", "vectorized", "potential_generator")
+)
+def _run_chains(z0, keys, data, prior, *, num_warmup, num_samples, progress_every, vectorized, potential_generator):
+    draws, diverging, num_steps, step_size, acceptance = _chains(
+        z0, keys, data, prior, num_warmup, num_samples, progress_every, vectorized, potential_generator
+    )
+    return dict(draws=draws, diverging=diverging, num_steps=num_steps, step_size=step_size, acceptance=acceptance)
+
+
+def run(z0, keys, data, prior, *, num_warmup, num_samples, vectorized, progress, potential_generator=None):
+    """The chains' draws (dict of arrays, leading axes (chains, draws)), with a tqdm bar if ``progress``.
+
+    Without ``potential_generator``: the attitude posterior's program (``_run``: the potential of
+    this module, the draws' motion at t = 0).  With it (a module-level function, or one cached per
+    static setting, so that a second call finds the program compiled): NUTS on
+    ``potential_generator(data, prior)``, the draws in whitened coordinates (``draws``)."""
     total = num_warmup + num_samples
     # The bar's callbacks are in the program whether it is shown or not: showing it compiles nothing.
     progress_every = max(total // 50, 1)
@@ -177,6 +199,10 @@ def run(z0, keys, data, prior, *, num_warmup, num_samples, vectorized, progress)
         progress_every=progress_every,
         vectorized=vectorized,
     )
+    if potential_generator is None:
+        program = _run
+    else:
+        program = functools.partial(_run_chains, potential_generator=potential_generator)
     chains = z0.shape[0]
     with _progress.bar("posterior", total * (1 if vectorized else chains), "NUTS", "it", shown=progress):
-        return jax.device_get(jax.block_until_ready(_run(z0, keys, data, prior, **arguments)))
+        return jax.device_get(jax.block_until_ready(program(z0, keys, data, prior, **arguments)))
