@@ -78,8 +78,11 @@ def tumbler_periods(inertia: Float[Array, "... 3"], angular_momentum: Float[Arra
     angular momentum (under ``jit`` only the shapes are checked).
     """
     _validate(inertia, angular_momentum, None)
-    inertia = jnp.asarray(inertia)
-    momentum = jnp.asarray(angular_momentum)
+    return _tumbler_periods(jnp.asarray(inertia), jnp.asarray(angular_momentum))
+
+
+@jax.jit  # one program per shape: eagerly, each new shape compiled the elliptic formulas' operations in turn
+def _tumbler_periods(inertia, momentum):
     order = jnp.argsort(inertia, axis=-1)
     sorted_inertia = jnp.take_along_axis(inertia, order, -1)
     sorted_momentum = jnp.take_along_axis(momentum, order, -1)

@@ -122,6 +122,7 @@ def _checked_mesh(vertices, faces):
     return vertices, faces
 
 
+@jax.jit  # one program per mesh size: eagerly, a new shape compiled each of its operations in turn
 def _facets(vertices, faces):
     """(normals, areas) of the triangles of a closed convex mesh, normals turned outward."""
     corners = vertices[..., faces, :]  # (..., F, 3, 3)
@@ -144,7 +145,11 @@ def mesh_inertia(vertices: Float[Array, "... V 3"], faces: Int[Array, "F 3"]) ->
     (sum_i v_i)(sum_i v_i)^T) (vertices relative to c, c itself among them at 0); I = tr(C) 1 - C.
     Faces may be in either orientation (convex meshes: each is turned outward).
     """
-    vertices, faces = _checked_mesh(vertices, faces)
+    return _mesh_inertia(*_checked_mesh(vertices, faces))
+
+
+@jax.jit  # one program per mesh size (see _facets)
+def _mesh_inertia(vertices, faces):
     centre = jnp.mean(vertices, -2, keepdims=True)
     corners = (vertices - centre)[..., faces, :]  # (..., F, 3, 3)
     volumes = jnp.linalg.det(corners) / 6
