@@ -2,7 +2,8 @@
 principal-axis rotator (period 0.3 days, 8 nights of 8 samples, 1% noise, an ellipsoid; the data of
 tests/test_lightcurve_nan_policy.py, clean).  The posterior of the period must agree with the fit's
 linearised uncertainty (a rotator's likelihood is close to Gaussian in its parameters: measured
-standard deviation 1.325e-5 against the fit's 1.304e-5, ratio 1.016, with 4 chains of 200 + 200)
+standard deviation 1.325e-5 against the fit's 1.304e-5, ratio 1.016, with 4 chains of 200 + 200
+in numpyro's MCMC; 1.060 in the sampler's compiled loop, test_period_posterior_of_a_rotator)
 and contain the true period; tumblers at full size are the benchmark's (benchmarks/posterior_vs_fit.py
 compares attitude posteriors the same way)."""
 

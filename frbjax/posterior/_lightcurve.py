@@ -5,7 +5,7 @@ motion $\theta$ = (log I1, log I2 with I3 = 1, log |L|, the attitude's rotation 
 fit's reference attitude, L's inertial direction as a tangent of the sphere about its reference)
 at the epoch.  The shape is held at its fitted values (sampling its hundreds of facet areas is left
 out), so the posterior is conditional on the shape: on a full-size tumbler its periods' standard
-deviations were 0.33 and 0.41 of the fit's sigmas, which carry the shape's uncertainty too
+deviations were 0.32 and 0.40 of the fit's sigmas, which carry the shape's uncertainty too
 (benchmarks/lightcurve_posterior.py).  The light curves' unknown scales, under a flat prior on each
 log-scale, are integrated out exactly: for Gaussian noise in log flux the integral over one curve's offset leaves
 the residuals about the curve's mean, the residuals of the fit, and a constant.  The log likelihood
