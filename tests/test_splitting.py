@@ -57,7 +57,9 @@ def state_error(y, reference):
 
 
 # One compiled program per solver, shared by the tests: everything but the solver and the shapes is an
-# argument (compiling the free flow takes seconds; the number of steps varies at run time).
+# argument (compiling the free flow takes seconds; the number of steps varies at run time).  The times
+# are passed as float64 arrays: a weakly typed scalar (a Python float) and a float64 one are different
+# signatures, and each would compile the solver again.
 MAX_STEPS = 50_010
 
 
@@ -76,9 +78,9 @@ def runner(solver):
 def solve(method, t1, step, y0=Y0, args=ARGS, t0=0.0):
     """(ts, (L, q)) after each step from t0 to t1 (``method``: a name or a diffrax solver)."""
     solver = frbjax.RigidBodySplitting(method) if isinstance(method, str) else method
-    ts, ys, count = runner(solver)(y0, args, jnp.asarray(t0), jnp.asarray(t1), jnp.asarray(step))
-    count = int(count)
-    return np.asarray(ts[:count]), (np.asarray(ys[0][:count]), np.asarray(ys[1][:count]))
+    ts, ys, count = runner(solver)(y0, args, *(np.float64(x) for x in (t0, t1, step)))
+    count = int(count)  # sliced in NumPy: a slice of a JAX array compiles once per length
+    return np.asarray(ts)[:count], (np.asarray(ys[0])[:count], np.asarray(ys[1])[:count])
 
 
 def final(method, t1, step, **kwargs):
@@ -86,8 +88,8 @@ def final(method, t1, step, **kwargs):
     return momenta[-1], attitudes[-1]
 
 
-@functools.cache
-def dopri8(final_time, tolerance, weight=ARGS["weight"]):
+@jax.jit
+def _dopri8_final_state(final_time, tolerance, weight):
     solution = diffrax.diffeqsolve(
         TERM,
         diffrax.Dopri8(),
@@ -100,6 +102,13 @@ def dopri8(final_time, tolerance, weight=ARGS["weight"]):
         stepsize_controller=diffrax.PIDController(rtol=tolerance, atol=tolerance),
     )
     return solution.ys[0][-1], solution.ys[1][-1]
+
+
+@functools.cache
+def dopri8(final_time, tolerance, weight=ARGS["weight"]):
+    """The reference state at ``final_time``: one compiled program for every time, tolerance and weight
+    (diffeqsolve called with Python numbers compiles again for each)."""
+    return _dopri8_final_state(*(np.float64(x) for x in (final_time, tolerance, weight)))
 
 
 def errors(method, steps, final_time, reference):
@@ -211,25 +220,27 @@ def test_calgo903_example1_all_steps_through_diffeqsolve():
         return u0 @ frbjax.quaternion_to_matrix(q)[:, 2]
 
     term = frbjax.RigidBodyTerm(problem["I"], potential=potential)
-    momentum, matrix = problem["Pi"], problem["Q"].reshape(3, 3).T
-    y0 = (jnp.asarray(momentum), frbjax.quaternion_from_matrix(jnp.asarray(matrix)))
-    solution = diffrax.diffeqsolve(
-        term,
-        frbjax.RigidBodySplitting("blanes_moan6"),
-        0.0,
-        problem["T"],
-        jnp.asarray(problem.step),
-        y0,
-        args=u0,
-        saveat=diffrax.SaveAt(steps=True),
-        max_steps=problem.steps,
-    )
-    assert solution.ys[0].shape == (problem.steps, 3)
-    np.testing.assert_allclose(solution.ts, expected.time[1:], rtol=0, atol=1e-9)
-    matrices = np.asarray(frbjax.quaternion_to_matrix(solution.ys[1]))
-    difference = max(
-        np.abs(np.asarray(solution.ys[0]) - expected.momentum[1:]).max(), np.abs(matrices - expected.attitude[1:]).max()
-    )
+
+    @jax.jit  # one program (called eagerly, the conversions around diffeqsolve compile one by one)
+    def run(momentum, matrix, u0):
+        y0 = (momentum, frbjax.quaternion_from_matrix(matrix))
+        solution = diffrax.diffeqsolve(
+            term,
+            frbjax.RigidBodySplitting("blanes_moan6"),
+            0.0,
+            problem["T"],
+            jnp.asarray(problem.step),
+            y0,
+            args=u0,
+            saveat=diffrax.SaveAt(steps=True),
+            max_steps=problem.steps,
+        )
+        return solution.ts, solution.ys[0], frbjax.quaternion_to_matrix(solution.ys[1])
+
+    times, momenta, matrices = (np.asarray(x) for x in run(problem["Pi"], problem["Q"].reshape(3, 3).T, u0))
+    assert momenta.shape == (problem.steps, 3)
+    np.testing.assert_allclose(times, expected.time[1:], rtol=0, atol=1e-9)
+    difference = max(np.abs(momenta - expected.momentum[1:]).max(), np.abs(matrices - expected.attitude[1:]).max())
     assert difference <= 3e-10
 
 
@@ -268,6 +279,7 @@ def test_float32():
     _, single = jax.jit(
         lambda y0, args: frbjax.splitting_trajectory(term32, y0, dt=0.05, steps=2000, args=args, method="blanes_moan4")
     )(y32, args32)
+    single = tuple(np.asarray(x) for x in single)
     assert single[0].dtype == np.float32 and single[1].dtype == np.float32
     norms = np.linalg.norm(np.asarray(single[1], np.float64), axis=-1)
     assert np.abs(norms - 1).max() <= 4 * np.finfo(np.float32).eps
@@ -280,8 +292,9 @@ def test_float32():
     solution = diffrax.diffeqsolve(
         term32, frbjax.RigidBodySplitting("blanes_moan4"), *times, y32, args=args32, max_steps=250
     )
-    assert solution.ys[0].dtype == np.float32 and solution.ys[1].dtype == np.float32
-    assert state_error((solution.ys[0][-1], solution.ys[1][-1]), (momenta[199], attitudes[199])) < 6e-5
+    ends = tuple(np.asarray(x)[-1] for x in solution.ys)
+    assert ends[0].dtype == np.float32 and ends[1].dtype == np.float32
+    assert state_error(ends, (momenta[199], attitudes[199])) < 6e-5
 
 
 def test_energy_bounded_where_tsit5_drifts():
@@ -323,19 +336,25 @@ def test_torque_of_the_potential():
     """tau = -dV/dw for a small rotation Q exp(hat(w)) (central differences), and equal to the heavy
     top's torque written by hand, -weight chi x (Q^T e_z)."""
     q = Y0[1]
-    torque = np.asarray(TERM.body_torque(0.0, jnp.asarray(q), ARGS))
+    torque, up = (np.asarray(x) for x in jax.jit(_torque_and_up)(q))
     epsilon = 1e-6
     numeric = []
     for axis in np.eye(3):
-        turned = [
-            frbjax.quaternion_from_matrix(frbjax.quaternion_to_matrix(q) @ _rotation(sign * epsilon * axis))
-            for sign in (1, -1)
-        ]
-        values = [float(heavy_top_potential(0.0, x, ARGS)) for x in turned]
+        values = [float(_potential_turned(q, _rotation(sign * epsilon * axis))) for sign in (1, -1)]
         numeric.append(-(values[0] - values[1]) / (2 * epsilon))
     np.testing.assert_allclose(torque, numeric, rtol=0, atol=5e-11)  # measured 1.1e-11
-    up = np.asarray(frbjax.quaternion_to_matrix(q))[2]  # e_z in the body frame
     np.testing.assert_allclose(torque, -ARGS["weight"] * np.cross(ARGS["chi"], up), rtol=0, atol=1e-16)
+
+
+def _torque_and_up(q):
+    """The term's torque at q and e_z in the body frame."""
+    return TERM.body_torque(0.0, q, ARGS), frbjax.quaternion_to_matrix(q)[2]
+
+
+@jax.jit  # one program for the six turned attitudes (eagerly, each operation compiles on its own)
+def _potential_turned(q, rotation):
+    """V at the attitude Q rotation, Q the matrix of q."""
+    return heavy_top_potential(0.0, frbjax.quaternion_from_matrix(frbjax.quaternion_to_matrix(q) @ rotation), ARGS)
 
 
 def _rotation(vector):
@@ -365,15 +384,16 @@ def test_time_dependent_torque_keeps_the_order():
         max_steps=100_000,
         stepsize_controller=diffrax.PIDController(rtol=1e-13, atol=1e-13),
     )
-    reference = (reference.ys[0][-1], reference.ys[1][-1])
+    reference = (np.asarray(reference.ys[0])[-1], np.asarray(reference.ys[1])[-1])
     run = jax.jit(
-        lambda h: (
-            diffrax.diffeqsolve(
+        lambda h: tuple(
+            y[-1]
+            for y in diffrax.diffeqsolve(
                 term, frbjax.RigidBodySplitting("yoshida4"), 0.0, 5.0, h, Y0, args=0.1, max_steps=10_000
             ).ys
         )
     )
-    measured = [state_error(tuple(y[-1] for y in run(jnp.asarray(h))), reference) for h in (0.1, 0.05)]
+    measured = [state_error(run(jnp.asarray(h)), reference) for h in (0.1, 0.05)]
     assert abs(np.log2(measured[0] / measured[1]) - 4) <= 0.3, measured
 
 
@@ -386,9 +406,10 @@ def test_batch_of_bodies_and_vmap():
     momenta = rng.normal(size=(2, 2, 3))
     attitudes = rng.normal(size=(2, 2, 4))
     attitudes /= np.linalg.norm(attitudes, axis=-1, keepdims=True)
-    _, (batched_momenta, batched_attitudes) = jax.jit(
+    _, batched = jax.jit(
         lambda y0: frbjax.splitting_trajectory(TERM, y0, dt=0.1, steps=20, args=ARGS, method="leapfrog")
     )((momenta, attitudes))
+    batched_momenta, batched_attitudes = (np.asarray(x) for x in batched)
     assert batched_momenta.shape == (21, 2, 2, 3) and batched_attitudes.shape == (21, 2, 2, 4)
     _, alone = solve("leapfrog", 2.0, 0.1, y0=(momenta[1, 0], attitudes[1, 0]))
     assert state_error((batched_momenta[1:, 1, 0], batched_attitudes[1:, 1, 0]), alone) < 3e-15  # 8.9e-16
@@ -396,6 +417,7 @@ def test_batch_of_bodies_and_vmap():
     _, mapped, _ = jax.vmap(run, in_axes=(0, None, None, None, None))(
         (momenta.reshape(4, 3), attitudes.reshape(4, 4)), ARGS, 0.0, 2.0, 0.1
     )
+    mapped = [np.asarray(x) for x in mapped]
     assert (
         state_error(
             (mapped[0][:, 19], mapped[1][:, 19]),
@@ -413,17 +435,24 @@ def test_saving_every_few_steps_joins_the_free_flows(method):
     (blanes_moan4), where the methods err by 1.4e-9, 1.7e-3 and 5.3e-9.  The last state alone against
     diffeqsolve's: 6.3e-14, 3.2e-14, 5.4e-15 (every step saved: 4.9e-14, 3.8e-15, 5.4e-15: diffrax
     advances the time by sums, the scan by t0 + n dt)."""
-    ts, every = jax.jit(lambda y0: frbjax.splitting_trajectory(TERM, y0, dt=0.1, steps=100, args=ARGS, method=method))(
-        Y0
+    ts, every = jax.tree.map(
+        np.asarray,
+        jax.jit(lambda y0: frbjax.splitting_trajectory(TERM, y0, dt=0.1, steps=100, args=ARGS, method=method))(Y0),
     )
-    ts_saved, saved = jax.jit(
-        lambda y0: frbjax.splitting_trajectory(TERM, y0, dt=0.1, steps=100, args=ARGS, method=method, save_every=10)
-    )(Y0)
+    ts_saved, saved = jax.tree.map(
+        np.asarray,
+        jax.jit(
+            lambda y0: frbjax.splitting_trajectory(TERM, y0, dt=0.1, steps=100, args=ARGS, method=method, save_every=10)
+        )(Y0),
+    )
     assert saved[0].shape == (11, 3) and saved[1].shape == (11, 4)
     np.testing.assert_allclose(ts_saved, ts[::10], rtol=1e-15)
     assert state_error(saved, (every[0][::10], every[1][::10])) < 1e-13
     # The last state alone (save_every = steps), against diffeqsolve's step.
-    _, last = frbjax.splitting_trajectory(TERM, Y0, dt=0.1, steps=100, args=ARGS, method=method, save_every=100)
+    _, last = jax.tree.map(
+        np.asarray,
+        frbjax.splitting_trajectory(TERM, Y0, dt=0.1, steps=100, args=ARGS, method=method, save_every=100),
+    )
     assert last[0].shape == (2, 3)
     assert state_error((last[0][-1], last[1][-1]), final(method, 10.0, 0.1)) < 1.5e-13
 
@@ -538,7 +567,9 @@ def test_gradients_through_1000_steps():
     """Reverse mode (diffeqsolve, RecursiveCheckpointAdjoint) and forward mode (splitting_trajectory)
     against Richardson-extrapolated central differences, in every input: moments, initial L and q,
     the potential's parameter chi, the step."""
-    inputs = [jnp.asarray(INERTIA), jnp.asarray(Y0[0]), jnp.asarray(Y0[1]), jnp.asarray(ARGS["chi"]), jnp.asarray(0.01)]
+    # The step a float64 array, not a weakly typed scalar: the shifted steps of the differences are
+    # float64, and the values would otherwise compile twice.
+    inputs = [jnp.asarray(x) for x in (INERTIA, Y0[0], Y0[1], ARGS["chi"], np.float64(0.01))]
     value = jax.jit(_final_value)
     gradients = jax.jit(jax.grad(_final_value, argnums=(0, 1, 2, 3, 4)))(*inputs)
     rng = np.random.default_rng(0)
@@ -605,7 +636,7 @@ three_steps = jax.jit(
 def test_bad_step(step):
     with pytest.raises(ValueError, match="dt: the step must be a finite scalar > 0"):
         frbjax.splitting_trajectory(TERM, Y0, dt=step, steps=3, args=ARGS)
-    _, states = three_steps(Y0, step)
+    _, states = jax.tree.map(np.asarray, three_steps(Y0, step))
     assert np.all(np.isnan(states[0][1:])) and np.all(np.isnan(states[1][1:]))
 
 
@@ -615,7 +646,7 @@ def test_non_finite_state(which):
     y0[which][1] = np.nan
     with pytest.raises(ValueError, match=re.escape(f"y0[{which}]")):
         frbjax.splitting_trajectory(TERM, tuple(y0), dt=0.1, steps=3, args=ARGS)
-    _, states = three_steps(tuple(y0), 0.1)
+    _, states = jax.tree.map(np.asarray, three_steps(tuple(y0), 0.1))
     assert np.all(np.isnan(states[0][1:])) and np.all(np.isnan(states[1][1:]))
     solved = final("leapfrog", 0.3, 0.1, y0=tuple(y0))
     assert np.all(np.isnan(solved[0])) and np.all(np.isnan(solved[1]))
@@ -665,9 +696,9 @@ def test_matrix_helpers_round_trip():
     rng = np.random.default_rng(1)
     q = rng.normal(size=(5, 4))
     q /= np.linalg.norm(q, axis=-1, keepdims=True)
-    matrices = np.asarray(frbjax.quaternion_to_matrix(q))
+    matrices = np.asarray(jax.jit(frbjax.quaternion_to_matrix)(q))
     np.testing.assert_allclose(
         np.einsum("nij,nkj->nik", matrices, matrices), np.broadcast_to(np.eye(3), (5, 3, 3)), atol=1e-15
     )
-    back = np.asarray(frbjax.quaternion_from_matrix(matrices))
+    back = np.asarray(jax.jit(frbjax.quaternion_from_matrix)(matrices))
     np.testing.assert_allclose(np.abs(np.einsum("ni,ni->n", back, q)), 1, atol=1e-15)

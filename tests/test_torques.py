@@ -62,18 +62,30 @@ def state_error(y, reference):
 
 
 @functools.cache
+def dopri8_runner(name):
+    """Dopri8's final state for one term, compiled once for every final time and tolerance
+    (diffeqsolve called with Python numbers compiles again for each)."""
+
+    @jax.jit
+    def run(final_time, tolerance):
+        solution = diffrax.diffeqsolve(
+            TERMS[name],
+            diffrax.Dopri8(),
+            0.0,
+            final_time,
+            0.01,
+            Y0,
+            max_steps=1_000_000,
+            stepsize_controller=diffrax.PIDController(rtol=tolerance, atol=tolerance),
+        )
+        return solution.ys[0][-1], solution.ys[1][-1]
+
+    return run
+
+
+@functools.cache
 def dopri8(name, final_time, tolerance):
-    solution = diffrax.diffeqsolve(
-        TERMS[name],
-        diffrax.Dopri8(),
-        0.0,
-        final_time,
-        0.01,
-        Y0,
-        max_steps=1_000_000,
-        stepsize_controller=diffrax.PIDController(rtol=tolerance, atol=tolerance),
-    )
-    return solution.ys[0][-1], solution.ys[1][-1]
+    return dopri8_runner(name)(np.float64(final_time), np.float64(tolerance))
 
 
 @functools.cache
@@ -166,7 +178,7 @@ def test_order_six_with_a_momentum_torque_free_of_momentum():
 def test_torques_free_of_momentum_kick_as_torques():
     """Gravity, the gravity gradient and a constant torque (and their sums) do not depend on L: given
     as momentum_torque, the term holds them as a torque (plain kicks, no matrix exponential), with
-    the torque of their potential to rounding and the same splitting steps (measured 2.8e-17 and,
+    the torque of their potential to rounding and the same splitting steps (measured 5.6e-17 and,
     after 20 steps, 5.7e-16); a sum with damping stays a momentum torque (the exact affine kick)."""
     gravity = torques.UniformGravity([0.05, 0.1, 0.4], [0.0, 0.0, -1.0])
     gradient = torques.GravityGradient(INERTIA, torques.CircularOrbit(3.0, 1.0))
@@ -180,18 +192,23 @@ def test_torques_free_of_momentum_kick_as_torques():
     both = frbjax.RigidBodyTerm(
         INERTIA, potential=lambda t, q, args: gravity.potential(t, q, args) + gradient.potential(t, q, args)
     )
-    q = jnp.asarray(Y0[1]) / jnp.linalg.norm(jnp.asarray(Y0[1]))
-    torque = term.body_torque(0.7, q, None, jnp.asarray(Y0[0]))
-    np.testing.assert_allclose(torque, both.body_torque(0.7, q, None), rtol=0, atol=2e-16)
     with_user = frbjax.RigidBodyTerm(
         INERTIA, torque=lambda t, q, args: jnp.array([0.0, 0.0, 0.2]), momentum_torque=gradient
     )
-    np.testing.assert_allclose(
-        with_user.body_torque(0.7, q, None),
-        gradient(0.7, q, None, None) + jnp.array([0.0, 0.0, 0.2]),
-        rtol=0,
-        atol=1e-15,
-    )
+
+    @jax.jit  # one program: called eagerly, each operation of the torques compiles on its own
+    def torques_at(momentum, attitude):
+        q = attitude / jnp.linalg.norm(attitude)
+        return (
+            term.body_torque(0.7, q, None, momentum),
+            both.body_torque(0.7, q, None),
+            with_user.body_torque(0.7, q, None),
+            gradient(0.7, q, None, None) + jnp.array([0.0, 0.0, 0.2]),
+        )
+
+    torque, by_potential, user_and_gradient, by_hand = (np.asarray(x) for x in torques_at(*Y0))
+    np.testing.assert_allclose(torque, by_potential, rtol=0, atol=2e-16)
+    np.testing.assert_allclose(user_and_gradient, by_hand, rtol=0, atol=1e-15)
     damped = frbjax.RigidBodyTerm(INERTIA, momentum_torque=gradient + damping)
     assert damped.momentum_torque is not None and damped.linear_in_momentum
     steps = [
@@ -214,10 +231,12 @@ def test_damped_sphere_exact_damping_kick():
     term = frbjax.RigidBodyTerm(inertia, momentum_torque=torques.LinearDamping(inertia, c))
     momentum0 = np.array([0.3, -0.5, 1.1])
     q0 = np.array([0.6, 0.0, 0.8, 0.0])
-    ts, (momenta, attitudes) = frbjax.splitting_trajectory(
-        term, (momentum0, q0), dt=0.1, steps=400, method="blanes_moan4"
+    ts, (momenta, attitudes) = jax.tree.map(
+        np.asarray,
+        jax.jit(lambda y0: frbjax.splitting_trajectory(term, y0, dt=0.1, steps=400, method="blanes_moan4"))(
+            (momentum0, q0)
+        ),
     )
-    ts = np.asarray(ts)
     expected = momentum0 * np.exp(-c * ts[:, None] / moment)
     eps = np.finfo(np.float64).eps
     # Rounding only, growing with the steps (7 matrix exponentials and 6 free flows each): the
@@ -396,10 +415,15 @@ def test_three_kinds_of_torque_add_up():
     damping = torques.LinearDamping(INERTIA, DAMPING)
     together = frbjax.RigidBodyTerm(INERTIA, potential=gravity.potential, torque=turning, momentum_torque=damping)
     alone = [frbjax.RigidBodyTerm(INERTIA, potential=gravity.potential), frbjax.RigidBodyTerm(INERTIA, torque=turning)]
-    momentum, q = jnp.asarray(Y0[0]), jnp.asarray(Y0[1])
-    expected = sum(np.asarray(term.body_torque(0.4, q, None)) for term in alone)
-    expected = expected + np.asarray(damping(0.4, q, momentum, None))
-    np.testing.assert_allclose(np.asarray(together.body_torque(0.4, q, None, momentum)), expected, rtol=0, atol=1e-15)
+
+    @jax.jit  # one program: called eagerly, each operation of the torques compiles on its own
+    def torques_at(momentum, q):
+        parts = [term.body_torque(0.4, q, None) for term in alone] + [damping(0.4, q, momentum, None)]
+        return together.body_torque(0.4, q, None, momentum), parts
+
+    total, parts = torques_at(*Y0)
+    expected = sum(np.asarray(part) for part in parts)
+    np.testing.assert_allclose(np.asarray(total), expected, rtol=0, atol=1e-15)
 
 
 def test_gradient_through_the_exact_damping_kick():
