@@ -240,7 +240,8 @@ def test_damped_sphere_exact_damping_kick():
     expected = momentum0 * np.exp(-c * ts[:, None] / moment)
     eps = np.finfo(np.float64).eps
     # Rounding only, growing with the steps (7 matrix exponentials and 6 free flows each): the
-    # relative error after n steps is at most 2.2 n eps (measured; 811 eps after the 400 steps).
+    # relative error after n steps is at most 2.8 n eps (measured: 2.77 eps after the first step, 811
+    # eps after the 400 steps).
     relative = (np.abs(np.asarray(momenta) - expected) / np.abs(expected)).max(axis=-1)
     assert np.all(relative <= 3 * eps * np.maximum(np.arange(len(ts)), 1))
     assert np.abs(np.linalg.norm(np.asarray(attitudes), axis=-1) - 1).max() <= 2 * eps
@@ -249,7 +250,8 @@ def test_damped_sphere_exact_damping_kick():
     turned = Rotation.from_quat(q0[[1, 2, 3, 0]]) * Rotation.from_rotvec(angle[:, None] * axis)
     closed_form = turned.as_quat()[:, [3, 0, 1, 2]]
     closed_form *= np.sign(np.sum(closed_form * np.asarray(attitudes), axis=-1))[:, None]
-    # Measured 1.4e-9: blanes_moan4's quadrature of the decaying speed.
+    # Measured 2.2e-12 (compiled kernels and JAX formulas): blanes_moan4's quadrature of the decaying
+    # speed.
     assert np.abs(np.asarray(attitudes) - closed_form).max() < 3e-9
 
 
