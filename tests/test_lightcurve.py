@@ -73,17 +73,6 @@ def unit(v):
     return v / np.linalg.norm(v, axis=-1, keepdims=True)
 
 
-def jitted_inertia(vertices, faces):
-    """mesh_inertia as one compiled program (called eagerly, each mesh's size compiled its operations
-    one by one)."""
-    return tuple(np.asarray(x) for x in jax.jit(lambda v: mesh_inertia(v, faces))(vertices))
-
-
-def jitted_shape(vertices, faces):
-    """ConvexShape.from_mesh as one compiled program (as jitted_inertia)."""
-    return jax.jit(lambda v: ConvexShape.from_mesh(v, faces))(vertices)
-
-
 # ------------------------------------------------------------------------------------ conventions
 
 
@@ -241,15 +230,15 @@ def _flux_of_arrays(inertia, momentum, attitude, normals, areas, times, sun, obs
 
 def test_float32_and_batches():
     """Two bodies and two shapes in one batch against each alone, and float32 against float64: one
-    compiled program per batch shape and dtype (the bodies and shapes built inside it; built eagerly,
-    each of their operations was compiled one by one)."""
+    compiled program per batch shape and dtype (the bodies built inside it; built eagerly, each of
+    their operations was compiled one by one)."""
     times = np.linspace(0.0, 20.0, 11)
     sun = unit(np.stack([np.cos(times / 50), np.sin(times / 50), 0.1 + 0 * times], -1))
     observer = unit(sun + np.array([0.0, 0.3, 0.1]))
     inertia = np.array([[0.6, 0.9, 1.0], [0.5, 1.0, 0.8]])
     momentum = np.array([[0.2, 0.1, 0.9], [0.7, 0.1, -0.2]])
     attitude = np.stack([ATTITUDE, [1.0, 0, 0, 0]])
-    pair = jax.jit(lambda: [ConvexShape.ellipsoid(1.3, 1.0, 0.7, 2), ConvexShape.ellipsoid(1.0, 0.9, 0.5, 2)])()
+    pair = (ConvexShape.ellipsoid(1.3, 1.0, 0.7, 2), ConvexShape.ellipsoid(1.0, 0.9, 0.5, 2))
     normals, areas = (np.stack([np.asarray(getattr(s, name)) for s in pair]) for name in ("normals", "areas"))
     # A batch of ellipsoids from arrays of semi-axes (rank-safe: the suite raises on rank promotion).
     batch = jax.jit(lambda a, b, c: ConvexShape.ellipsoid(a, b, c, 2))(
@@ -290,7 +279,7 @@ def test_bad_directions_name_the_argument():
 
 def test_inertia_of_box_and_ellipsoid():
     a, b, c = 1.0, 2.0, 0.5
-    volume, centre, inertia = jitted_inertia(*box_mesh(a, b, c))
+    volume, centre, inertia = (np.asarray(x) for x in mesh_inertia(*box_mesh(a, b, c)))
     mass = 8 * a * b * c
     expected = mass / 3 * np.diag([b * b + c * c, a * a + c * c, a * a + b * b])
     np.testing.assert_allclose(volume, mass, rtol=1e-14)
@@ -300,7 +289,7 @@ def test_inertia_of_box_and_ellipsoid():
     # m/5 (b^2 + c^2), ... (measured relative errors 2.2e-3 and 3.6e-3 at 5120 facets).
     axes = np.array([1.3, 1.0, 0.7])
     vertices, faces = icosphere(4)
-    volume, _, inertia = jitted_inertia(vertices * axes, faces)
+    volume, _, inertia = (np.asarray(x) for x in mesh_inertia(vertices * axes, faces))
     exact_volume = 4 / 3 * np.pi * np.prod(axes)
     exact = (
         exact_volume
@@ -316,11 +305,11 @@ def test_minkowski_reconstruction_recovers_the_polytope():
     rng = np.random.default_rng(5)
     points = rng.normal(size=(40, 3)) * np.array([1.4, 1.0, 0.7])
     hull = ConvexHull(points)
-    original = jitted_shape(points, hull.simplices)
+    original = ConvexShape.from_mesh(points, hull.simplices)
     vertices, faces = original.polyhedron()
-    rebuilt = jitted_shape(vertices, faces)
-    v0, _, i0 = jitted_inertia(points, hull.simplices)
-    v1, c1, i1 = jitted_inertia(vertices, faces)
+    rebuilt = ConvexShape.from_mesh(vertices, faces)
+    v0, _, i0 = (np.asarray(x) for x in mesh_inertia(points, hull.simplices))
+    v1, c1, i1 = (np.asarray(x) for x in mesh_inertia(vertices, faces))
     # Measured: volume 2.5e-10, inertia 1.7e-9 relative, centroid at the origin to 1.4e-16.
     assert abs(v1 / v0 - 1) < 1e-9
     assert np.max(np.abs(i1 - i0)) < 5e-9 * np.max(np.abs(i0))
@@ -335,7 +324,7 @@ def test_minkowski_reconstruction_of_an_image_that_is_not_closed():
     """A fitted Gaussian image is closed only as far as its regularisation holds it: the polyhedron
     of the nearest closed image.  This image (an ellipsoid's on the 320 normals of the fit's model,
     log-areas perturbed by 0.4 N(0, 1), closure 0.8% of its area) made qhull fail before."""
-    model = jitted_shape(*icosphere(2))
+    model = ConvexShape.from_mesh(*icosphere(2))
     normals = np.asarray(model.normals)
     axes = np.array([1.35, 1.0, 0.8])
     # The ellipsoid's area per solid angle is (abc)^2 / h(n)^4, h its support function.
@@ -345,7 +334,7 @@ def test_minkowski_reconstruction_of_an_image_that_is_not_closed():
     image = ConvexShape(normals, areas)
     assert np.max(np.abs(np.asarray(image.closure()))) > 5e-3
     vertices, faces = image.polyhedron()
-    rebuilt = jitted_shape(vertices, faces)
+    rebuilt = ConvexShape.from_mesh(vertices, faces)
     # Each of the polyhedron's triangles lies on a face of one of the image's normals: the areas per
     # normal against the image's (measured: rms 2.2%, largest 3.9% of the mean area), the total the
     # image's, the polyhedron's image closed (3.5e-17).
@@ -362,10 +351,6 @@ def test_minkowski_reconstruction_of_an_image_that_is_not_closed():
 # ------------------------------------------------------------------------------------ periods
 
 
-# One compiled program for the periods of one body (eagerly, their operations were compiled one by one).
-periods_of = jax.jit(tumbler_periods)
-
-
 def test_periods_against_the_motion():
     for inertia, momentum in [
         ((0.61, 0.965, 1.0), (0.19, 0.05, 0.98)),  # SAM
@@ -373,7 +358,7 @@ def test_periods_against_the_motion():
         ((1.0, 0.5, 0.8), (0.2, 0.95, -0.1)),
     ]:  # LAM, axes in any order
         inertia, momentum = np.asarray(inertia), 2.3 * unit(momentum)
-        p_psi, p_phi, long_axis = (np.asarray(x) for x in periods_of(inertia, momentum))
+        p_psi, p_phi, long_axis = (np.asarray(x) for x in tumbler_periods(inertia, momentum))
         body = FreeRigidBody(inertia, momentum, ATTITUDE)
         momentum_after = np.asarray(body.angular_momentum(np.array([float(p_phi)])))[0]
         np.testing.assert_allclose(momentum_after, momentum, atol=1e-12)
@@ -396,9 +381,9 @@ def test_apophis_periods_from_its_published_spin_state():
     energy_ratio = 1.024
     l1_squared = (energy_ratio - 1) / (1 / inertia[0] - 1)  # l2 = 0: a point of the orbit
     direction = np.array([np.sqrt(l1_squared), 0.0, np.sqrt(1 - l1_squared)])
-    p_psi, p_phi, long_axis = periods_of(inertia, direction)
+    p_psi, p_phi, long_axis = tumbler_periods(inertia, direction)
     scale = float(p_psi) / 27.38  # |L| in 1/h
-    p_psi, p_phi, _ = periods_of(inertia, scale * direction)
+    p_psi, p_phi, _ = tumbler_periods(inertia, scale * direction)
     assert not bool(long_axis)
     assert abs(float(p_phi) - 263.0) < 6.0  # 264.6 h
     np.testing.assert_allclose(float(p_psi), 27.38, rtol=1e-12)
