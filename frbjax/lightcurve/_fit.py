@@ -918,7 +918,14 @@ def fit_lightcurve(
                 **solver_settings,
             )
             for full, part in zip(out, continued):
-                full[leader] = np.asarray(part)[0]
+                # The ellipsoid's windows end with the period prior's rows at weight 0 (zeros); the
+                # continued solve has no prior, so its residual and Jacobian rows stop before them.
+                part = np.asarray(part)[0]
+                if part.ndim:
+                    full[leader] = 0.0
+                    full[leader][: len(part)] = part
+                else:
+                    full[leader] = part
     fitted, refine_costs, oks, residual_rows, jacobians = out
     winner = int(np.argmin(np.where(np.isfinite(refine_costs), refine_costs, np.inf)))
     p = fitted[winner].astype(float)
