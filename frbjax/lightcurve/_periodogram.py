@@ -127,9 +127,10 @@ class TumblerPeriodogram:
 
 
 class _Data:
-    """Centred log brightness and the per-curve means needed to centre the columns."""
+    """Centred log brightness, the curves of the samples, and the residual sums of squares of series
+    fitted to them."""
 
-    def __init__(self, times, values, labels, segments=1, drift=0):
+    def __init__(self, times, values, labels, drift=0):
         self.origin = 0.5 * (times.min() + times.max())
         self.times = times - self.origin
         # Slow drift of the coefficients: each column times the Legendre polynomials 0..drift of the
@@ -137,42 +138,57 @@ class _Data:
         x = self.times / max(0.5 * float(np.ptp(times)), 1e-300)
         self.drift = np.stack([np.polynomial.legendre.legval(x, np.eye(drift + 1)[d]) for d in range(drift + 1)])
         _, index = np.unique(labels, return_inverse=True)
-        self.index = index
-        counts = np.bincount(index)
-        self.average = (np.eye(len(counts))[index] / counts).astype(float)  # (N, C)
-        self.values = values - (values @ self.average)[index]
+        self.counts = np.bincount(index).astype(float)
+        self.indicator = np.eye(len(self.counts))[index]  # (N, C): 1 where a sample is in a curve
+        self.values = values - (values @ self.indicator / self.counts)[index]
         self.total = float(self.values @ self.values)
-        self.dof = len(values) - len(counts)
-        # Segments: the curves in order of their mean time, cut into groups of equal count.
-        curve_times = self.times @ self.average
-        rank = np.argsort(np.argsort(curve_times))
-        segment_of_curve = np.minimum(rank * segments // len(counts), segments - 1)
-        self.segment = segment_of_curve[index]
-        self.segments = segments
+        self.dof = len(values) - len(self.counts)
 
-    def rss(self, frequencies, chunk=128):
-        """Residual sum of squares of the series with column frequencies ``frequencies`` (G, K) (one
-        cosine and one sine each, the curves' offsets free), for each of the G rows."""
-        frequencies = np.asarray(frequencies, float)
-        out = np.empty(len(frequencies))
-        for start in range(0, len(frequencies), chunk):
-            block = frequencies[start : start + chunk]
-            phase = np.exp(2j * np.pi * block[:, :, None] * self.times)  # (G, K, N)
-            if len(self.drift) > 1:
-                phase = (phase[:, :, None, :] * self.drift).reshape(len(block), -1, len(self.times))
-            phase = phase - (phase @ self.average)[..., self.index]
-            columns = np.concatenate([phase.real, phase.imag], 1)  # (G, 2K, N)
-            explained = 0.0
-            for s in range(self.segments):
-                rows = self.segment == s
-                part = columns[:, :, rows]
-                gram = part @ np.swapaxes(part, 1, 2)
-                moment = part @ self.values[rows]
-                scale = np.trace(gram, axis1=1, axis2=2)[:, None, None] / gram.shape[1]
-                gram = gram + (1e-10 * scale + 1e-300) * np.eye(gram.shape[1])
-                coefficients = np.linalg.solve(gram, moment[..., None])[..., 0]
-                explained = explained + np.sum(coefficients * moment, -1)
-            out[start : start + chunk] = self.total - explained
+    def columns(self, bases, indices):
+        """cos and sin of 2 pi f t for the frequencies f = indices @ basis of each basis (G, B) (the
+        integer ``indices`` (K, B)), each times the drift's polynomials: (G, 2 K (drift + 1), N).
+
+        The phases are products of the powers of exp(2 pi i f_b t), one per basis frequency: a complex
+        product per element instead of an exponential (the powers' rounding, |j| eps, is far below
+        the noise's)."""
+        count, samples = len(bases), len(self.times)
+        units = np.exp(2j * np.pi * bases[:, :, None] * self.times)  # (G, B, N)
+        powers = []
+        for b in range(bases.shape[1]):
+            table = [np.ones((count, samples), complex)]
+            for _ in range(int(np.abs(indices[:, b]).max())):
+                table.append(table[-1] * units[:, b])
+            powers.append(table)
+        phase = np.empty((count, len(indices), samples), complex)
+        for k, orders in enumerate(indices):
+            product = np.ones((count, samples), complex)
+            for b, order in enumerate(orders):
+                if order:
+                    power = powers[b][abs(order)]
+                    product = product * (power if order > 0 else power.conj())
+            phase[:, k] = product
+        if len(self.drift) > 1:
+            phase = (phase[:, :, None, :] * self.drift).reshape(count, -1, samples)
+        return np.concatenate([phase.real, phase.imag], 1)
+
+    def rss(self, bases, indices, chunk=128):
+        """Residual sum of squares of the series with the frequencies ``indices`` (K, B) @ basis for each
+        basis of ``bases`` (G, B) (a cosine and a sine each, every curve's offset free): (G,)."""
+        bases = np.asarray(bases, float).reshape(len(bases), -1)
+        indices = np.asarray(indices, int).reshape(-1, bases.shape[1])
+        out = np.empty(len(bases))
+        for start in range(0, len(bases), chunk):
+            columns = self.columns(bases[start : start + chunk], indices)  # (G, P, N)
+            # Each curve's offset is fitted with the series: the normal equations of the columns
+            # less their curves' means, X_c X_c^T = X X^T - S diag(1 / n) S^T (S: the columns' sums
+            # over each curve, n: the curves' counts), and X_c v = X v for the centred data v.
+            sums = columns @ self.indicator  # (G, P, C)
+            gram = columns @ np.swapaxes(columns, 1, 2) - (sums / self.counts) @ np.swapaxes(sums, 1, 2)
+            moment = columns @ self.values
+            scale = np.trace(gram, axis1=1, axis2=2)[:, None, None] / gram.shape[1]
+            gram = gram + (1e-10 * scale + 1e-300) * np.eye(gram.shape[1])
+            coefficients = np.linalg.solve(gram, moment[..., None])[..., 0]
+            out[start : start + chunk] = self.total - np.sum(coefficients * moment, -1)
         return np.maximum(out, 0.0)
 
 
@@ -202,7 +218,7 @@ def _refine(data, indices, f1, f2, step, levels=3, points=7):
     for _ in range(levels):
         offsets = (np.arange(points) - points // 2) * step
         g1, g2 = np.meshgrid(best[0] + offsets, best[1] + offsets, indexing="ij")
-        rss = data.rss(indices[:, 0] * g1.reshape(-1, 1) + indices[:, 1] * g2.reshape(-1, 1))
+        rss = data.rss(np.stack([g1.reshape(-1), g2.reshape(-1)], -1), indices)
         k = int(np.argmin(rss))
         if rss[k] < best[2]:
             best = (float(g1.reshape(-1)[k]), float(g2.reshape(-1)[k]), float(rss[k]))
@@ -297,7 +313,7 @@ def tumbler_periodogram(
     shape, a ``period_range`` that is missing or not positive and increasing, fewer samples than the
     series has parameters, counts or orders below 1 (``drift`` below 0), non-positive ``oversampling``
     or ``tolerance``, ``max_width`` outside (0, 1).  numpy
-    only (float64); about ten seconds for a thousand samples on one core.
+    only (float64); 3 to 8 seconds for a thousand samples on one core (benchmarks/lightcurve_periodogram.py).
     """
     times = checks.real_array("times", times)
     if times.ndim != 1:
@@ -354,7 +370,7 @@ def tumbler_periodogram(
     f_low, f_high = 1 / p_max, 1 / p_min
     frequencies = np.arange(f_low, f_high + step, step)
     harmonics = np.arange(1, 3)
-    rss_one = data.rss(frequencies[:, None] * harmonics)
+    rss_one = data.rss(frequencies[:, None], harmonics[:, None])
     separation = max(int(round(2 * oversampling)), 1)
     fundamentals = [frequencies[i] for i in _local_minima(rss_one, peaks, separation)]
     if not fundamentals:
@@ -362,7 +378,9 @@ def tumbler_periodogram(
     # Each fundamental to a fiftieth of 1 / T: at a high signal-to-noise ratio the second scan's
     # landscape (f1 held) changes over a small fraction of the grid step.
     fine = np.linspace(-1, 1, 21) * step
-    fundamentals = [float(fa + fine[int(np.argmin(data.rss((fa + fine)[:, None] * harmonics)))]) for fa in fundamentals]
+    fundamentals = [
+        float(fa + fine[int(np.argmin(data.rss((fa + fine)[:, None], harmonics[:, None])))]) for fa in fundamentals
+    ]
 
     # ---- 2. the second frequency for each candidate f1, then joint refinement
     found = []
@@ -373,7 +391,7 @@ def tumbler_periodogram(
             grid = np.arange(2 * resolution, f1 - 2 * resolution, step * oversampling / 3)
             if len(grid) < 3:
                 continue
-            rss_two = data.rss(indices[:, 0] * f1 + indices[:, 1] * grid[:, None])
+            rss_two = data.rss(np.stack([np.full_like(grid, f1), grid], -1), indices)
             for i in _local_minima(rss_two, second_minima, 3):
                 found.append(_refine(data, indices, f1, float(grid[i]), step, levels=2, points=5))
     found.sort(key=lambda item: item[2])
@@ -402,9 +420,7 @@ def tumbler_periodogram(
                 if not near:
                     candidates.append((f_psi, f_phi, mode))
     if candidates:
-        first = rich.rss(
-            np.array([reading_indices[:, 0] * fp + reading_indices[:, 1] * fq for fp, fq, _ in candidates])
-        )
+        first = rich.rss(np.array([(fp, fq) for fp, fq, _ in candidates]), reading_indices)
         order_first = np.argsort(first)[:refined_readings]
     else:
         order_first = []
@@ -424,7 +440,7 @@ def tumbler_periodogram(
     one_period = []
     for f in [f for fa in fundamentals for f in (fa, fa / 2) if f > 2 * resolution]:
         offsets = (np.arange(9) - 4) * step / 2
-        trial = rich.rss((f + offsets)[:, None] * pa_harmonics)
+        trial = rich.rss((f + offsets)[:, None], pa_harmonics[:, None])
         one_period.append((float(np.min(trial)), float(f + offsets[int(np.argmin(trial))])))
     rss_pa, f_pa = min(one_period) if one_period else (float(rss_one.min()), float(best_one))
     pa_dof = rich.dof - 2 * len(pa_harmonics) * (drift + 1)
@@ -432,7 +448,7 @@ def tumbler_periodogram(
     # that fits within the noise's allowance is taken.
     for _ in range(2):
         offsets = (np.arange(9) - 4) * step / 2
-        trial = rich.rss((2 * f_pa + offsets)[:, None] * pa_harmonics)
+        trial = rich.rss((2 * f_pa + offsets)[:, None], pa_harmonics[:, None])
         allowance = 8 * len(pa_harmonics) * (drift + 1) * rss_pa / max(pa_dof, 1)
         if 2 * f_pa > f_high or float(np.min(trial)) > rss_pa + allowance:
             break
@@ -477,7 +493,7 @@ def tumbler_periodogram(
     if map_halfwidth > 0:
         offsets = np.linspace(-map_halfwidth, map_halfwidth, 41) * resolution
         map_f1, map_f2 = np.meshgrid(best[0] + offsets, best[1] + offsets, indexing="ij")
-        map_rss = data.rss(indices[:, 0] * map_f1.reshape(-1, 1) + indices[:, 1] * map_f2.reshape(-1, 1))
+        map_rss = data.rss(np.stack([map_f1.reshape(-1), map_f2.reshape(-1)], -1), indices)
         map_rms = np.sqrt(map_rss / max(basis_dof, 1)).reshape(map_f1.shape)
     else:
         map_f1 = map_f2 = map_rms = np.zeros((0, 0))
