@@ -23,6 +23,7 @@ import functools
 
 import jax
 import jax.numpy as jnp
+import numpy as np
 from numpyro.infer.hmc import hmc
 
 from .. import _progress
@@ -189,7 +190,8 @@ def run(z0, keys, data, prior, *, num_warmup, num_samples, vectorized, progress,
     Without ``potential_generator``: the attitude posterior's program (``_run``: the potential of
     this module, the draws' motion at t = 0).  With it (a module-level function, or one cached per
     static setting, so that a second call finds the program compiled): NUTS on
-    ``potential_generator(data, prior)``, the draws in whitened coordinates (``draws``)."""
+    ``potential_generator(data, prior)``, the draws in whitened coordinates (``draws``); sequential
+    chains then run one program call each, so that one program serves every number of chains."""
     total = num_warmup + num_samples
     # The bar's callbacks are in the program whether it is shown or not: showing it compiles nothing.
     progress_every = max(total // 50, 1)
@@ -199,10 +201,31 @@ def run(z0, keys, data, prior, *, num_warmup, num_samples, vectorized, progress,
         progress_every=progress_every,
         vectorized=vectorized,
     )
-    if potential_generator is None:
-        program = _run
-    else:
-        program = functools.partial(_run_chains, potential_generator=potential_generator)
     chains = z0.shape[0]
     with _progress.bar("posterior", total * (1 if vectorized else chains), "NUTS", "it", shown=progress):
-        return jax.device_get(jax.block_until_ready(program(z0, keys, data, prior, **arguments)))
+        if potential_generator is None:
+            return jax.device_get(jax.block_until_ready(_run(z0, keys, data, prior, **arguments)))
+        if vectorized:
+            return jax.device_get(
+                jax.block_until_ready(
+                    _run_chains(z0, keys, data, prior, potential_generator=potential_generator, **arguments)
+                )
+            )
+        # Sequential chains one program call each (a batch of one): the program is compiled once
+        # whatever the number of chains, so that runs of other chain counts find it compiled.
+        each = [
+            jax.device_get(
+                jax.block_until_ready(
+                    _run_chains(
+                        z0[chain : chain + 1],
+                        keys[chain : chain + 1],
+                        data,
+                        prior,
+                        potential_generator=potential_generator,
+                        **arguments,
+                    )
+                )
+            )
+            for chain in range(chains)
+        ]
+        return {name: np.concatenate([out[name] for out in each]) for name in each[0]}
