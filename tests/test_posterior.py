@@ -84,9 +84,13 @@ def posterior(times, q, **options):
 
 
 def test_bad_input_refused():
+    """Each refused before any fit or sampling (the data: the first 8 of 40 attitudes, whose motion
+    program the other tests share; 8 times of their own compiled one more), except a prior that
+    excludes the data, which only the fit (compiled for the other tests) can tell."""
     rng = np.random.default_rng(0)
     times = TIMES[:8]
-    q = observed(np.array([0.6, 0.8, 1.0]), np.array(PRIOR_RATE), np.array([1.0, 0.0, 0.0, 0.0]), times, rng)
+    q40 = observed(np.array([0.6, 0.8, 1.0]), np.array(PRIOR_RATE), np.array([1.0, 0.0, 0.0, 0.0]), TIMES, rng)
+    q = q40[:8]
     cases = [
         (dict(attitude_sigma=0.0), "attitude_sigma"),
         (dict(attitude_sigma=-1e-3), "attitude_sigma"),
@@ -107,7 +111,6 @@ def test_bad_input_refused():
             attitude_posterior(times, q, **options)
     # A prior of moments (1, e^2 to e^3, e^2 to e^3), far from the data's (0.6, 0.8, 1) (40 samples:
     # the fit compiled for the other tests).
-    q40 = observed(np.array([0.6, 0.8, 1.0]), np.array(PRIOR_RATE), np.array([1.0, 0.0, 0.0, 0.0]), TIMES, rng)
     with pytest.raises(ValueError, match="prior excludes"):
         posterior(TIMES, q40, prior={"log_inertia_ratios": TriangleLogUniform(2.0, 3.0)})
     # The data's checks are fit_attitude's.

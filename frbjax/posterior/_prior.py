@@ -129,25 +129,33 @@ class TriangleLogUniform(dist.Distribution):
 
     def sample(self, key, sample_shape=()):
         shape = tuple(sample_shape) + (2,)
-        low, high = jnp.broadcast_to(self.low, shape), jnp.broadcast_to(self.high, shape)
-
-        def draw(key):
-            box_key, accept_key = jax.random.split(key)
-            value = low + (high - low) * jax.random.uniform(box_key, shape)
-            accepted = jax.random.uniform(accept_key, shape[:-1]) < jnp.exp(self._log_edge(value))
-            return value, accepted
-
-        def redraw(carry):
-            key, value, accepted = carry
-            key, subkey = jax.random.split(key)
-            candidate, candidate_accepted = draw(subkey)
-            value = jnp.where(accepted[..., None], value, candidate)
-            return key, value, accepted | candidate_accepted
-
         key, subkey = jax.random.split(key)
-        value, accepted = draw(subkey)
-        _, value, _ = jax.lax.while_loop(lambda carry: ~jnp.all(carry[2]), redraw, (key, value, accepted))
+        value, accepted = _triangle_draw(self, subkey, shape)
+        # The loop's functions are module-level and its operands carry the distribution: a later
+        # call finds the loop compiled (fresh closures were traced and compiled again, 0.7 s a call).
+        _, _, value, _ = jax.lax.while_loop(_triangle_rejected, _triangle_redraw, (self, key, value, accepted))
         return value
+
+
+def _triangle_draw(distribution, key, shape):
+    """Draws of ``shape`` uniform in the box, and whether each passes the triangle's weight."""
+    low, high = jnp.broadcast_to(distribution.low, shape), jnp.broadcast_to(distribution.high, shape)
+    box_key, accept_key = jax.random.split(key)
+    value = low + (high - low) * jax.random.uniform(box_key, shape)
+    accepted = jax.random.uniform(accept_key, shape[:-1]) < jnp.exp(distribution._log_edge(value))
+    return value, accepted
+
+
+def _triangle_rejected(carry):
+    return ~jnp.all(carry[3])
+
+
+def _triangle_redraw(carry):
+    distribution, key, value, accepted = carry
+    key, subkey = jax.random.split(key)
+    candidate, candidate_accepted = _triangle_draw(distribution, subkey, value.shape)
+    value = jnp.where(accepted[..., None], value, candidate)
+    return distribution, key, value, accepted | candidate_accepted
 
 
 def default_prior(rate_scale: float, *, tensor: bool = False) -> dict:
