@@ -18,7 +18,7 @@ $m_i$ the model flux of the fitted shape (Kaasalainen & Torppa 2001) through the
 $\sigma$ the relative noise.  numpyro's NUTS samples it in whitened coordinates
 $\theta = \hat\theta + C^{1/2} z$, $C$ the fit's covariance of $\theta$ conditional on the shape
 (the inverse of the precision's motion block), in the attitude posterior's program
-(``_sampler``: the chains one after another in one compiled loop, the data and the whitening as its
+(``_sampler``: the chains one after another, a call each of one compiled loop, the data and the whitening as its
 arguments, so that a second posterior of the same sizes and scattering law compiles nothing).
 """
 
