@@ -9,6 +9,7 @@ import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
+from jax.custom_derivatives import SymbolicZero
 from jaxtyping import Array, Float, Int
 
 from . import _compiled_motion, _quaternion as quaternion
@@ -375,6 +376,85 @@ def motion_once(inertia, angular_momentum, attitude, t, with_attitude=True, axes
     return motion(inertia, angular_momentum, attitude, t, axes)
 
 
+def _stacked(inertia, angular_momentum, attitude, t):
+    """The inputs as one (..., 11) array: moments, L0, q0, t (the order of ``flow_jacobian``'s columns)."""
+    return jnp.concatenate([inertia, angular_momentum, attitude, t[..., None]], -1)
+
+
+def _state_of_point(point):
+    """``motion_once``'s state of one body as a (7,) function of its 11 numbers."""
+    return jnp.concatenate(motion_once(point[:3], point[3:6], point[6:10], point[10]), -1)
+
+
+@jax.custom_jvp
+def flow_jacobian(inertia, angular_momentum, attitude, t):
+    """(values (..., 7), partial derivatives (..., 7, 11)) of ``motion_once``'s (L(t), q(t)) (axes None)
+    in the moments, L0, q0 and t, all of one batch: one compiled kernel (csrc/flow_jacobian.hpp), with
+    ``motion_once``'s derivative conventions at uniform rotations and at symmetric bodies next to the
+    plane of their equal moments.  Where the kernels are selected (``_compiled_motion.selected``)."""
+    out = _compiled_motion.free_flow_jacobian(inertia, angular_momentum, attitude, t)
+    return out[..., 0], out[..., 1:]
+
+
+@flow_jacobian.defjvp
+def _flow_jacobian_jvp(primals, tangents):
+    # The second derivatives are the composite's (those of its first-order conventions at the
+    # degenerate points): the derivative of its Jacobian, one body at a time.
+    values, jacobian = flow_jacobian(*primals)
+    points, d_points = _stacked(*primals), _stacked(*tangents)
+    flat, d_flat = points.reshape(-1, 11), d_points.reshape(-1, 11)
+    _, d_jacobian = jax.jvp(jax.vmap(jax.jacfwd(_state_of_point)), (flat,), (d_flat,))
+    d_values = jnp.sum(jacobian * d_points[..., None, :], -1)
+    return (values, jacobian), (d_values, d_jacobian.reshape(jacobian.shape))
+
+
+def flow_direction(tangents, batch, dtype):
+    """The tangents of (moments, L0, q0, t) (symbolic zeros allowed) as one (batch, 11) array."""
+    zero = jnp.zeros((), dtype)
+    shapes = (batch + (3,), batch + (3,), batch + (4,), batch)
+    return _stacked(
+        *(
+            jnp.broadcast_to(zero if isinstance(tangent, SymbolicZero) else tangent, shape)
+            for tangent, shape in zip(tangents, shapes)
+        )
+    )
+
+
+# The rows of flow_jacobian's outputs (L(t) (3), q(t) (4)) that each evaluation returns.
+_FLOW_ROWS = {"momentum": (slice(0, 3),), "attitude": (slice(3, 7),), "state": (slice(0, 3), slice(3, 7))}
+
+
+def _with_flow_jacobian(method, outputs):
+    """``method(body, t)`` (a body of principal moments) with the derivatives of ``flow_jacobian`` in
+    the body's moments, initial L and unit initial attitude and in t: every field of a body is a
+    function of those three, and its motion at t is ``motion_once``'s, so the JVP is that matrix times
+    their tangents (the derived fields' tangents are not needed, and JAX drops their computation)."""
+    wrapped = jax.custom_jvp(method)
+
+    def rule(primals, tangents):
+        body, t = primals
+        d_body, d_t = tangents
+        value = method(body, t)
+        batch = jax.tree.leaves(value)[0].shape[:-1]
+        dtype = body.inertia.dtype
+        inputs = (
+            jnp.broadcast_to(body.inertia, batch + (3,)),
+            jnp.broadcast_to(body.initial_angular_momentum, batch + (3,)),
+            jnp.broadcast_to(body.initial_attitude, batch + (4,)),
+            jnp.broadcast_to(jnp.asarray(t, dtype), batch),
+        )
+        _, jacobian = flow_jacobian(*inputs)
+        direction = flow_direction(
+            (d_body.inertia, d_body.initial_angular_momentum, d_body.initial_attitude, d_t), batch, dtype
+        )
+        tangent = jnp.sum(jacobian * direction[..., None, :], -1)
+        parts = tuple(tangent[..., rows] for rows in _FLOW_ROWS[outputs])
+        return value, parts if outputs == "state" else parts[0]
+
+    wrapped.defjvp(rule, symbolic_zeros=True)
+    return lambda body, t: wrapped(body, t)
+
+
 def _series_inputs(body, t):
     return (
         body.inertia,
@@ -389,9 +469,24 @@ def _series_precessing(body, t):
     return body._precessing()
 
 
-def _precession_derivatives(outputs):
-    """For the evaluations of a FreeRigidBody through its series: ``with_precession_derivatives``."""
-    return lambda method: with_precession_derivatives(method, outputs, _series_precessing, _series_inputs)
+def _motion_derivatives(outputs):
+    """The derivatives of a FreeRigidBody's evaluations through its series: for bodies of principal
+    moments where the compiled kernels are selected, those of ``flow_jacobian`` (one kernel); for the
+    others, the JAX composite's with ``with_precession_derivatives`` (the same conventions)."""
+
+    def decorate(method):
+        with_precession = with_precession_derivatives(method, outputs, _series_precessing, _series_inputs)
+        with_kernel = _with_flow_jacobian(method, outputs)
+
+        @functools.wraps(method)
+        def evaluate(body, t):
+            if body.principal_axes is None and _compiled_motion.selected(body.inertia):
+                return with_kernel(body, t)
+            return with_precession(body, t)
+
+        return evaluate
+
+    return decorate
 
 
 def _compiled(method):
@@ -584,7 +679,7 @@ class FreeRigidBody(eqx.Module):
             motion, evaluate, body.inertia_tensor, prepared, (body.initial_angular_momentum, body.initial_attitude, t)
         )
 
-    @_precession_derivatives("momentum")
+    @_motion_derivatives("momentum")
     def _angular_momentum(self, t):
         t, tau = self._time(t)
         unit_working, _ = _evaluate(self._constants, tau, attitude=False)
@@ -600,8 +695,8 @@ class FreeRigidBody(eqx.Module):
         particular, unit_working = _evaluate(self._constants, tau)
         return self._momentum_from(t, unit_working), self._attitude_from(t, tau, particular)
 
-    _quaternion = _precession_derivatives("attitude")(_elliptic_quaternion)
-    _state = _precession_derivatives("state")(_elliptic_state)
+    _quaternion = _motion_derivatives("attitude")(_elliptic_quaternion)
+    _state = _motion_derivatives("state")(_elliptic_state)
 
     # ------------------------------------------------------------------------------------- public
 

@@ -113,6 +113,19 @@ def free_flow(inertia, angular_momentum, attitude, t):
     return jax.ffi.ffi_call("frbjax_free_flow", results, vmap_method="broadcast_all")(*arguments)
 
 
+def free_flow_jacobian(inertia, angular_momentum, attitude, t):
+    """The free flow's values and partial derivatives (csrc/flow_jacobian.hpp), ``free_flow``'s
+    arguments broadcast to one batch: (..., 7, 12), per output (L(t), q(t)) its value and then its
+    derivatives in the moments (3), L0 (3), q0 (4) and t, with ``_body.motion_once``'s conventions at
+    uniform rotations and symmetric bodies next to the plane of their equal moments."""
+    if _compiled._module() is None:
+        raise RuntimeError("frbjax's compiled kernels are not available (see frbjax.special._compiled)")
+    batch = t.shape
+    result = jax.ShapeDtypeStruct(batch + (7, 12), inertia.dtype)
+    call = jax.ffi.ffi_call("frbjax_free_flow_jacobian", result, vmap_method="broadcast_all")
+    return call(inertia, angular_momentum, attitude, t)
+
+
 def free_flow_frame(inertia, angular_momentum):
     """The kernel's working frame per body, for the tests: (sorted inertia, unit working L, |L|,
     regime), to compare bit for bit with ``_body._prepare``'s."""

@@ -14,10 +14,9 @@ import jax.numpy as jnp
 from jaxtyping import Array, Float
 
 from . import _compiled_motion
-from ._body import _validate, _working_dtype, motion_once
+from ._body import _validate, _working_dtype, flow_direction, flow_jacobian, motion_once
 from ._checks import check_finite, on_host, real_array
 from ._inertia import InertiaTensor, through_principal_frame
-from ._precession import jvp_of_moved
 
 
 def _state_in_principal_frame(inertia, angular_momentum, attitude, t, axes):
@@ -56,17 +55,22 @@ def _compiled_state(inertia, angular_momentum, attitude, t):
     products); here the whole flow is one custom call, which is what a splitting method's many
     steps of one body pay for.  The derivatives stay the composite's, conventions included (the
     uniform rotation's variational solution, docs/theory.md §6; the regular precession of symmetric
-    bodies next to the plane of their equal moments, ``_precession``): the JVP rule is the JVP of
-    ``motion_once``, its values the kernel's (equal to rounding: the same formulas)."""
+    bodies next to the plane of their equal moments, ``_precession``), computed by a second kernel
+    (csrc/flow_jacobian.hpp) as the matrix of partial derivatives in the 11 inputs: the JVP rule is
+    that matrix times the tangents, linear in them (reverse mode transposes the product), so that a
+    derivative program compiles one custom call and a contraction instead of the composite's
+    derivative program."""
     return _compiled_motion.free_flow(inertia, angular_momentum, attitude, t)
 
 
 @functools.partial(_compiled_state.defjvp, symbolic_zeros=True)
 def _compiled_state_jvp(primals, tangents):
-    # Only the inputs that move are differentiated (a derivative in t alone, as a splitting method's
-    # adjoint takes, differentiates nothing of the body).
-    _, tangent = jvp_of_moved(motion_once, primals, tangents)
-    return _compiled_state(*primals), tangent
+    inertia, angular_momentum, attitude, t = primals
+    t = jnp.broadcast_to(t, inertia.shape[:-1])
+    direction = flow_direction(tangents, t.shape, inertia.dtype)
+    values, jacobian = flow_jacobian(inertia, angular_momentum, attitude, t)
+    tangent = jnp.sum(jacobian * direction[..., None, :], -1)
+    return (values[..., :3], values[..., 3:]), (tangent[..., :3], tangent[..., 3:])
 
 
 @jax.jit
