@@ -16,6 +16,7 @@
 
 #include <cmath>
 #include <limits>
+#include <type_traits>
 
 #include "free_flow.hpp"
 
@@ -87,10 +88,12 @@ void hamilton_product(const T* p, const T* q, T* out) {
 }
 
 // (delta L(t), phi(t)) of a uniform rotation (frbjax/_uniform.py's `_response`, principal frame): the
-// solution of the variational equations for the changes d_moments and d_momentum of its inputs.
-template <class R>
-void uniform_response(const R* moments, const R* momentum, R t, const R* d_moments, const R* d_momentum,
-                      R* d_angular_momentum, R* phi) {
+// solution of the variational equations for the changes d_moments and d_momentum of its inputs.  The
+// uniform rotation's moments and L0 are constants of the rule (`_frozen`), t is of the number type T:
+// differentiated again, the rule gives the second derivatives of the first-order expansion.
+template <class R, class T>
+void uniform_response(const R* moments, const R* momentum, const T& t, const R* d_moments, const R* d_momentum,
+                      T* d_angular_momentum, T* phi) {
   const R size_squared = momentum[0] * momentum[0] + momentum[1] * momentum[1] + momentum[2] * momentum[2];
   const bool spinning = size_squared > 0;
   const R root = std::sqrt(spinning ? size_squared : R(1));
@@ -107,44 +110,45 @@ void uniform_response(const R* moments, const R* momentum, R t, const R* d_momen
   };
   const R n1 = unit[0] * unit[0], n2 = unit[1] * unit[1], n3 = unit[2] * unit[2];
   const R kappa = size_squared * (n1 * gaps[1] * gaps[2] + n2 * gaps[0] * gaps[2] + n3 * gaps[0] * gaps[1]);
-  R f[3];
-  response_functions<R>(kappa * t * t, f);
-  const R sine = t * f[0], versine = t * t * f[1], excess = t * t * t * f[2];
+  T f[3];
+  response_functions<T>(t * t * kappa, f);
+  const T sine = t * f[0], versine = t * t * f[1], excess = t * t * t * f[2];
 
   // b / |L0| and the forced part W: delta L(t) gets |L0| W, phi gets -n x W.
-  R pull[3], forcing[3], once[3], twice[3], forced[3];
+  R pull[3], forcing[3], once[3], twice[3];
   for (int k = 0; k < 3; ++k) pull[k] = unit[k] * d_moments[k] / (moments[k] * moments[k]);
   cross(unit, pull, forcing);
   for (int k = 0; k < 3; ++k) forcing[k] = -size * forcing[k];
   across(forcing, once);
   across(once, twice);
-  for (int k = 0; k < 3; ++k)
-    forced[k] = t * forcing[k] + versine * size * once[k] + excess * size_squared * twice[k];
+  T forced[3];
+  for (int k = 0; k < 3; ++k) forced[k] = t * forcing[k] + versine * (size * once[k]) + excess * (size_squared * twice[k]);
   R turned[3], turned_twice[3];
   across(d_momentum, turned);
   across(turned, turned_twice);
   for (int k = 0; k < 3; ++k)
-    d_angular_momentum[k] = d_momentum[k] + sine * size * turned[k] + versine * size_squared * turned_twice[k] +
-                            size * forced[k];
+    d_angular_momentum[k] = sine * (size * turned[k]) + versine * (size_squared * turned_twice[k]) + forced[k] * size +
+                            d_momentum[k];
 
-  const R spin_angle = t * omega * size;
-  R g[3];
-  response_functions<R>(spin_angle * spin_angle, g);
-  R normal[3], unit_normal[3], unit_turned[3], unit_turned_twice[3], unit_forced[3];
+  const T spin_angle = t * (omega * size);
+  T g[3];
+  response_functions<T>(spin_angle * spin_angle, g);
+  R normal[3], unit_normal[3], unit_turned[3], unit_turned_twice[3];
   cross(unit, d_momentum, normal);
   cross(unit, normal, unit_normal);
   cross(unit, turned, unit_turned);
   cross(unit, turned_twice, unit_turned_twice);
-  cross(unit, forced, unit_forced);
+  const T unit_forced[3] = {forced[2] * unit[1] - forced[1] * unit[2], forced[0] * unit[2] - forced[2] * unit[0],
+                            forced[1] * unit[0] - forced[0] * unit[1]};
   R along = 0, pulled = 0;
   for (int k = 0; k < 3; ++k) {
     along += unit[k] / moments[k] * d_momentum[k];
     pulled += unit[k] * unit[k] * d_moments[k] / (moments[k] * moments[k]);
   }
-  const R parallel = t * (along - size * pulled);
+  const T parallel = t * (along - size * pulled);
   for (int k = 0; k < 3; ++k)
-    phi[k] = -t * omega * (g[0] * unit_normal[k] + spin_angle * g[1] * normal[k]) - sine * unit_turned[k] -
-             versine * size * unit_turned_twice[k] - unit_forced[k] + parallel * unit[k];
+    phi[k] = -(t * omega) * (g[0] * unit_normal[k] + spin_angle * g[1] * normal[k]) - sine * unit_turned[k] -
+             versine * (size * unit_turned_twice[k]) - unit_forced[k] + parallel * unit[k];
 }
 
 // Whether a body takes the precession's derivatives (frbjax/_precession.py's `precessing`): exactly two
@@ -214,141 +218,290 @@ void precession(const T* moments, const T* momentum, const T& t, T* angular_mome
   spin[1 + e] = s_e + s_w * p_e + (s_u * p_v - s_v * p_u);
 }
 
-// values (7) and jacobian (7 x 11, row-major) of the free flow of one body (free_flow.hpp's inputs).
+// The numbers of the flow's derivatives: Dual<R, 11> (first derivatives, .d[a]) and its nesting
+// (.v.d[a] first, .d[b].d[a] = d/d_b of the first derivative in a).
 template <class R>
-void free_flow_jacobian(const R* inertia, const R* momentum, const R* attitude, R t, R* values, R* jacobian) {
-  using D = Dual<R, kFlowInputs>;
+using FlowDual = Dual<R, kFlowInputs>;
+template <class R>
+using FlowDual2 = Dual<FlowDual<R>, kFlowInputs>;
+
+template <class R>
+inline void seed(FlowDual<R>& x, R value, int index) {
+  x = FlowDual<R>(0.0);
+  x.v = value;
+  x.d[index] = R(1);
+}
+template <class R>
+inline void seed(FlowDual2<R>& x, R value, int index) {
+  x = FlowDual2<R>(0.0);
+  x.v.v = value;
+  x.v.d[index] = R(1);
+  x.d[index].v = R(1);
+}
+
+// The working motion's outputs as functions of the 11 inputs, by the chain rule from its own partial
+// derivatives in its 7 inputs (motion.hpp on Dual<R, 7>, or nested for the second ones).
+template <class R>
+void carry(const Dual<R, kMotionInputs>* motion, const FlowDual<R>* inputs, FlowDual<R>* out) {
+  for (int o = 0; o < kMotionOutputs; ++o) {
+    out[o] = FlowDual<R>(0.0);
+    out[o].v = motion[o].v;
+    for (int j = 0; j < kMotionInputs; ++j)
+      for (int c = 0; c < kFlowInputs; ++c) out[o].d[c] += motion[o].d[j] * inputs[j].d[c];
+  }
+}
+template <class R>
+void carry(const Dual<Dual<R, kMotionInputs>, kMotionInputs>* motion, const FlowDual2<R>* inputs, FlowDual2<R>* out) {
+  for (int o = 0; o < kMotionOutputs; ++o) {
+    const auto& m = motion[o];
+    out[o] = FlowDual2<R>(0.0);
+    out[o].v.v = m.v.v;
+    for (int a = 0; a < kFlowInputs; ++a) {
+      R first = 0;
+      for (int j = 0; j < kMotionInputs; ++j) first += m.v.d[j] * inputs[j].v.d[a];
+      out[o].v.d[a] = first;
+      out[o].d[a].v = first;
+    }
+    for (int b = 0; b < kFlowInputs; ++b)
+      for (int a = 0; a < kFlowInputs; ++a) {
+        R second = 0;
+        for (int j = 0; j < kMotionInputs; ++j) {
+          second += m.v.d[j] * inputs[j].d[b].d[a];
+          for (int k = 0; k < kMotionInputs; ++k) second += m.d[k].d[j] * inputs[j].v.d[a] * inputs[k].d[b].v;
+        }
+        out[o].d[b].d[a] = second;
+      }
+  }
+}
+
+template <class R>
+using MotionDual1 = Dual<R, kMotionInputs>;
+template <class R>
+using MotionDual2 = Dual<MotionDual1<R>, kMotionInputs>;
+
+template <class R>
+void seed_motion(MotionDual1<R>& x, R value, int index) {
+  x = MotionDual1<R>(0.0);
+  x.v = value;
+  x.d[index] = R(1);
+}
+template <class R>
+void seed_motion(MotionDual2<R>& x, R value, int index) {
+  x = MotionDual2<R>(0.0);
+  x.v.v = value;
+  x.v.d[index] = R(1);
+  x.d[index].v = R(1);
+}
+
+// (L(t), q(t)) of a moving body on the flow's numbers D: the working frame P (and the regime) locally
+// constant, L_w = P^T L, the sorted moments, |L|, the working motion, L(t) = |L| P l̂(tau) and
+// q(t) = start ⊗ (w, P v) with (w, v) = conj(q̂(0)) ⊗ q̂(tau), normalised (free_flow.hpp).
+template <class R, class D, class M>
+void moving_flow(const WorkingFrame<R>& frame, R t, const D* moments, const D* angular_momentum, const D& time,
+                 const D* start, D* result) {
+  D working_moments[3], working_momentum[3];
+  for (int k = 0; k < 3; ++k) {
+    working_momentum[k] = D(0.0);
+    for (int i = 0; i < 3; ++i) {
+      if (frame.permutation[i][k] != 0) working_moments[k] = moments[i];
+      working_momentum[k] += angular_momentum[i] * double(frame.permutation[i][k]);
+    }
+  }
+  const D norm = sqrt(working_momentum[0] * working_momentum[0] + working_momentum[1] * working_momentum[1] +
+                      working_momentum[2] * working_momentum[2]);
+  D inputs[kMotionInputs];
+  for (int k = 0; k < 3; ++k) {
+    inputs[k] = working_moments[k];
+    inputs[3 + k] = working_momentum[k] / norm;
+  }
+  inputs[6] = norm * time;
+  const R input_values[kMotionInputs] = {frame.inertia[0],       frame.inertia[1],       frame.inertia[2],
+                                         frame.unit_momentum[0], frame.unit_momentum[1], frame.unit_momentum[2],
+                                         frame.norm * t};
+  M seeded[kMotionInputs], motion[kMotionOutputs];
+  for (int j = 0; j < kMotionInputs; ++j) seed_motion(seeded[j], input_values[j], j);
+  working_motion<M>(seeded, frame.regime, true, motion);
+  D carried[kMotionOutputs];
+  carry(motion, inputs, carried);
+  for (int i = 0; i < 3; ++i) {
+    D turned(0.0);
+    for (int k = 0; k < 3; ++k) turned += carried[k] * double(frame.permutation[i][k]);
+    result[i] = norm * turned;
+  }
+  const D conjugate_start[4] = {carried[3], -carried[4], -carried[5], -carried[6]};
+  D change[4], body_change[4], product[4];
+  hamilton_product(conjugate_start, carried + 7, change);
+  body_change[0] = change[0];
+  for (int i = 0; i < 3; ++i) {
+    body_change[1 + i] = D(0.0);
+    for (int k = 0; k < 3; ++k) body_change[1 + i] += change[1 + k] * double(frame.permutation[i][k]);
+  }
+  hamilton_product(start, body_change, product);
+  const D inverse =
+      1.0 / sqrt(product[0] * product[0] + product[1] * product[1] + product[2] * product[2] + product[3] * product[3]);
+  for (int k = 0; k < 4; ++k) result[3 + k] = product[k] * inverse;
+}
+
+// The uniform rotation's rule (frbjax/_uniform.py): the tangent of (L(t), q(t)) along each of the 11
+// inputs, on the number type T (R; or FlowDual<R> for its own derivatives).  L(t) = L0 and
+// q(t) = start ⊗ s with s = exp(t Omega0 / 2): d L(t) and d s = s ⊗ (0, rate / 2), rate = phi, for
+// changes of the moments and L0 (`uniform_response`); d s / dt = s ⊗ (0, Omega0 / 2).  `start`,
+// `spin` and `velocity` (Omega0 = L0 / I) carry, as T, their own derivatives: the rules'.
+template <class R, class T>
+void uniform_tangents(const R* moments, const R* momentum, const T& time, const T* start, const T (*d_start)[4],
+                      const T* spin, const T* velocity, T (*tangent)[kFlowInputs]) {
+  for (int a = 0; a < kFlowInputs; ++a) {
+    T d_state[3] = {T(0.0), T(0.0), T(0.0)}, rate[3] = {T(0.0), T(0.0), T(0.0)};
+    if (a < 6) {
+      R d_moments[3] = {0, 0, 0}, d_momentum[3] = {0, 0, 0};
+      (a < 3 ? d_moments[a] : d_momentum[a - 3]) = R(1);
+      uniform_response<R, T>(moments, momentum, time, d_moments, d_momentum, d_state, rate);
+    } else if (a == 10) {
+      for (int k = 0; k < 3; ++k) rate[k] = velocity[k];
+    }
+    const T half_rate[4] = {T(0.0), rate[0] / 2.0, rate[1] / 2.0, rate[2] / 2.0};
+    T turned[4], carried[4], moved[4];
+    hamilton_product(spin, half_rate, turned);
+    hamilton_product(start, turned, carried);
+    hamilton_product(d_start[a], spin, moved);
+    for (int k = 0; k < 3; ++k) tangent[k][a] = d_state[k];
+    for (int k = 0; k < 4; ++k) tangent[3 + k][a] = moved[k] + carried[k];
+  }
+}
+
+// The unit attitude q0 / |q0| (as `_prepare` normalises it) on the flow's numbers.
+template <class D>
+void unit_attitude(const D* quaternion, D* start) {
+  const D inverse = 1.0 / sqrt(quaternion[0] * quaternion[0] + quaternion[1] * quaternion[1] +
+                               quaternion[2] * quaternion[2] + quaternion[3] * quaternion[3]);
+  for (int k = 0; k < 4; ++k) start[k] = quaternion[k] * inverse;
+}
+
+// Per output: its value (free_flow.hpp's), then its 11 first derivatives (Order 1), then (Order 2) the
+// 11 x 11 second ones, [a][b] the derivative in b of the first one in a.  An invalid body gets NaN.
+template <int Order>
+constexpr int flow_width() {
+  return Order == 1 ? 1 + kFlowInputs : 1 + kFlowInputs + kFlowInputs * kFlowInputs;
+}
+
+template <class R, int Order>
+void free_flow_derivatives(const R* inertia, const R* momentum, const R* attitude, R t, R* out) {
+  constexpr int W = flow_width<Order>();
+  R values[kFlowOutputs];
   free_flow<R>(inertia, momentum, attitude, t, values, values + 3);
   if (!valid_body(inertia, momentum, attitude)) {
-    for (int k = 0; k < kFlowOutputs * kFlowInputs; ++k) jacobian[k] = std::numeric_limits<R>::quiet_NaN();
+    for (int o = 0; o < kFlowOutputs; ++o) {
+      out[o * W] = values[o];
+      for (int k = 1; k < W; ++k) out[o * W + k] = std::numeric_limits<R>::quiet_NaN();
+    }
     return;
   }
-  D moments[3], angular_momentum[3], quaternion[4], time(0.0);
+  using D = std::conditional_t<Order == 1, FlowDual<R>, FlowDual2<R>>;
+  using M = std::conditional_t<Order == 1, MotionDual1<R>, MotionDual2<R>>;
+  D moments[3], angular_momentum[3], quaternion[4], time;
   for (int k = 0; k < 3; ++k) {
-    moments[k] = D(0.0);
-    moments[k].v = inertia[k];
-    moments[k].d[k] = R(1);
-    angular_momentum[k] = D(0.0);
-    angular_momentum[k].v = momentum[k];
-    angular_momentum[k].d[3 + k] = R(1);
+    seed(moments[k], inertia[k], k);
+    seed(angular_momentum[k], momentum[k], 3 + k);
   }
-  for (int k = 0; k < 4; ++k) {
-    quaternion[k] = D(0.0);
-    quaternion[k].v = attitude[k];
-    quaternion[k].d[6 + k] = R(1);
-  }
-  time.v = t;
-  time.d[10] = R(1);
-  // q0 / |q0|: the body's unit attitude, as `_prepare` normalises it.
+  for (int k = 0; k < 4; ++k) seed(quaternion[k], attitude[k], 6 + k);
+  seed(time, t, 10);
   D start[4];
-  {
-    const D inverse = 1.0 / sqrt(quaternion[0] * quaternion[0] + quaternion[1] * quaternion[1] +
-                                 quaternion[2] * quaternion[2] + quaternion[3] * quaternion[3]);
-    for (int k = 0; k < 4; ++k) start[k] = quaternion[k] * inverse;
-  }
-  D result[kFlowOutputs];
+  unit_attitude(quaternion, start);
   const WorkingFrame<R> frame = working_frame<R>(inertia, momentum);
 
+  // first[o][a] (and second[o][a][b] for Order 2).
+  R first[kFlowOutputs][kFlowInputs], second[Order == 2 ? kFlowOutputs : 1][kFlowInputs][kFlowInputs];
   if (frame.regime == kUniform) {
-    // L(t) = L0 and q(t) = start ⊗ s, s = exp(t Omega0 / 2), with the variational solution: dL(t) and
-    // d s = s ⊗ (0, phi / 2) for changes of the moments and L0; d s / dt = s ⊗ (0, Omega0 / 2).
-    R rotation[3], spin[4];
-    for (int k = 0; k < 3; ++k) rotation[k] = t * (momentum[k] / inertia[k]);
-    exp_pure(rotation, spin);
-    for (int k = 0; k < kFlowOutputs; ++k) result[k] = D(0.0);
-    for (int c = 0; c < 6; ++c) {
-      R d_moments[3] = {0, 0, 0}, d_momentum[3] = {0, 0, 0}, d_state[3], phi[3];
-      (c < 3 ? d_moments[c] : d_momentum[c - 3]) = R(1);
-      uniform_response<R>(inertia, momentum, t, d_moments, d_momentum, d_state, phi);
-      const R half_turn[4] = {R(0), phi[0] / 2, phi[1] / 2, phi[2] / 2};
-      R turned[4];
-      hamilton_product(spin, half_turn, turned);
-      for (int k = 0; k < 3; ++k) result[k].d[c] = d_state[k];
-      for (int k = 0; k < 4; ++k) result[3 + k].d[c] = turned[k];
-    }
-    const R half_velocity[4] = {R(0), momentum[0] / inertia[0] / 2, momentum[1] / inertia[1] / 2,
-                                momentum[2] / inertia[2] / 2};
-    R rate[4];
-    hamilton_product(spin, half_velocity, rate);
-    for (int k = 0; k < 4; ++k) result[3 + k].d[10] = rate[k];
-    // d(start ⊗ s ⊗ (1, phi / 2)) = d start ⊗ s + start ⊗ d(s ⊗ ...): the first from start's duals.
-    D fixed_spin[4], turned[4], moved[4];
-    for (int k = 0; k < 4; ++k) {
-      fixed_spin[k] = D(spin[k]);
-      for (int c = 0; c < kFlowInputs; ++c) turned[k].d[c] = result[3 + k].d[c];
-    }
-    hamilton_product(start, fixed_spin, moved);
-    D start_values[4];
-    for (int k = 0; k < 4; ++k) start_values[k] = D(start[k].v);
-    D carried[4];
-    for (int k = 0; k < 4; ++k) turned[k].v = R(0);
-    hamilton_product(start_values, turned, carried);
-    for (int k = 0; k < 4; ++k) result[3 + k] = moved[k] + carried[k];
-  } else {
-    // The working frame P and the regime are locally constant: L_w = P^T L, J_w the sorted moments.
-    D working_moments[3], working_momentum[3];
+    R rotation[3], spin[4], velocity[3];
     for (int k = 0; k < 3; ++k) {
-      working_momentum[k] = D(0.0);
-      for (int i = 0; i < 3; ++i) {
-        if (frame.permutation[i][k] != 0) working_moments[k] = moments[i];
-        working_momentum[k] += angular_momentum[i] * double(frame.permutation[i][k]);
+      velocity[k] = momentum[k] / inertia[k];
+      rotation[k] = t * velocity[k];
+    }
+    exp_pure(rotation, spin);
+    R start_values[4], d_start[kFlowInputs][4];
+    for (int k = 0; k < 4; ++k) {
+      if constexpr (Order == 1) {
+        start_values[k] = start[k].v;
+        for (int a = 0; a < kFlowInputs; ++a) d_start[a][k] = start[k].d[a];
+      } else {
+        start_values[k] = start[k].v.v;
+        for (int a = 0; a < kFlowInputs; ++a) d_start[a][k] = start[k].v.d[a];
       }
     }
-    const D norm = sqrt(working_momentum[0] * working_momentum[0] + working_momentum[1] * working_momentum[1] +
-                        working_momentum[2] * working_momentum[2]);
-    D inputs[kMotionInputs];
-    for (int k = 0; k < 3; ++k) {
-      inputs[k] = working_moments[k];
-      inputs[3 + k] = working_momentum[k] / norm;
+    uniform_tangents<R, R>(inertia, momentum, t, start_values, d_start, spin, velocity, first);
+    if constexpr (Order == 2) {
+      // The rule's own derivatives: t, start, and the rules' derivatives of s and Omega0
+      // (`_uniform_spin_jvp`'s uniform_momentum(...) / moments).
+      using T = FlowDual<R>;
+      T time_t(0.0), start_t[4], d_start_t[kFlowInputs][4], spin_t[4], velocity_t[3];
+      time_t.v = t;
+      time_t.d[10] = R(1);
+      for (int k = 0; k < 4; ++k) {
+        start_t[k] = start[k].v;
+        for (int a = 0; a < kFlowInputs; ++a) {
+          d_start_t[a][k] = T(0.0);
+          d_start_t[a][k].v = start[k].v.d[a];
+          for (int b = 0; b < kFlowInputs; ++b) d_start_t[a][k].d[b] = start[k].d[b].d[a];
+        }
+      }
+      // d s along b = s ⊗ (0, rate_b / 2) = conj(start) ⊗ (q-tangent minus the start's part)...
+      // computed directly: rate_b from the rule in R.
+      for (int k = 0; k < 4; ++k) {
+        spin_t[k] = T(0.0);
+        spin_t[k].v = spin[k];
+      }
+      for (int k = 0; k < 3; ++k) {
+        velocity_t[k] = T(0.0);
+        velocity_t[k].v = velocity[k];
+      }
+      for (int b = 0; b < kFlowInputs; ++b) {
+        R d_state[3] = {0, 0, 0}, rate[3] = {0, 0, 0};
+        if (b < 6) {
+          R d_moments[3] = {0, 0, 0}, d_momentum[3] = {0, 0, 0};
+          (b < 3 ? d_moments[b] : d_momentum[b - 3]) = R(1);
+          uniform_response<R, R>(inertia, momentum, t, d_moments, d_momentum, d_state, rate);
+        } else if (b == 10) {
+          for (int k = 0; k < 3; ++k) rate[k] = velocity[k];
+        }
+        const R half_rate[4] = {R(0), rate[0] / 2, rate[1] / 2, rate[2] / 2};
+        R d_spin[4];
+        hamilton_product(spin, half_rate, d_spin);
+        for (int k = 0; k < 4; ++k) spin_t[k].d[b] = d_spin[k];
+        for (int k = 0; k < 3; ++k)
+          velocity_t[k].d[b] = d_state[k] / inertia[k] - (b == k ? velocity[k] / inertia[k] : R(0));
+      }
+      T tangent[kFlowOutputs][kFlowInputs];
+      uniform_tangents<R, T>(inertia, momentum, time_t, start_t, d_start_t, spin_t, velocity_t, tangent);
+      for (int o = 0; o < kFlowOutputs; ++o)
+        for (int a = 0; a < kFlowInputs; ++a)
+          for (int b = 0; b < kFlowInputs; ++b) second[o][a][b] = tangent[o][a].d[b];
     }
-    inputs[6] = norm * time;
-    // The working motion's partial derivatives in its own 7 inputs, carried into the 11.
-    using W = Dual<R, kMotionInputs>;
-    W seeded[kMotionInputs], motion[kMotionOutputs];
-    const R input_values[kMotionInputs] = {frame.inertia[0],       frame.inertia[1],       frame.inertia[2],
-                                           frame.unit_momentum[0], frame.unit_momentum[1], frame.unit_momentum[2],
-                                           frame.norm * t};
-    for (int j = 0; j < kMotionInputs; ++j) {
-      seeded[j] = W(0.0);
-      seeded[j].v = input_values[j];
-      seeded[j].d[j] = R(1);
-    }
-    working_motion<W>(seeded, frame.regime, true, motion);
-    D carried[kMotionOutputs];
-    for (int o = 0; o < kMotionOutputs; ++o) {
-      carried[o] = D(0.0);
-      carried[o].v = motion[o].v;
-      for (int j = 0; j < kMotionInputs; ++j)
-        for (int c = 0; c < kFlowInputs; ++c) carried[o].d[c] += motion[o].d[j] * inputs[j].d[c];
-    }
-    // L(t) = |L| P l̂(tau); q(t) = start ⊗ (w, P v) with (w, v) = conj(q̂(0)) ⊗ q̂(tau), normalised.
-    for (int i = 0; i < 3; ++i) {
-      D turned(0.0);
-      for (int k = 0; k < 3; ++k) turned += carried[k] * double(frame.permutation[i][k]);
-      result[i] = norm * turned;
-    }
-    const D conjugate_start[4] = {carried[3], -carried[4], -carried[5], -carried[6]};
-    D change[4], body_change[4], product[4];
-    hamilton_product(conjugate_start, carried + 7, change);
-    body_change[0] = change[0];
-    for (int i = 0; i < 3; ++i) {
-      body_change[1 + i] = D(0.0);
-      for (int k = 0; k < 3; ++k) body_change[1 + i] += change[1 + k] * double(frame.permutation[i][k]);
-    }
-    hamilton_product(start, body_change, product);
-    const D inverse = 1.0 / sqrt(product[0] * product[0] + product[1] * product[1] + product[2] * product[2] +
-                                 product[3] * product[3]);
-    for (int k = 0; k < 4; ++k) result[3 + k] = product[k] * inverse;
-
+  } else {
+    D result[kFlowOutputs];
+    moving_flow<R, D, M>(frame, t, moments, angular_momentum, time, start, result);
     if (precessing<R>(inertia, momentum, frame.regime)) {
       // The expansion's derivatives in place of the formulas' (its values are theirs to rounding).
       D spin[4];
       precession<D>(moments, angular_momentum, time, result, spin);
       hamilton_product(start, spin, result + 3);
     }
+    for (int o = 0; o < kFlowOutputs; ++o)
+      for (int a = 0; a < kFlowInputs; ++a) {
+        if constexpr (Order == 1) {
+          first[o][a] = result[o].d[a];
+        } else {
+          first[o][a] = result[o].v.d[a];
+          for (int b = 0; b < kFlowInputs; ++b) second[o][a][b] = result[o].d[b].d[a];
+        }
+      }
   }
-  for (int o = 0; o < kFlowOutputs; ++o)
-    for (int c = 0; c < kFlowInputs; ++c) jacobian[o * kFlowInputs + c] = result[o].d[c];
+  for (int o = 0; o < kFlowOutputs; ++o) {
+    out[o * W] = values[o];
+    for (int a = 0; a < kFlowInputs; ++a) out[o * W + 1 + a] = first[o][a];
+    if constexpr (Order == 2)
+      for (int a = 0; a < kFlowInputs; ++a)
+        for (int b = 0; b < kFlowInputs; ++b) out[o * W + 1 + kFlowInputs + a * kFlowInputs + b] = second[o][a][b];
+  }
 }
 
 }  // namespace frbjax

@@ -397,60 +397,60 @@ XLA_FFI_DEFINE_HANDLER(FreeFlow, free_flow_values,
                            .Ret<ffi::AnyBuffer>());
 
 // The free flow's values and partial derivatives (flow_jacobian.hpp): free_flow's inputs, one result
-// (..., 7, 12): per output (L(t) (3), q(t) (4)) its value, then its derivatives in the moments (3), L0
-// (3), q0 (4) and t.  frbjax/_free_flow.py's JVP rule is the product of that matrix with the tangents.
-template <class R>
-ffi::Error run_free_flow_jacobian(ffi::ThreadPool& pool, const ffi::AnyBuffer& inertia, const ffi::AnyBuffer& momentum,
-                                  const ffi::AnyBuffer& attitude, const ffi::AnyBuffer& time, ffi::AnyBuffer& result) {
-  constexpr int W = 1 + kFlowInputs;
+// (..., 7, W): per output (L(t) (3), q(t) (4)) its value, then its derivatives in the moments (3), L0
+// (3), q0 (4) and t (Order 1, W = 12), then their derivatives (Order 2, W = 133).
+// frbjax/_body.py's JVP rules are products of these with the tangents.
+template <int Order, class R>
+ffi::Error run_free_flow_derivatives(ffi::ThreadPool& pool, const ffi::AnyBuffer& inertia,
+                                     const ffi::AnyBuffer& momentum, const ffi::AnyBuffer& attitude,
+                                     const ffi::AnyBuffer& time, ffi::AnyBuffer& result) {
+  constexpr int W = flow_width<Order>();
   const std::size_t count = time.element_count();
   const ffi::DataType dtype = result.element_type();
   const ffi::AnyBuffer* buffers[] = {&inertia, &momentum, &attitude, &time};
   for (const ffi::AnyBuffer* buffer : buffers)
     if (buffer->element_type() != dtype)
-      return ffi::Error::InvalidArgument("free_flow_jacobian: every argument and the result must have one dtype");
+      return ffi::Error::InvalidArgument("free_flow_derivatives: every argument and the result must have one dtype");
   if (inertia.element_count() != 3 * count || momentum.element_count() != 3 * count ||
       attitude.element_count() != 4 * count || result.element_count() != kFlowOutputs * W * count)
-    return ffi::Error::InvalidArgument("free_flow_jacobian: shapes (..., 3), (..., 3), (..., 4), (...) -> (..., 7, 12)");
+    return ffi::Error::InvalidArgument("free_flow_derivatives: shapes (..., 3), (..., 3), (..., 4), (...) -> (..., 7, W)");
   const R* j = static_cast<const R*>(inertia.untyped_data());
   const R* l = static_cast<const R*>(momentum.untyped_data());
   const R* q = static_cast<const R*>(attitude.untyped_data());
   const R* t = static_cast<const R*>(time.untyped_data());
   R* output = static_cast<R*>(result.untyped_data());
-  parallel_for(pool, count, grain(1) / 4, [&](std::size_t begin, std::size_t end) {
-    for (std::size_t i = begin; i < end; ++i) {
-      R values[kFlowOutputs], jacobian[kFlowOutputs * kFlowInputs];
-      free_flow_jacobian<R>(j + 3 * i, l + 3 * i, q + 4 * i, t[i], values, jacobian);
-      R* out = output + i * kFlowOutputs * W;
-      for (int o = 0; o < kFlowOutputs; ++o) {
-        out[o * W] = values[o];
-        for (int c = 0; c < kFlowInputs; ++c) out[o * W + 1 + c] = jacobian[o * kFlowInputs + c];
-      }
-    }
+  parallel_for(pool, count, grain(Order) / 4, [&](std::size_t begin, std::size_t end) {
+    for (std::size_t i = begin; i < end; ++i)
+      free_flow_derivatives<R, Order>(j + 3 * i, l + 3 * i, q + 4 * i, t[i], output + i * kFlowOutputs * W);
   });
   return ffi::Error::Success();
 }
 
-ffi::Error free_flow_jacobian_values(ffi::ThreadPool pool, ffi::AnyBuffer inertia, ffi::AnyBuffer momentum,
-                                     ffi::AnyBuffer attitude, ffi::AnyBuffer time, ffi::Result<ffi::AnyBuffer> result) {
+template <int Order>
+ffi::Error free_flow_derivative_values(ffi::ThreadPool pool, ffi::AnyBuffer inertia, ffi::AnyBuffer momentum,
+                                       ffi::AnyBuffer attitude, ffi::AnyBuffer time, ffi::Result<ffi::AnyBuffer> result) {
   switch (result->element_type()) {
     case ffi::DataType::F64:
-      return run_free_flow_jacobian<double>(pool, inertia, momentum, attitude, time, *result);
+      return run_free_flow_derivatives<Order, double>(pool, inertia, momentum, attitude, time, *result);
     case ffi::DataType::F32:
-      return run_free_flow_jacobian<float>(pool, inertia, momentum, attitude, time, *result);
+      return run_free_flow_derivatives<Order, float>(pool, inertia, momentum, attitude, time, *result);
     default:
-      return ffi::Error::InvalidArgument("free_flow_jacobian: float32 or float64 only");
+      return ffi::Error::InvalidArgument("free_flow_derivatives: float32 or float64 only");
   }
 }
 
-XLA_FFI_DEFINE_HANDLER(FreeFlowJacobian, free_flow_jacobian_values,
-                       ffi::Ffi::Bind()
-                           .Ctx<ffi::ThreadPool>()
-                           .Arg<ffi::AnyBuffer>()
-                           .Arg<ffi::AnyBuffer>()
-                           .Arg<ffi::AnyBuffer>()
-                           .Arg<ffi::AnyBuffer>()
-                           .Ret<ffi::AnyBuffer>());
+#define FRBJAX_FLOW_DERIVATIVES_HANDLER(ORDER)                                                              \
+  XLA_FFI_DEFINE_HANDLER(FreeFlow_##ORDER, free_flow_derivative_values<ORDER>,                            \
+                         ffi::Ffi::Bind()                                                                 \
+                             .Ctx<ffi::ThreadPool>()                                                      \
+                             .Arg<ffi::AnyBuffer>()                                                       \
+                             .Arg<ffi::AnyBuffer>()                                                       \
+                             .Arg<ffi::AnyBuffer>()                                                       \
+                             .Arg<ffi::AnyBuffer>()                                                       \
+                             .Ret<ffi::AnyBuffer>())
+
+FRBJAX_FLOW_DERIVATIVES_HANDLER(1);
+FRBJAX_FLOW_DERIVATIVES_HANDLER(2);
 
 // For the tests: free_flow.hpp's working frame and regime per body, inertia and angular momentum
 // (..., 3) -> (..., 8) (free_flow_frame).
@@ -577,7 +577,7 @@ const Entry kHandlers[] = {
     {"frbjax_series_record", SeriesRecord}, {"frbjax_series_motion", SeriesMotion},
     {"frbjax_series_momentum", SeriesMomentum},
     {"frbjax_momentum_0", Momentum_0}, {"frbjax_momentum_1", Momentum_1}, {"frbjax_momentum_2", Momentum_2},
-    {"frbjax_free_flow", FreeFlow},    {"frbjax_free_flow_jacobian", FreeFlowJacobian},    {"frbjax_free_flow_frame", FreeFlowFrame},
+    {"frbjax_free_flow", FreeFlow},    {"frbjax_free_flow_1", FreeFlow_1}, {"frbjax_free_flow_2", FreeFlow_2},    {"frbjax_free_flow_frame", FreeFlowFrame},
 };
 
 PyObject* handlers(PyObject*, PyObject*) {

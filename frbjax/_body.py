@@ -9,7 +9,6 @@ import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
-from jax.custom_derivatives import SymbolicZero
 from jaxtyping import Array, Float, Int
 
 from . import _compiled_motion, _quaternion as quaternion
@@ -376,56 +375,12 @@ def motion_once(inertia, angular_momentum, attitude, t, with_attitude=True, axes
     return motion(inertia, angular_momentum, attitude, t, axes)
 
 
-def _stacked(inertia, angular_momentum, attitude, t):
-    """The inputs as one (..., 11) array: moments, L0, q0, t (the order of ``flow_jacobian``'s columns)."""
-    return jnp.concatenate([inertia, angular_momentum, attitude, t[..., None]], -1)
-
-
-def _state_of_point(point):
-    """``motion_once``'s state of one body as a (7,) function of its 11 numbers."""
-    return jnp.concatenate(motion_once(point[:3], point[3:6], point[6:10], point[10]), -1)
-
-
-@jax.custom_jvp
-def flow_jacobian(inertia, angular_momentum, attitude, t):
-    """(values (..., 7), partial derivatives (..., 7, 11)) of ``motion_once``'s (L(t), q(t)) (axes None)
-    in the moments, L0, q0 and t, all of one batch: one compiled kernel (csrc/flow_jacobian.hpp), with
-    ``motion_once``'s derivative conventions at uniform rotations and at symmetric bodies next to the
-    plane of their equal moments.  Where the kernels are selected (``_compiled_motion.selected``)."""
-    out = _compiled_motion.free_flow_jacobian(inertia, angular_momentum, attitude, t)
-    return out[..., 0], out[..., 1:]
-
-
-@flow_jacobian.defjvp
-def _flow_jacobian_jvp(primals, tangents):
-    # The second derivatives are the composite's (those of its first-order conventions at the
-    # degenerate points): the derivative of its Jacobian, one body at a time.
-    values, jacobian = flow_jacobian(*primals)
-    points, d_points = _stacked(*primals), _stacked(*tangents)
-    flat, d_flat = points.reshape(-1, 11), d_points.reshape(-1, 11)
-    _, d_jacobian = jax.jvp(jax.vmap(jax.jacfwd(_state_of_point)), (flat,), (d_flat,))
-    d_values = jnp.sum(jacobian * d_points[..., None, :], -1)
-    return (values, jacobian), (d_values, d_jacobian.reshape(jacobian.shape))
-
-
-def flow_direction(tangents, batch, dtype):
-    """The tangents of (moments, L0, q0, t) (symbolic zeros allowed) as one (batch, 11) array."""
-    zero = jnp.zeros((), dtype)
-    shapes = (batch + (3,), batch + (3,), batch + (4,), batch)
-    return _stacked(
-        *(
-            jnp.broadcast_to(zero if isinstance(tangent, SymbolicZero) else tangent, shape)
-            for tangent, shape in zip(tangents, shapes)
-        )
-    )
-
-
-# The rows of flow_jacobian's outputs (L(t) (3), q(t) (4)) that each evaluation returns.
+# The rows of the flow kernels's outputs (L(t) (3), q(t) (4)) that each evaluation returns.
 _FLOW_ROWS = {"momentum": (slice(0, 3),), "attitude": (slice(3, 7),), "state": (slice(0, 3), slice(3, 7))}
 
 
 def _with_flow_jacobian(method, outputs):
-    """``method(body, t)`` (a body of principal moments) with the derivatives of ``flow_jacobian`` in
+    """``method(body, t)`` (a body of principal moments) with the derivatives of the flow kernels in
     the body's moments, initial L and unit initial attitude and in t: every field of a body is a
     function of those three, and its motion at t is ``motion_once``'s, so the JVP is that matrix times
     their tangents (the derived fields' tangents are not needed, and JAX drops their computation)."""
@@ -443,8 +398,8 @@ def _with_flow_jacobian(method, outputs):
             jnp.broadcast_to(body.initial_attitude, batch + (4,)),
             jnp.broadcast_to(jnp.asarray(t, dtype), batch),
         )
-        _, jacobian = flow_jacobian(*inputs)
-        direction = flow_direction(
+        _, jacobian = _compiled_motion.flow_with_jacobian(*inputs)
+        direction = _compiled_motion.flow_direction(
             (d_body.inertia, d_body.initial_angular_momentum, d_body.initial_attitude, d_t), batch, dtype
         )
         tangent = jnp.sum(jacobian * direction[..., None, :], -1)
@@ -471,7 +426,7 @@ def _series_precessing(body, t):
 
 def _motion_derivatives(outputs):
     """The derivatives of a FreeRigidBody's evaluations through its series: for bodies of principal
-    moments where the compiled kernels are selected, those of ``flow_jacobian`` (one kernel); for the
+    moments where the compiled kernels are selected, those of the flow kernels (``_compiled_motion.flow``); for the
     others, the JAX composite's with ``with_precession_derivatives`` (the same conventions)."""
 
     def decorate(method):

@@ -21,6 +21,7 @@ import os
 
 import jax
 import jax.numpy as jnp
+from jax.custom_derivatives import SymbolicZero
 
 from .special import _compiled
 
@@ -113,17 +114,44 @@ def free_flow(inertia, angular_momentum, attitude, t):
     return jax.ffi.ffi_call("frbjax_free_flow", results, vmap_method="broadcast_all")(*arguments)
 
 
-def free_flow_jacobian(inertia, angular_momentum, attitude, t):
-    """The free flow's values and partial derivatives (csrc/flow_jacobian.hpp), ``free_flow``'s
-    arguments broadcast to one batch: (..., 7, 12), per output (L(t), q(t)) its value and then its
-    derivatives in the moments (3), L0 (3), q0 (4) and t, with ``_body.motion_once``'s conventions at
-    uniform rotations and symmetric bodies next to the plane of their equal moments."""
+def flow_direction(tangents, batch, dtype):
+    """The tangents of (moments, L0, q0, t) (symbolic zeros allowed) stacked as one (batch, 11) array,
+    the order of the flow kernels' partial derivatives."""
+    zero = jnp.zeros((), dtype)
+    shapes = (batch + (3,), batch + (3,), batch + (4,), batch + (1,))
+    return jnp.concatenate(
+        [
+            jnp.broadcast_to(zero if isinstance(tangent, SymbolicZero) else jnp.reshape(tangent, shape), shape)
+            for tangent, shape in zip(tangents, shapes)
+        ],
+        -1,
+    )
+
+
+def _flow_kernel(order, arguments):
+    """The free flow's values (order 0: csrc/free_flow.hpp) or values and partial derivatives (orders 1
+    and 2: csrc/flow_jacobian.hpp) of bodies with principal moments, as (..., 7, width)."""
+    inertia, angular_momentum, attitude, t = arguments
+    if order == 0:
+        return jnp.concatenate(free_flow(inertia, angular_momentum, attitude, t), -1)[..., None]
     if _compiled._module() is None:
         raise RuntimeError("frbjax's compiled kernels are not available (see frbjax.special._compiled)")
-    batch = t.shape
-    result = jax.ShapeDtypeStruct(batch + (7, 12), inertia.dtype)
-    call = jax.ffi.ffi_call("frbjax_free_flow_jacobian", result, vmap_method="broadcast_all")
-    return call(inertia, angular_momentum, attitude, t)
+    width = 1 + _FLOW_INPUTS + (_FLOW_INPUTS**2 if order == 2 else 0)
+    result = jax.ShapeDtypeStruct(t.shape + (7, width), inertia.dtype)
+    return jax.ffi.ffi_call(f"frbjax_free_flow_{order}", result, vmap_method="broadcast_all")(*arguments)
+
+
+_FLOW_INPUTS = 11  # moments (3), L0 (3), q0 (4), t
+# (state, with_jacobian) of arguments (inertia, L0, q0 (..., 3, 3, 4), t (...)) of one batch: the state
+# (L(t), q(t)) as (..., 7) with the kernels' derivatives (``_compiled.differentiable``: first from the
+# order-1 kernel, second from the order-2 one, linear in the tangents), and (values, partials (..., 7, 11)),
+# with ``_body.motion_once``'s derivative conventions at uniform rotations and at symmetric bodies next
+# to the plane of their equal moments.
+flow, flow_with_jacobian = _compiled.differentiable(
+    _flow_kernel,
+    _FLOW_INPUTS,
+    lambda primals, tangents: flow_direction(tangents, primals[3].shape, primals[0].dtype),
+)
 
 
 def free_flow_frame(inertia, angular_momentum):

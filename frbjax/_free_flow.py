@@ -7,14 +7,12 @@ splitting integrators (``frbjax._splitting``) goes through it.
 
 from __future__ import annotations
 
-import functools
-
 import jax
 import jax.numpy as jnp
 from jaxtyping import Array, Float
 
 from . import _compiled_motion
-from ._body import _validate, _working_dtype, flow_direction, flow_jacobian, motion_once
+from ._body import _validate, _working_dtype, motion_once
 from ._checks import check_finite, on_host, real_array
 from ._inertia import InertiaTensor, through_principal_frame
 
@@ -45,7 +43,6 @@ def _tensor_free_flow(matrix, moments, axes, angular_momentum, attitude, t):
     return through_principal_frame(motion, evaluate, matrix, prepared, arguments)
 
 
-@jax.custom_jvp
 def _compiled_state(inertia, angular_momentum, attitude, t):
     """``motion_once``'s (L(t), q(t)) from one compiled kernel (csrc/free_flow.hpp), its derivatives
     those of ``motion_once`` itself.
@@ -53,24 +50,16 @@ def _compiled_state(inertia, angular_momentum, attitude, t):
     On the CPU the composite runs the working-frame kernel and around it some 150 small XLA kernels
     (the checks, the working frame, the classification, the uniform rotation, the quaternion
     products); here the whole flow is one custom call, which is what a splitting method's many
-    steps of one body pay for.  The derivatives stay the composite's, conventions included (the
+    steps of one body pay for.  The derivatives are the composite's, conventions included (the
     uniform rotation's variational solution, docs/theory.md §6; the regular precession of symmetric
-    bodies next to the plane of their equal moments, ``_precession``), computed by a second kernel
-    (csrc/flow_jacobian.hpp) as the matrix of partial derivatives in the 11 inputs: the JVP rule is
-    that matrix times the tangents, linear in them (reverse mode transposes the product), so that a
-    derivative program compiles one custom call and a contraction instead of the composite's
-    derivative program."""
-    return _compiled_motion.free_flow(inertia, angular_momentum, attitude, t)
-
-
-@functools.partial(_compiled_state.defjvp, symbolic_zeros=True)
-def _compiled_state_jvp(primals, tangents):
-    inertia, angular_momentum, attitude, t = primals
+    bodies next to the plane of their equal moments, ``_precession``), from two more kernels
+    (csrc/flow_jacobian.hpp): the 7 x 11 partial derivatives in the inputs and their second ones.
+    The JVP rule is a product of that matrix with the tangents, linear in them (reverse mode
+    transposes it), so that a derivative program compiles a custom call and a contraction instead
+    of the composite's derivative program."""
     t = jnp.broadcast_to(t, inertia.shape[:-1])
-    direction = flow_direction(tangents, t.shape, inertia.dtype)
-    values, jacobian = flow_jacobian(inertia, angular_momentum, attitude, t)
-    tangent = jnp.sum(jacobian * direction[..., None, :], -1)
-    return (values[..., :3], values[..., 3:]), (tangent[..., :3], tangent[..., 3:])
+    state = _compiled_motion.flow(inertia, angular_momentum, attitude, t)
+    return state[..., :3], state[..., 3:]
 
 
 @jax.jit
