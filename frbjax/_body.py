@@ -435,7 +435,7 @@ def _motion_derivatives(outputs):
 
         @functools.wraps(method)
         def evaluate(body, t):
-            if body.principal_axes is None and _compiled_motion.selected(body.inertia):
+            if _kernel_derivatives(body):
                 return with_kernel(body, t)
             return with_precession(body, t)
 
@@ -714,26 +714,33 @@ def _body_of(fields):
     return body
 
 
-def state_with_elliptic_derivatives(body, t):
-    """``body.state(t)`` (bodies without an inertia tensor), its derivatives those of the elliptic
-    formulas everywhere: a symmetric body next to the plane of its equal moments does not take the
-    expansion of its regular precession (``_precession``).
+def _kernel_derivatives(body) -> bool:
+    """Whether a body's evaluations take the flow kernels' derivatives (``_motion_derivatives``)."""
+    return body.principal_axes is None and _compiled_motion.selected(body.inertia)
 
-    For the fits.  Their parameters are continuous, so an iterate is an exactly symmetric body with
-    probability zero, and the two derivatives agree everywhere else, bit for bit.  On such a body they
-    are finite and differ by 1.3e-13 at unit L 0.02 off that plane, 9e-5 at 1e-6 (entries of order
-    1; tests/test_fit.py), which a Levenberg-Marquardt step does not mind.  The expansion's rule is a
-    conditional that the model's forward-mode Jacobian compiles in full whether or not a body takes
-    it: without it ``fit_attitude``'s first call takes about a sixth less time.
+
+def state_with_elliptic_derivatives(body, t):
+    """``body.state(t)`` (bodies without an inertia tensor) for the fits: where the flow kernels give
+    the derivatives (bodies of principal moments on the CPU), those of ``body.state``, one custom call
+    whatever the body; elsewhere those of the elliptic formulas everywhere: a symmetric body next to
+    the plane of its equal moments does not take the expansion of its regular precession
+    (``_precession``).
+
+    The fits' parameters are continuous, so an iterate is an exactly symmetric body with probability
+    zero, and the two derivatives agree everywhere else, bit for bit.  On such a body they are finite
+    and differ by 1.3e-13 at unit L 0.02 off that plane, 9e-5 at 1e-6 (entries of order 1;
+    tests/test_fit.py), which a Levenberg-Marquardt step does not mind.  In JAX the expansion's rule
+    is a conditional that the model's forward-mode Jacobian compiles in full whether or not a body
+    takes it: without it ``fit_attitude``'s first call took about a sixth less time.
     """
     body, t = _common_rank(body, jnp.asarray(t, body.inertia.dtype))
-    return body._elliptic_state(t)
+    return body._state(t) if _kernel_derivatives(body) else body._elliptic_state(t)
 
 
 def quaternion_with_elliptic_derivatives(body, t):
     """``body.quaternion(t)`` with the derivatives of ``state_with_elliptic_derivatives``."""
     body, t = _common_rank(body, jnp.asarray(t, body.inertia.dtype))
-    return body._elliptic_quaternion(t)
+    return body._quaternion(t) if _kernel_derivatives(body) else body._elliptic_quaternion(t)
 
 
 def with_principal_axes(inertia, angular_momentum, attitude, axes):

@@ -118,14 +118,9 @@ def flow_direction(tangents, batch, dtype):
     """The tangents of (moments, L0, q0, t) (symbolic zeros allowed) stacked as one (batch, 11) array,
     the order of the flow kernels' partial derivatives."""
     zero = jnp.zeros((), dtype)
-    shapes = (batch + (3,), batch + (3,), batch + (4,), batch + (1,))
-    return jnp.concatenate(
-        [
-            jnp.broadcast_to(zero if isinstance(tangent, SymbolicZero) else jnp.reshape(tangent, shape), shape)
-            for tangent, shape in zip(tangents, shapes)
-        ],
-        -1,
-    )
+    *vectors, time = (zero if isinstance(tangent, SymbolicZero) else tangent for tangent in tangents)
+    vectors = [jnp.broadcast_to(vector, batch + (size,)) for vector, size in zip(vectors, (3, 3, 4))]
+    return jnp.concatenate(vectors + [jnp.broadcast_to(jnp.asarray(time)[..., None], batch + (1,))], -1)
 
 
 def _flow_kernel(order, arguments):
