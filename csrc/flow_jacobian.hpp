@@ -71,22 +71,6 @@ void response_functions(const T& y, T* f) {
   }
 }
 
-template <class T>
-void cross(const T* a, const T* b, T* out) {
-  out[0] = a[1] * b[2] - a[2] * b[1];
-  out[1] = a[2] * b[0] - a[0] * b[2];
-  out[2] = a[0] * b[1] - a[1] * b[0];
-}
-
-// The Hamilton product p ⊗ q (w, x, y, z) without fused products: for derivatives.
-template <class T>
-void hamilton_product(const T* p, const T* q, T* out) {
-  out[0] = p[0] * q[0] - p[1] * q[1] - p[2] * q[2] - p[3] * q[3];
-  out[1] = p[0] * q[1] + p[1] * q[0] + p[2] * q[3] - p[3] * q[2];
-  out[2] = p[0] * q[2] - p[1] * q[3] + p[2] * q[0] + p[3] * q[1];
-  out[3] = p[0] * q[3] + p[1] * q[2] - p[2] * q[1] + p[3] * q[0];
-}
-
 // (delta L(t), phi(t)) of a uniform rotation (frbjax/_uniform.py's `_response`, principal frame): the
 // solution of the variational equations for the changes d_moments and d_momentum of its inputs.  The
 // uniform rotation's moments and L0 are constants of the rule (`_frozen`), t is of the number type T:

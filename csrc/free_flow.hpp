@@ -71,6 +71,23 @@ void hamilton(const T* p, const T* q, T* out) {
   out[3] = multiply_add(pz, qw, multiply_add(-py, qx, multiply_add(pw, qz, px * qy)));
 }
 
+// a x b on any number type.
+template <class T>
+void cross(const T* a, const T* b, T* out) {
+  out[0] = a[1] * b[2] - a[2] * b[1];
+  out[1] = a[2] * b[0] - a[0] * b[2];
+  out[2] = a[0] * b[1] - a[1] * b[0];
+}
+
+// The Hamilton product p ⊗ q (w, x, y, z) on any number type (dual numbers too), unfused.
+template <class T>
+void hamilton_product(const T* p, const T* q, T* out) {
+  out[0] = p[0] * q[0] - p[1] * q[1] - p[2] * q[2] - p[3] * q[3];
+  out[1] = p[0] * q[1] + p[1] * q[0] + p[2] * q[3] - p[3] * q[2];
+  out[2] = p[0] * q[2] - p[1] * q[3] + p[2] * q[0] + p[3] * q[1];
+  out[3] = p[0] * q[3] + p[1] * q[2] - p[2] * q[1] + p[3] * q[0];
+}
+
 // v / |v| for a quaternion, as v times 1/|v|: XLA's form, v rsqrt(|v|^2) (its reciprocal square root
 // is correctly rounded at 86% of points and within 2 ulp at the others).
 template <class T>

@@ -17,6 +17,7 @@
 #include <string>
 
 #include "carlson.hpp"
+#include "body.hpp"
 #include "flow_jacobian.hpp"
 #include "free_flow.hpp"
 #include "jacobi.hpp"
@@ -452,6 +453,85 @@ ffi::Error free_flow_derivative_values(ffi::ThreadPool pool, ffi::AnyBuffer iner
 FRBJAX_FLOW_DERIVATIVES_HANDLER(1);
 FRBJAX_FLOW_DERIVATIVES_HANDLER(2);
 
+// A FreeRigidBody's records (body.hpp): inertia (..., 3), L0 (..., 3), q0 (..., 4) and optionally the
+// principal axes (..., 3, 3), all of the result's dtype and of one batch; the result (..., size).
+template <class R>
+ffi::Error run_body_record(ffi::ThreadPool& pool, ffi::RemainingArgs arguments, ffi::AnyBuffer& result) {
+  constexpr int size = BodyLayout<R>::size;
+  const std::size_t count = result.element_count() / size;
+  const bool with_axes = arguments.size() == 4;
+  const std::size_t widths[4] = {3, 3, 4, 9};
+  const R* inputs[4] = {nullptr, nullptr, nullptr, nullptr};
+  if (result.element_count() != count * size) return ffi::Error::InvalidArgument("body_record: wrong result size");
+  for (std::size_t j = 0; j < arguments.size(); ++j) {
+    auto buffer = arguments.get<ffi::AnyBuffer>(j);
+    if (!buffer.has_value()) return buffer.error();
+    if (buffer->element_type() != result.element_type() || buffer->element_count() != widths[j] * count)
+      return ffi::Error::InvalidArgument("body_record: (..., 3), (..., 3), (..., 4)[, (..., 3, 3)] of the result's dtype");
+    inputs[j] = static_cast<const R*>(buffer->untyped_data());
+  }
+  R* output = static_cast<R*>(result.untyped_data());
+  parallel_for(pool, count, grain(1) / 4, [&](std::size_t begin, std::size_t end) {
+    for (std::size_t i = begin; i < end; ++i)
+      body_record<R>(inputs[0] + 3 * i, inputs[1] + 3 * i, inputs[2] + 4 * i, with_axes ? inputs[3] + 9 * i : nullptr,
+                     output + i * size);
+  });
+  return ffi::Error::Success();
+}
+
+ffi::Error body_record_values(ffi::ThreadPool pool, ffi::RemainingArgs arguments, ffi::Result<ffi::AnyBuffer> result) {
+  if (arguments.size() != 3 && arguments.size() != 4)
+    return ffi::Error::InvalidArgument("body_record: three or four arguments");
+  return by_float_type("body_record", arguments.size(), arguments, *result, [&](auto zero) {
+    using R = decltype(zero);
+    return run_body_record<R>(pool, arguments, *result);
+  });
+}
+
+// A body's state from records (bodies, size) and times t (bodies, per body), each body's times
+// contiguous: (..., 7) (L(t), q(t)) or (..., 3) (L(t)).
+template <bool Attitude, class R>
+ffi::Error run_body_state(ffi::ThreadPool& pool, ffi::RemainingArgs arguments, ffi::AnyBuffer& result) {
+  constexpr int size = BodyLayout<R>::size;
+  constexpr int outputs = Attitude ? 7 : 3;
+  std::size_t count = result.element_count() / outputs;
+  auto records = arguments.get<ffi::AnyBuffer>(0);
+  auto times = arguments.get<ffi::AnyBuffer>(1);
+  if (!records.has_value()) return records.error();
+  if (!times.has_value()) return times.error();
+  std::size_t bodies = records->element_count() / size;
+  if (records->element_type() != result.element_type() || times->element_type() != result.element_type() ||
+      records->element_count() != bodies * size || times->element_count() != count ||
+      (bodies == 0 ? count != 0 : count % bodies != 0))
+    return ffi::Error::InvalidArgument("body_state: records (bodies, size) and times (bodies, ...) of the result's dtype");
+  const R* record = static_cast<const R*>(records->untyped_data());
+  const R* t = static_cast<const R*>(times->untyped_data());
+  R* output = static_cast<R*>(result.untyped_data());
+  std::size_t per_body = bodies == 0 ? 0 : count / bodies;
+  parallel_for(pool, count, grain(0) / 4, [&](std::size_t begin, std::size_t end) {
+    for (std::size_t i = begin; i < end; ++i) {
+      R out[7];
+      body_state<R>(record + (i / per_body) * size, t[i], Attitude, out);
+      for (int o = 0; o < outputs; ++o) output[i * outputs + o] = out[o];
+    }
+  });
+  return ffi::Error::Success();
+}
+
+template <bool Attitude>
+ffi::Error body_state_values(ffi::ThreadPool pool, ffi::RemainingArgs arguments, ffi::Result<ffi::AnyBuffer> result) {
+  return by_float_type("body_state", 2, arguments, *result, [&](auto zero) {
+    using R = decltype(zero);
+    return run_body_state<Attitude, R>(pool, arguments, *result);
+  });
+}
+
+XLA_FFI_DEFINE_HANDLER(BodyRecord, body_record_values, ffi::Ffi::Bind().Ctx<ffi::ThreadPool>().RemainingArgs().Ret<ffi::AnyBuffer>());
+XLA_FFI_DEFINE_HANDLER(BodyState, body_state_values<true>,
+                       ffi::Ffi::Bind().Ctx<ffi::ThreadPool>().RemainingArgs().Ret<ffi::AnyBuffer>());
+XLA_FFI_DEFINE_HANDLER(BodyMomentum, body_state_values<false>,
+                       ffi::Ffi::Bind().Ctx<ffi::ThreadPool>().RemainingArgs().Ret<ffi::AnyBuffer>());
+
 // For the tests: free_flow.hpp's working frame and regime per body, inertia and angular momentum
 // (..., 3) -> (..., 8) (free_flow_frame).
 template <class R>
@@ -577,7 +657,7 @@ const Entry kHandlers[] = {
     {"frbjax_series_record", SeriesRecord}, {"frbjax_series_motion", SeriesMotion},
     {"frbjax_series_momentum", SeriesMomentum},
     {"frbjax_momentum_0", Momentum_0}, {"frbjax_momentum_1", Momentum_1}, {"frbjax_momentum_2", Momentum_2},
-    {"frbjax_free_flow", FreeFlow},    {"frbjax_free_flow_1", FreeFlow_1}, {"frbjax_free_flow_2", FreeFlow_2},    {"frbjax_free_flow_frame", FreeFlowFrame},
+    {"frbjax_free_flow", FreeFlow},    {"frbjax_free_flow_1", FreeFlow_1}, {"frbjax_body_record", BodyRecord}, {"frbjax_body_state", BodyState}, {"frbjax_body_momentum", BodyMomentum}, {"frbjax_free_flow_2", FreeFlow_2},    {"frbjax_free_flow_frame", FreeFlowFrame},
 };
 
 PyObject* handlers(PyObject*, PyObject*) {

@@ -13,10 +13,10 @@ from jaxtyping import Array, Float, Int
 
 from . import _compiled_motion, _quaternion as quaternion
 from ._checks import check_finite, check_nonzero_rows, check_positive, is_concrete, on_host, real_array
-from ._frame import angular_velocity, dot as _dot, matrix_product, matrix_times as _apply, to_principal
+from ._frame import angular_velocity, dot as _dot, matrix_product, matrix_times as _apply, to_body, to_principal
 from ._fusion import materialise, sum_last, when_any
 from ._inertia import InertiaTensor, through_principal_frame, validate_tensor
-from ._precession import precessing, with_precession_derivatives
+from ._precession import jvp_of_moved, precessing, with_precession_derivatives
 from ._regimes import (
     classify,
     constants,
@@ -233,7 +233,10 @@ def _evaluate(consts, tau, attitude=True):
 
 @jax.jit
 def _construct(inertia, angular_momentum, attitude, axes=None):
-    """The fields of a FreeRigidBody (see its docstring) from validated inputs, as one jitted program."""
+    """The fields of a FreeRigidBody (see its docstring) from validated inputs, as one jitted program:
+    one compiled kernel (``_construct_compiled``) where the motion's kernels are selected."""
+    if _compiled_motion.selected(jnp.zeros((), _working_dtype(inertia, angular_momentum))):
+        return _construct_compiled(inertia, angular_momentum, attitude, axes)
     (inertia, angular_momentum, attitude, valid, permutation, sorted_inertia, unit_working, norm, regime) = _prepare(
         inertia, angular_momentum, attitude, axes
     )
@@ -265,6 +268,68 @@ def _construct(inertia, angular_momentum, attitude, axes=None):
         principal_axes=None if axes is None else jnp.where(valid[..., None, None], axes, jnp.nan),
         _constants=consts,
         _attitude_map=attitude_map,
+    )
+
+
+def _validated(inertia, angular_momentum, attitude, axes):
+    """``_prepare``'s broadcast and checked inputs: (inertia, L0, q0 (not normalised), axes, valid)."""
+    dtype = _working_dtype(inertia, angular_momentum)
+    inertia, angular_momentum, attitude = (jnp.asarray(a, dtype) for a in (inertia, angular_momentum, attitude))
+    shapes = [inertia.shape[:-1], angular_momentum.shape[:-1], attitude.shape[:-1]]
+    if axes is not None:
+        axes = axes.astype(dtype)
+        shapes.append(axes.shape[:-2])
+    batch = jnp.broadcast_shapes(*shapes)
+    inertia = jnp.broadcast_to(inertia, batch + (3,))
+    angular_momentum = jnp.broadcast_to(angular_momentum, batch + (3,))
+    attitude = jnp.broadcast_to(attitude, batch + (4,))
+    valid = (
+        jnp.all((inertia > 0) & jnp.isfinite(inertia), axis=-1)
+        & jnp.all(jnp.isfinite(angular_momentum), axis=-1)
+        & jnp.all(jnp.isfinite(attitude), axis=-1)
+        & jnp.any(attitude != 0, axis=-1)
+    )
+    if axes is not None:
+        axes = jnp.broadcast_to(axes, batch + (3, 3))
+        valid = valid & jnp.all(jnp.isfinite(axes), axis=(-2, -1))
+    inertia, angular_momentum, attitude = (
+        jnp.where(valid[..., None], a, jnp.nan) for a in (inertia, angular_momentum, attitude)
+    )
+    return inertia, angular_momentum, attitude, axes, valid
+
+
+def _construct_compiled(inertia, angular_momentum, attitude, axes):
+    """``_construct``'s fields from one compiled kernel (csrc/body.hpp): the checks, the working frame,
+    the regime, the series record and the attitude map of each body, whose evaluations are then one
+    kernel each (``_compiled_motion.body_state``).  The fields the user sees and differentiates (the
+    moments, L0, unit q0, |L|, the axes and the working axes in the body frame) carry their tangents
+    here; the record's do not: the evaluations' derivatives are the flow kernels' (``flow_state``)."""
+    inertia, angular_momentum, attitude, axes, valid = _validated(inertia, angular_momentum, attitude, axes)
+    record = _compiled_motion.body_record(inertia, angular_momentum, attitude, axes)
+    at_norm, at_regime, at_permutation, at_map, at_principal = _compiled_motion.body_offsets(record.dtype)
+    batch = record.shape[:-1]
+    unit_attitude = attitude / jnp.sqrt(sum_last(attitude * attitude))[..., None]
+    # |L| as recorded, with the tangent of sqrt(L . L) (safe-where at L = 0).
+    squared = sum_last(angular_momentum * angular_momentum)
+    moving = squared > 0
+    size = jnp.where(moving, jnp.sqrt(jnp.where(moving, squared, 1)), 0)
+    norm = record[..., at_norm] + (size - jax.lax.stop_gradient(size))
+    permutation = record[..., at_permutation : at_permutation + 9].reshape(batch + (3, 3))
+    if axes is not None:
+        # R P: the working axes turn with the principal axes.
+        principal_permutation = record[..., at_principal : at_principal + 9].reshape(batch + (3, 3))
+        turned = matrix_product(axes, principal_permutation)
+        permutation = permutation + (turned - jax.lax.stop_gradient(turned))
+    return dict(
+        inertia=inertia,
+        initial_angular_momentum=angular_momentum,
+        initial_attitude=unit_attitude,
+        momentum_norm=norm,
+        permutation=permutation,
+        regime=record[..., at_regime].astype(jnp.int32),
+        principal_axes=None if axes is None else jnp.where(valid[..., None, None], axes, jnp.nan),
+        _constants=dict(body=record),
+        _attitude_map=record[..., at_map : at_map + 16].reshape(batch + (4, 4)),
     )
 
 
@@ -375,36 +440,63 @@ def motion_once(inertia, angular_momentum, attitude, t, with_attitude=True, axes
     return motion(inertia, angular_momentum, attitude, t, axes)
 
 
-# The rows of the flow kernels's outputs (L(t) (3), q(t) (4)) that each evaluation returns.
-_FLOW_ROWS = {"momentum": (slice(0, 3),), "attitude": (slice(3, 7),), "state": (slice(0, 3), slice(3, 7))}
+def flow_state(inertia, axes, angular_momentum, attitude, t):
+    """(L(t), q(t)) in the body frame from the flow kernels (``_compiled_motion.flow``), arguments of one
+    batch, differentiable (the kernels' first and second derivatives, ``motion_once``'s conventions).
+
+    With principal ``axes`` (columns, a rotation, in the body frame; None: the body axes are principal)
+    through the principal frame (docs/theory.md §12): L_p = R^T L0, with components of rounding size
+    made zeros in value as ``_prepare`` makes them (so that the kernel sees the same uniform rotations),
+    q_p = q0 ⊗ r, and L(t) = R L_p(t), q(t) = q_p(t) ⊗ conj(r) (r: R as a quaternion).  The turn of
+    the axes enters the derivatives through these products.
+    """
+    if axes is not None:
+        principal = to_principal(axes, angular_momentum)
+        size = jax.lax.stop_gradient(jnp.sqrt(sum_last(principal * principal)))[..., None]
+        rounding = _FRAME_ROUNDING * jnp.finfo(principal.dtype).eps * size
+        angular_momentum = jnp.where(
+            jnp.abs(principal) <= rounding, principal - jax.lax.stop_gradient(principal), principal
+        )
+        rotation = quaternion.from_matrix(axes)
+        attitude = quaternion.multiply(attitude, rotation)
+    state = _compiled_motion.flow(inertia, angular_momentum, attitude, t)
+    momentum, attitude = state[..., :3], state[..., 3:]
+    if axes is None:
+        return momentum, attitude
+    return to_body(axes, momentum), quaternion.multiply(attitude, quaternion.conjugate(rotation))
 
 
 def _with_flow_jacobian(method, outputs):
-    """``method(body, t)`` (a body of principal moments) with the derivatives of the flow kernels in
-    the body's moments, initial L and unit initial attitude and in t: every field of a body is a
-    function of those three, and its motion at t is ``motion_once``'s, so the JVP is that matrix times
-    their tangents (the derived fields' tangents are not needed, and JAX drops their computation)."""
+    """``method(body, t)`` with the derivatives of the flow kernels (``flow_state``) in the body's
+    moments, principal axes, initial L and unit initial attitude and in t: every field of a body is a
+    function of those, and its motion at t is ``motion_once``'s, so the JVP is the kernels' matrix of
+    partial derivatives times their tangents (the derived fields' tangents are not needed, and JAX
+    drops their computation)."""
     wrapped = jax.custom_jvp(method)
 
     def rule(primals, tangents):
         body, t = primals
         d_body, d_t = tangents
-        value = method(body, t)
+        # The value through the rule itself, so that derivatives of this rule (second ones) see its
+        # derivatives: the method's own values come from kernels without any.
+        value = wrapped(body, t)
         batch = jax.tree.leaves(value)[0].shape[:-1]
-        dtype = body.inertia.dtype
-        inputs = (
-            jnp.broadcast_to(body.inertia, batch + (3,)),
-            jnp.broadcast_to(body.initial_angular_momentum, batch + (3,)),
-            jnp.broadcast_to(body.initial_attitude, batch + (4,)),
-            jnp.broadcast_to(jnp.asarray(t, dtype), batch),
+
+        def state(inertia, axes, momentum, attitude, t):
+            axes = None if axes is None else jnp.broadcast_to(axes, batch + (3, 3))
+            inertia, momentum, attitude = (
+                jnp.broadcast_to(a, batch + a.shape[-1:]) for a in (inertia, momentum, attitude)
+            )
+            momentum, attitude = flow_state(inertia, axes, momentum, attitude, jnp.broadcast_to(t, batch))
+            return {"momentum": momentum, "attitude": attitude, "state": (momentum, attitude)}[outputs]
+
+        fields = ("inertia", "principal_axes", "initial_angular_momentum", "initial_attitude")
+        _, tangent = jvp_of_moved(
+            state,
+            tuple(getattr(body, name) for name in fields) + (jnp.asarray(t, body.inertia.dtype),),
+            tuple(getattr(d_body, name) for name in fields) + (d_t,),
         )
-        _, jacobian = _compiled_motion.flow_with_jacobian(*inputs)
-        direction = _compiled_motion.flow_direction(
-            (d_body.inertia, d_body.initial_angular_momentum, d_body.initial_attitude, d_t), batch, dtype
-        )
-        tangent = jnp.sum(jacobian * direction[..., None, :], -1)
-        parts = tuple(tangent[..., rows] for rows in _FLOW_ROWS[outputs])
-        return value, parts if outputs == "state" else parts[0]
+        return value, tangent
 
     wrapped.defjvp(rule, symbolic_zeros=True)
     return lambda body, t: wrapped(body, t)
@@ -425,9 +517,9 @@ def _series_precessing(body, t):
 
 
 def _motion_derivatives(outputs):
-    """The derivatives of a FreeRigidBody's evaluations through its series: for bodies of principal
-    moments where the compiled kernels are selected, those of the flow kernels (``_compiled_motion.flow``); for the
-    others, the JAX composite's with ``with_precession_derivatives`` (the same conventions)."""
+    """The derivatives of a FreeRigidBody's evaluations through its series: where the compiled kernels
+    are selected, those of the flow kernels (``flow_state``); elsewhere the JAX composite's with
+    ``with_precession_derivatives`` (the same conventions)."""
 
     def decorate(method):
         with_precession = with_precession_derivatives(method, outputs, _series_precessing, _series_inputs)
@@ -634,18 +726,26 @@ class FreeRigidBody(eqx.Module):
             motion, evaluate, body.inertia_tensor, prepared, (body.initial_angular_momentum, body.initial_attitude, t)
         )
 
+    # A body built by the compiled kernel (``_construct_compiled``) evaluates with one kernel call.
+
     @_motion_derivatives("momentum")
     def _angular_momentum(self, t):
+        if "body" in self._constants:
+            return _compiled_motion.body_state(self._constants["body"], t, attitude=False)[0]
         t, tau = self._time(t)
         unit_working, _ = _evaluate(self._constants, tau, attitude=False)
         return self._momentum_from(t, unit_working)
 
     def _elliptic_quaternion(self, t):
+        if "body" in self._constants:
+            return _compiled_motion.body_state(self._constants["body"], t)[1]
         t, tau = self._time(t)
         particular, _ = _evaluate(self._constants, tau)
         return self._attitude_from(t, tau, particular)
 
     def _elliptic_state(self, t):
+        if "body" in self._constants:
+            return _compiled_motion.body_state(self._constants["body"], t)
         t, tau = self._time(t)
         particular, unit_working = _evaluate(self._constants, tau)
         return self._momentum_from(t, unit_working), self._attitude_from(t, tau, particular)
@@ -716,7 +816,7 @@ def _body_of(fields):
 
 def _kernel_derivatives(body) -> bool:
     """Whether a body's evaluations take the flow kernels' derivatives (``_motion_derivatives``)."""
-    return body.principal_axes is None and _compiled_motion.selected(body.inertia)
+    return _compiled_motion.selected(body.inertia)
 
 
 def state_with_elliptic_derivatives(body, t):

@@ -191,6 +191,43 @@ def series_record(inertia, unit_momentum, regime):
     return jax.ffi.ffi_call("frbjax_series_record", result, vmap_method="broadcast_all")(*columns, regime)
 
 
+def body_record_size(dtype) -> int:
+    """The length of a body's record (csrc/body.hpp's BodyLayout): the series record and 52 more."""
+    return record_size(dtype) + 52
+
+
+def body_record(inertia, angular_momentum, attitude, axes=None):
+    """Each body's record (csrc/body.hpp; values: the derivatives are the flow kernels'): moments,
+    L0 (..., 3) and q0 (..., 4) in the body frame and its principal axes (..., 3, 3) or None, of one
+    batch and dtype.  Offsets: ``BODY_NORM`` |L| (NaN for an invalid body), ``BODY_REGIME``,
+    ``BODY_PERMUTATION`` (3 x 3, the working axes in body coordinates), ``BODY_ATTITUDE_MAP`` (4 x 4),
+    ``BODY_PRINCIPAL_PERMUTATION`` (the working axes in principal coordinates)."""
+    if _compiled._module() is None:
+        raise RuntimeError("frbjax's compiled kernels are not available (see frbjax.special._compiled)")
+    arguments = [inertia, angular_momentum, attitude] + ([] if axes is None else [axes])
+    arguments = jax.lax.stop_gradient(arguments)
+    result = jax.ShapeDtypeStruct(inertia.shape[:-1] + (body_record_size(inertia.dtype),), inertia.dtype)
+    return jax.ffi.ffi_call("frbjax_body_record", result, vmap_method="broadcast_all")(*arguments)
+
+
+def body_offsets(dtype):
+    """(norm, regime, permutation, attitude map, principal permutation) offsets in a body's record."""
+    start = record_size(dtype)
+    return start, start + 1, start + 2, start + 11, start + 43
+
+
+def body_state(record, t, attitude=True):
+    """(L(t), q(t)) in the body frame from the bodies' records at times ``t`` (values), or (L(t), None)
+    without ``attitude``; ``t`` broadcasts against the records' batch."""
+    batch = jnp.broadcast_shapes(record.shape[:-1], jnp.shape(t))
+    t = jnp.broadcast_to(jnp.asarray(t, record.dtype), batch)
+    records = _records_by_body(jax.lax.stop_gradient(record), batch)
+    result = jax.ShapeDtypeStruct(batch + ((7 if attitude else 3),), record.dtype)
+    name = "frbjax_body_state" if attitude else "frbjax_body_momentum"
+    out = jax.ffi.ffi_call(name, result, vmap_method="broadcast_all")(records, jax.lax.stop_gradient(t))
+    return (out[..., :3], out[..., 3:]) if attitude else (out, None)
+
+
 def _series_kernel(attitude):
     outputs = 7 if attitude else 3
     rows = list(range(3)) + (list(range(7, 11)) if attitude else [])

@@ -12,12 +12,18 @@ import jax.numpy as jnp
 from jaxtyping import Array, Float
 
 from . import _compiled_motion
-from ._body import _validate, _working_dtype, motion_once
+from ._body import _validate, _working_dtype, flow_state, motion_once
 from ._checks import check_finite, on_host, real_array
 from ._inertia import InertiaTensor, through_principal_frame
 
 
 def _state_in_principal_frame(inertia, angular_momentum, attitude, t, axes):
+    """``motion_once`` of a body with principal ``axes``: through the flow kernels where they are
+    selected (``_body.flow_state``: one custom call and its derivatives' matrices), else the composite."""
+    dtype = _working_dtype(inertia, angular_momentum)
+    if _compiled_motion.selected(inertia.astype(dtype)):
+        arguments = (a.astype(dtype) for a in (inertia, axes, angular_momentum, attitude, t))
+        return flow_state(*arguments)
     return motion_once(inertia, angular_momentum, attitude, t, True, axes)
 
 

@@ -154,8 +154,10 @@ def _uniform_momentum_jvp(primals, tangents):
     principal, d_principal = _in_principal_frame(axes, momentum, d_axes, d_momentum)
     d_angular_momentum, _ = _response(*_frozen(moments, principal), t, d_moments, d_principal)
     if axes is not None:
-        # L(t) = R P(t): dR P + R dP(t), P(t) = R^T L0.
-        d_angular_momentum = matrix_times(d_axes, principal) + to_body(axes, d_angular_momentum)
+        # L(t) = R P(t): dR P(t) + R dP(t), P(t) = R^T L0 in value; P(t) through this rule, so that its
+        # derivative (in the second derivatives) is the nutation that a turn of the axes starts, dP(t).
+        principal_now = uniform_momentum(moments, principal, t)
+        d_angular_momentum = matrix_times(d_axes, principal_now) + to_body(axes, d_angular_momentum)
     return uniform_momentum(moments, momentum, t, axes), d_angular_momentum
 
 
