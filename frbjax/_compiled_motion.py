@@ -22,6 +22,8 @@ import os
 import jax
 import jax.numpy as jnp
 from jax.custom_derivatives import SymbolicZero
+from jax.experimental.custom_partitioning import custom_partitioning
+from jax.sharding import NamedSharding, PartitionSpec
 
 from .special import _compiled
 
@@ -216,15 +218,71 @@ def body_offsets(dtype):
     return start, start + 1, start + 2, start + 11, start + 43
 
 
+def _body_state_call(records, t):
+    return jax.ffi.ffi_call("frbjax_body_state", jax.ShapeDtypeStruct(t.shape + (7,), records.dtype))(records, t)
+
+
+def _body_momentum_call(records, t):
+    return jax.ffi.ffi_call("frbjax_body_momentum", jax.ShapeDtypeStruct(t.shape + (3,), records.dtype))(records, t)
+
+
+def _over_bodies(mesh, arg_shapes):
+    """Shardings of (records, t, result) with the bodies' axis split as ``t``'s leading axis is."""
+    spec = tuple(arg_shapes[1].sharding.spec)
+    leading = spec[0] if spec else None
+    t_spec = (leading,) + (None,) * (len(arg_shapes[1].shape) - 1)
+    return (
+        NamedSharding(mesh, PartitionSpec(leading, None)),
+        NamedSharding(mesh, PartitionSpec(*t_spec)),
+        NamedSharding(mesh, PartitionSpec(*t_spec, None)),
+    )
+
+
+def _partitioned(attitude):
+    """The evaluation kernel split over devices along the bodies (``shard_bodies``: each device
+    evaluates its own bodies), and under ``vmap`` one call over the mapped and the bodies' axes."""
+    kernel = _body_state_call if attitude else _body_momentum_call
+    call = custom_partitioning(kernel)
+
+    def partition(mesh, arg_shapes, result_shape):
+        records, t, result = _over_bodies(mesh, arg_shapes)
+        return mesh, kernel, result, (records, t)
+
+    call.def_partition(
+        partition=partition,
+        infer_sharding_from_operands=lambda mesh, arg_shapes, result_shape: _over_bodies(mesh, arg_shapes)[2],
+        sharding_rule="b s, b t -> b t o",
+    )
+
+    @jax.custom_batching.custom_vmap
+    def evaluate(records, t):
+        return call(records, t)
+
+    @evaluate.def_vmap
+    def _(axis_size, in_batched, records, t):
+        records, t = (
+            value if batched else jnp.broadcast_to(value, (axis_size,) + value.shape)
+            for value, batched in zip((records, t), in_batched)
+        )
+        # Each mapped row's bodies after the previous row's: the bodies' axis absorbs the mapped one.
+        out = evaluate(records.reshape((-1, records.shape[-1])), t.reshape((-1,) + t.shape[2:]))
+        return out.reshape(t.shape + out.shape[-1:]), True
+
+    return evaluate
+
+
+_body_state_kernels = {True: _partitioned(True), False: _partitioned(False)}
+
+
 def body_state(record, t, attitude=True):
     """(L(t), q(t)) in the body frame from the bodies' records at times ``t`` (values), or (L(t), None)
     without ``attitude``; ``t`` broadcasts against the records' batch."""
     batch = jnp.broadcast_shapes(record.shape[:-1], jnp.shape(t))
-    t = jnp.broadcast_to(jnp.asarray(t, record.dtype), batch)
+    t = jax.lax.stop_gradient(jnp.broadcast_to(jnp.asarray(t, record.dtype), batch))
     records = _records_by_body(jax.lax.stop_gradient(record), batch)
-    result = jax.ShapeDtypeStruct(batch + ((7 if attitude else 3),), record.dtype)
-    name = "frbjax_body_state" if attitude else "frbjax_body_momentum"
-    out = jax.ffi.ffi_call(name, result, vmap_method="broadcast_all")(records, jax.lax.stop_gradient(t))
+    # (bodies, times per body): the kernel's layout (each body's times contiguous).
+    times = t.reshape((records.shape[0], -1)) if t.size else t.reshape((0, 1))
+    out = _body_state_kernels[attitude](records, times).reshape(batch + ((7 if attitude else 3),))
     return (out[..., :3], out[..., 3:]) if attitude else (out, None)
 
 
