@@ -322,16 +322,17 @@ def test_the_second_derivatives_are_the_composites():
 
 def test_bodies_with_principal_axes_take_the_kernels_through_the_principal_frame():
     """A body whose principal axes R are not its body axes (a tensor's) is evaluated through the
-    principal frame (``_body.flow_state``: L_p = R^T L0, q_p = q0 ⊗ r, then back): its values and first
-    and second derivatives in the moments, the axes (R exp(hat w) at w = 0), L0, q0 and t against
-    ``motion_once`` with those axes (the JAX rules, ``_uniform``'s and ``_precession``'s with axes), at
-    a random body, a symmetric one next to the plane of its equal moments, an axis spin and L = 0
-    (their L given in the principal frame and turned to the body's).  Measured (2026-11-28): values
-    1.3 eps, first derivatives 1.0 eps, second 1.8 eps (1 + the largest entry); allowed 4.  (This test
-    found the JAX rule of the uniform rotation missing, in its second derivatives in the axes, the
-    nutation that a turn of the axes starts: d2 L_y / dw_y dw_z of the axis spin was 0.299 where the
-    kernels give -1.98306709, as do central differences of either path's first derivatives off the
-    uniform rotation, h = 1e-5.  ``_uniform`` is fixed.)"""
+    principal frame (``_body.flow_state``: L_p = R^T L0, q_p = q0 ⊗ r, then back): its values, first
+    derivatives and second derivatives (along two random directions) in the moments, the axes
+    (R exp(hat w) at w = 0), L0, q0 and t against ``motion_once`` with those axes (the JAX rules,
+    ``_uniform``'s and ``_precession``'s with axes), at a random body, a symmetric one next to the
+    plane of its equal moments, an axis spin and L = 0 (their L given in the principal frame and
+    turned to the body's).  Measured (2026-11-28): values 1.3 eps, first derivatives 1.0 eps, second
+    1.8 eps (1 + the largest entry); allowed 4.  (This test found the JAX rule of the uniform rotation
+    missing, in its second derivatives in the axes, the nutation that a turn of the axes starts:
+    d2 L_y / dw_y dw_z of the axis spin was 0.299 where the kernels give -1.98306709, as do central
+    differences of either path's first derivatives off the uniform rotation, h = 1e-5.  ``_uniform``
+    is fixed.)"""
     rng = np.random.default_rng(7)
     axes = np.linalg.qr(rng.normal(size=(3, 3)))[0]
     axes = axes * np.linalg.det(axes)
@@ -358,10 +359,17 @@ def test_bodies_with_principal_axes_take_the_kernels_through_the_principal_frame
     )
     x = jnp.concatenate([points[:, :3], jnp.zeros((len(points), 3)), points[:, 3:]], -1)
 
-    def all_orders(x):
-        return [(f(x), jax.jacfwd(f)(x), jax.jacfwd(jax.jacfwd(f))(x)) for f in (ours, theirs)]
+    directions = jnp.asarray(np.random.default_rng(8).normal(size=(2,) + x.shape))
 
-    results = jax.jit(jax.vmap(all_orders)).lower(x).compile(FAST_COMPILE_OPTIONS)(x)
+    def all_orders(x, u, v):
+        def second(f):
+            return jax.jvp(lambda y: jax.jvp(f, (y,), (u,))[1], (x,), (v,))[1]
+
+        return [(f(x), jax.jacfwd(f)(x), second(f)) for f in (ours, theirs)]
+
+    # The second derivatives along two random directions (a full Hessian of the JAX rules with axes
+    # compiles for 20 s).
+    results = jax.jit(jax.vmap(all_orders)).lower(x, *directions).compile(FAST_COMPILE_OPTIONS)(x, *directions)
     eps = np.finfo(np.float64).eps
     for mine, expected in zip(*results):
         mine, expected = np.asarray(mine), np.asarray(expected)
