@@ -338,9 +338,9 @@ MODEL_BODIES = {
     "principal_axis": ([0.6, 0.8, 1.0], [0.0, 0.0, 0.7]),
 }
 # Largest |dJ| of the fits' model's Jacobian from the body's (entries of order 1), the same for L and q:
-# measured 0, 0, 1.26e-13 and 9.0e-5 on the JAX path; next to the plane 2.11e-13 with the compiled
-# kernels (their rounding).  Next to the plane it is the expansion's derivative against the elliptic
-# formulas', which lose about 1e-16 / (e . n)^2 = 2.5e-13 at e . n = 0.02: the bound.
+# on the JAX path (FRBJAX_KERNELS=jax) measured 0, 0, 1.26e-13 and 9.0e-5.  Next to the plane it is the
+# expansion's derivative against the elliptic formulas', which lose about 1e-16 / (e . n)^2 = 2.5e-13
+# at e . n = 0.02: the bound.  On the CPU's default path both take the flow kernels' derivatives: 0.
 MODEL_JACOBIAN_DIFFERENCE = {
     "triaxial": 0.0,
     "principal_axis": 0.0,
@@ -361,7 +361,6 @@ def _model_program(fits):
     return jax.jit(lambda *args: (state(*args), jax.jacfwd(state, argnums=(0, 1, 2, 3))(*args)))
 
 
-@pytest.mark.slow  # the first body compiles the body's state and Jacobian programs: 56.5 s in CI's tier (2026-11-28)
 @pytest.mark.parametrize("name", MODEL_BODIES)
 def test_model_derivatives_are_the_bodys_except_on_exactly_symmetric_bodies(name):
     """The fits' model evaluates the motion with the elliptic formulas' own derivatives

@@ -301,9 +301,8 @@ def _hessian_references():
     return names, x, np.array(data["attitude"]), values, hessians
 
 
-# Each path's Hessian program compiles for about a minute (CI's tier, 2026-11-28: 57.6 s for the one-time
-# path; the series path 62.6 s once it no longer shared the first one's work).
-@pytest.mark.slow
+# Each path's Hessian program compiled for about a minute with the JAX rules (CI's tier, 2026-11-28:
+# 57.6 s and 62.6 s); with the compiled flow kernels' second derivatives, 0.2 s.
 @pytest.mark.parametrize("path", PATHS)
 def test_hessian_matches_mpmath(path):
     """The Hessian of (L(t), q(t)) with respect to (I, L, t) at generic points of both regimes and next
