@@ -1,14 +1,18 @@
 // The partial derivatives of the whole free flow (free_flow.hpp) in its 11 inputs: the moments (3),
-// L0 (3), q0 (4, any norm) and t, with the derivative conventions of frbjax/_body.py's `motion_once`
-// at its degenerate points, so that frbjax/_free_flow.py's JVP rule is one product with this matrix
-// (a custom call and a contraction for XLA to compile, instead of the composite's derivative program).
+// L0 (3), q0 (4, any norm) and t, first (7 x 11) and second (7 x 11 x 11), with the derivative
+// conventions of frbjax/_body.py's `motion_once` at its degenerate points, so that every JVP rule of
+// the motion on the CPU (`free_flow`, a FreeRigidBody's evaluations: frbjax/_body.py's `flow_state`)
+// is a product of these matrices with the tangents (a custom call and a contraction for XLA to
+// compile, instead of the composite's derivative program).
 //
 // Three cases per point, as `motion_once` takes them:
 // - moving bodies: the derivatives of the formulas taken (the working frame and |L|, the working
 //   motion of motion.hpp, the quaternion products), by the chain rule on dual numbers: the working
-//   motion's own 7 partial derivatives (its order-1 instantiation) carried into the 11 inputs;
+//   motion's own 7 (and 7 x 7) partial derivatives, from its order-1 (order-2) instantiation, carried
+//   into the 11 inputs;
 // - uniform rotations (docs/theory.md §6): the solution of the variational equations of the uniform
 //   rotation (frbjax/_uniform.py's `_response`), whose values are L(t) = L0, q(t) = q0 ⊗ exp(t Omega0/2);
+//   its second derivatives are the rule's own, its coefficients frozen at the uniform rotation;
 // - symmetric bodies next to the plane of their equal moments: the derivatives of the first-order
 //   expansion of their regular precession (frbjax/_precession.py's `precession`), on dual numbers.
 // The values are free_flow.hpp's.  An invalid body (free_flow.hpp's checks) gets NaN everywhere.

@@ -1,17 +1,21 @@
-"""The motion in the working frame as compiled CPU kernels: at one time per point (``csrc/motion.hpp``)
-and through a body's theta series (``csrc/series.hpp``, bottom of this module).
+"""The motion as compiled CPU kernels: the working-frame motion at one time per point
+(``csrc/motion.hpp``), a body's theta series (``csrc/series.hpp``), the whole free flow of one body at
+one time (``csrc/free_flow.hpp``), a ``FreeRigidBody``'s record and its state (``csrc/body.hpp``), and
+the flow's partial derivatives (``csrc/flow_jacobian.hpp``).
 
-The compiled form of ``_regimes.orbit_constants`` followed by ``_regimes.evaluate_once``: the same
-formulas (docs/theory.md §4, §5, §11), per point in C++ with early exits instead of elementwise
-selections, so that XLA compiles one custom call instead of the regimes' hundreds of fused loops.
+The first is the compiled form of ``_regimes.orbit_constants`` followed by ``_regimes.evaluate_once``:
+the same formulas (docs/theory.md §4, §5, §11), per point in C++ with early exits instead of
+elementwise selections, so that XLA compiles one custom call instead of the regimes' hundreds of
+fused loops.  It also evaluates the motion on dual numbers, which gives the partial derivatives of
+its 11 outputs in its 7 inputs (J1, J2, J3, l1, l2, l3, tau; order 1) and their second ones (order 2)
+from the same code: those of the formula taken.  The JAX composite around it (``_body.motion_once``,
+with the conventions of ``_uniform`` and ``_precession`` in JAX) is the path of
+``FRBJAX_MOTION_KERNEL=jax`` for the rest of the motion and the tests' reference.
 
-Derivatives: the kernel also evaluates the motion on dual numbers, which gives the partial
-derivatives of its 11 outputs in its 7 inputs (J1, J2, J3, l1, l2, l3, tau; order 1) and their second
-ones (order 2) from the same code: those of the formula taken, as the JAX path's automatic
-derivatives are.  The JVP rules are linear in the tangents (reverse mode transposes a product);
-second derivatives come from the rule of the order-1 kernel, third ones are not provided.  The
-derivative conventions of the motion at its degenerate points (uniform rotation, the regular
-precession of symmetric bodies) are applied around this function, in JAX, as on the JAX path.
+On the CPU's default path every derivative of the motion is the flow kernels' (``flow``): the
+7 x 11 first and 7 x 11 x 11 second partial derivatives of (L(t), q(t)) in the moments, L0, q0 and t,
+with those conventions computed in C++, so that a JVP is a product of a matrix with the tangents
+(linear in them: reverse mode transposes it) and no derivative rule of the JAX composite is compiled.
 """
 
 from __future__ import annotations
