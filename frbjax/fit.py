@@ -76,7 +76,7 @@ import numpy as np
 import optimistix as optx
 from jaxtyping import Array, Float
 
-from . import _checks as checks, _quaternion as quaternion
+from . import _checks as checks, _compiled_motion, _quaternion as quaternion
 from ._body import FreeRigidBody, state_with_elliptic_derivatives, with_principal_axes
 from ._errors import FitError
 from ._multistart import solve_each
@@ -480,6 +480,11 @@ def _fitted_body(inertia, angular_momentum, attitude, tensor=False):
 # XLA:CPU compiles the solver about a quarter faster, and runs it as fast, with the fusion emitters
 # off (measured in benchmarks/fit_success.py); ignored on other backends.
 DEFAULT_COMPILER_OPTIONS = {"xla_cpu_use_fusion_emitters": False}
+# Where the motion and its derivatives are compiled kernels (the CPU's default), XLA compiles only the
+# solver's linear algebra around them, and without LLVM's optimisations it does so in half the time:
+# the first call of benchmarks/first_answer.py's fit (200 samples, 12 starts, one core, 2026-11-28)
+# 1.58 s against 2.87 s, a later call 0.30 s against 0.25 s.
+KERNEL_COMPILER_OPTIONS = {**DEFAULT_COMPILER_OPTIONS, "xla_backend_optimization_level": 0}
 
 
 @functools.cache
@@ -490,7 +495,10 @@ def _compiled_fit(options):
 
 def _solve(options, *args, **static):
     if options is None:
-        options = DEFAULT_COMPILER_OPTIONS if jax.default_backend() == "cpu" else {}
+        options = {}
+        if jax.default_backend() == "cpu":
+            kernels = _compiled_motion.selected(jnp.zeros((), args[0].dtype))
+            options = KERNEL_COMPILER_OPTIONS if kernels else DEFAULT_COMPILER_OPTIONS
         try:
             return _compiled_fit(tuple(sorted(options.items())))(*args, **static)
         except jax.errors.JaxRuntimeError as error:  # an XLA without these options: compile without
@@ -660,8 +668,9 @@ def fit_attitude(
     ``jax.random`` key): randomises the starts beyond the deterministic ones and their inertia guesses.
 
     ``rtol``, ``atol``, ``max_steps``: of each Levenberg-Marquardt solve; ``compiler_options``: XLA
-    compiler options of the solver (default ``DEFAULT_COMPILER_OPTIONS`` on CPU; ``{}`` for XLA's
-    defaults; e.g. ``{"xla_backend_optimization_level": 0}`` compiles faster and runs slower).
+    compiler options of the solver (default on the CPU ``KERNEL_COMPILER_OPTIONS`` where the motion runs
+    as compiled kernels, which compiles in half the time and runs a fifth slower, else
+    ``DEFAULT_COMPILER_OPTIONS``; ``{}`` for XLA's defaults).
 
     ``nan_policy``: what to do with samples that have a non-finite time, quaternion or angular
     velocity (a dropped sample): ``"raise"`` (default) refuses them, naming their indices;
