@@ -335,18 +335,26 @@ void moving_flow(const WorkingFrame<R>& frame, R t, const D* moments, const D* a
 // q(t) = start ⊗ s with s = exp(t Omega0 / 2): d L(t) and d s = s ⊗ (0, rate / 2), rate = phi, for
 // changes of the moments and L0 (`uniform_response`); d s / dt = s ⊗ (0, Omega0 / 2).  `start`,
 // `spin` and `velocity` (Omega0 = L0 / I) carry, as T, their own derivatives: the rules'.
+// The uniform rule along input a: d L(t) and the rate of the turn of s (phi for the moments and L0,
+// Omega0 for t, nothing for q0).
+template <class R, class T>
+void uniform_rule(const R* moments, const R* momentum, const T& time, const T* velocity, int a, T* d_state, T* rate) {
+  for (int k = 0; k < 3; ++k) d_state[k] = rate[k] = T(0.0);
+  if (a < 6) {
+    R d_moments[3] = {0, 0, 0}, d_momentum[3] = {0, 0, 0};
+    (a < 3 ? d_moments[a] : d_momentum[a - 3]) = R(1);
+    uniform_response<R, T>(moments, momentum, time, d_moments, d_momentum, d_state, rate);
+  } else if (a == 10) {
+    for (int k = 0; k < 3; ++k) rate[k] = velocity[k];
+  }
+}
+
 template <class R, class T>
 void uniform_tangents(const R* moments, const R* momentum, const T& time, const T* start, const T (*d_start)[4],
                       const T* spin, const T* velocity, T (*tangent)[kFlowInputs]) {
   for (int a = 0; a < kFlowInputs; ++a) {
-    T d_state[3] = {T(0.0), T(0.0), T(0.0)}, rate[3] = {T(0.0), T(0.0), T(0.0)};
-    if (a < 6) {
-      R d_moments[3] = {0, 0, 0}, d_momentum[3] = {0, 0, 0};
-      (a < 3 ? d_moments[a] : d_momentum[a - 3]) = R(1);
-      uniform_response<R, T>(moments, momentum, time, d_moments, d_momentum, d_state, rate);
-    } else if (a == 10) {
-      for (int k = 0; k < 3; ++k) rate[k] = velocity[k];
-    }
+    T d_state[3], rate[3];
+    uniform_rule<R, T>(moments, momentum, time, velocity, a, d_state, rate);
     const T half_rate[4] = {T(0.0), rate[0] / 2.0, rate[1] / 2.0, rate[2] / 2.0};
     T turned[4], carried[4], moved[4];
     hamilton_product(spin, half_rate, turned);
@@ -443,14 +451,8 @@ void free_flow_derivatives(const R* inertia, const R* momentum, const R* attitud
         velocity_t[k].v = velocity[k];
       }
       for (int b = 0; b < kFlowInputs; ++b) {
-        R d_state[3] = {0, 0, 0}, rate[3] = {0, 0, 0};
-        if (b < 6) {
-          R d_moments[3] = {0, 0, 0}, d_momentum[3] = {0, 0, 0};
-          (b < 3 ? d_moments[b] : d_momentum[b - 3]) = R(1);
-          uniform_response<R, R>(inertia, momentum, t, d_moments, d_momentum, d_state, rate);
-        } else if (b == 10) {
-          for (int k = 0; k < 3; ++k) rate[k] = velocity[k];
-        }
+        R d_state[3], rate[3];
+        uniform_rule<R, R>(inertia, momentum, t, velocity, b, d_state, rate);
         const R half_rate[4] = {R(0), rate[0] / 2, rate[1] / 2, rate[2] / 2};
         R d_spin[4];
         hamilton_product(spin, half_rate, d_spin);

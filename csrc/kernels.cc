@@ -488,34 +488,43 @@ ffi::Error body_record_values(ffi::ThreadPool pool, ffi::RemainingArgs arguments
   });
 }
 
-// A body's state from records (bodies, size) and times t (bodies, per body), each body's times
-// contiguous: (..., 7) (L(t), q(t)) or (..., 3) (L(t)).
-template <bool Attitude, class R>
-ffi::Error run_body_state(ffi::ThreadPool& pool, ffi::RemainingArgs arguments, ffi::AnyBuffer& result) {
-  constexpr int size = BodyLayout<R>::size;
-  constexpr int outputs = Attitude ? 7 : 3;
-  std::size_t count = result.element_count() / outputs;
+// `evaluate(record, time, out)` of records (bodies, size) at times (bodies, per body), each body's
+// times contiguous (row-major): the result (..., outputs).  A record is read once per body, not
+// copied per time.  `name` names the kernel in its errors.
+template <class R, int Size, int Outputs, class Evaluate>
+ffi::Error run_at_times(ffi::ThreadPool& pool, ffi::RemainingArgs& arguments, ffi::AnyBuffer& result,
+                        const char* name, Evaluate evaluate) {
+  std::size_t count = result.element_count() / Outputs;
   auto records = arguments.get<ffi::AnyBuffer>(0);
   auto times = arguments.get<ffi::AnyBuffer>(1);
   if (!records.has_value()) return records.error();
   if (!times.has_value()) return times.error();
-  std::size_t bodies = records->element_count() / size;
+  std::size_t bodies = records->element_count() / Size;
   if (records->element_type() != result.element_type() || times->element_type() != result.element_type() ||
-      records->element_count() != bodies * size || times->element_count() != count ||
+      records->element_count() != bodies * Size || times->element_count() != count ||
       (bodies == 0 ? count != 0 : count % bodies != 0))
-    return ffi::Error::InvalidArgument("body_state: records (bodies, size) and times (bodies, ...) of the result's dtype");
+    return ffi::Error::InvalidArgument(std::string(name) +
+                                       ": records (bodies, size) and times (bodies, ...) of the result's dtype");
   const R* record = static_cast<const R*>(records->untyped_data());
-  const R* t = static_cast<const R*>(times->untyped_data());
+  const R* time = static_cast<const R*>(times->untyped_data());
   R* output = static_cast<R*>(result.untyped_data());
   std::size_t per_body = bodies == 0 ? 0 : count / bodies;
   parallel_for(pool, count, grain(0) / 4, [&](std::size_t begin, std::size_t end) {
     for (std::size_t i = begin; i < end; ++i) {
       R out[7];
-      body_state<R>(record + (i / per_body) * size, t[i], Attitude, out);
-      for (int o = 0; o < outputs; ++o) output[i * outputs + o] = out[o];
+      evaluate(record + (i / per_body) * Size, time[i], out);
+      for (int o = 0; o < Outputs; ++o) output[i * Outputs + o] = out[o];
     }
   });
   return ffi::Error::Success();
+}
+
+// A body's state from records (bodies, size) and times t (bodies, per body): (..., 7) (L(t), q(t)) or
+// (..., 3) (L(t)).
+template <bool Attitude, class R>
+ffi::Error run_body_state(ffi::ThreadPool& pool, ffi::RemainingArgs arguments, ffi::AnyBuffer& result) {
+  return run_at_times<R, BodyLayout<R>::size, Attitude ? 7 : 3>(
+      pool, arguments, result, "body_state", [](const R* record, R t, R* out) { body_state<R>(record, t, Attitude, out); });
 }
 
 template <bool Attitude>
@@ -592,31 +601,9 @@ ffi::Error run_series_record(ffi::ThreadPool& pool, ffi::RemainingArgs arguments
 // (row-major): (bodies, per body, 7) or (..., 3).  A record is read once per body, not copied per time.
 template <bool Attitude, class R>
 ffi::Error run_series_motion(ffi::ThreadPool& pool, ffi::RemainingArgs arguments, ffi::AnyBuffer& result) {
-  constexpr int size = SeriesLayout<R>::size;
-  constexpr int outputs = Attitude ? 7 : 3;
-  std::size_t count = result.element_count() / outputs;
-  auto records = arguments.get<ffi::AnyBuffer>(0);
-  auto times = arguments.get<ffi::AnyBuffer>(1);
-  if (!records.has_value()) return records.error();
-  if (!times.has_value()) return times.error();
-  std::size_t bodies = records->element_count() / size;
-  if (records->element_type() != result.element_type() || times->element_type() != result.element_type() ||
-      records->element_count() != bodies * size || times->element_count() != count ||
-      (bodies == 0 ? count != 0 : count % bodies != 0))
-    return ffi::Error::InvalidArgument(
-        "series_motion: records (bodies, size) and times (bodies, ...) of the result's dtype");
-  const R* record = static_cast<const R*>(records->untyped_data());
-  const R* tau = static_cast<const R*>(times->untyped_data());
-  R* output = static_cast<R*>(result.untyped_data());
-  std::size_t per_body = bodies == 0 ? 0 : count / bodies;
-  parallel_for(pool, count, grain(0) / 4, [&](std::size_t begin, std::size_t end) {
-    for (std::size_t i = begin; i < end; ++i) {
-      R out[7];
-      series_motion<R>(record + (i / per_body) * size, tau[i], Attitude, out);
-      for (int o = 0; o < outputs; ++o) output[i * outputs + o] = out[o];
-    }
-  });
-  return ffi::Error::Success();
+  return run_at_times<R, SeriesLayout<R>::size, Attitude ? 7 : 3>(
+      pool, arguments, result, "series_motion",
+      [](const R* record, R tau, R* out) { series_motion<R>(record, tau, Attitude, out); });
 }
 
 ffi::Error series_record_values(ffi::ThreadPool pool, ffi::RemainingArgs arguments,

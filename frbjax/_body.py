@@ -148,32 +148,7 @@ def _prepare(inertia, angular_momentum, attitude, axes=None):
     the body axes are principal.  The frame is then the working frame's axes in body coordinates,
     axes @ P (docs/theory.md §12); ``angular_momentum`` and ``attitude`` stay those of the body frame.
     """
-    dtype = _working_dtype(inertia, angular_momentum)
-    attitude = jnp.asarray(attitude, dtype)
-    inertia = inertia.astype(dtype)
-    angular_momentum = angular_momentum.astype(dtype)
-    shapes = [inertia.shape[:-1], angular_momentum.shape[:-1], attitude.shape[:-1]]
-    if axes is not None:
-        axes = axes.astype(dtype)
-        shapes.append(axes.shape[:-2])
-    batch = jnp.broadcast_shapes(*shapes)
-    inertia = jnp.broadcast_to(inertia, batch + (3,))
-    angular_momentum = jnp.broadcast_to(angular_momentum, batch + (3,))
-    attitude = jnp.broadcast_to(attitude, batch + (4,))
-    # Invalid values (possible only under tracing; _validate rejects concrete ones): every per-body
-    # input becomes NaN, and with it every output of that body (class docstring).
-    valid = (
-        jnp.all((inertia > 0) & jnp.isfinite(inertia), axis=-1)
-        & jnp.all(jnp.isfinite(angular_momentum), axis=-1)
-        & jnp.all(jnp.isfinite(attitude), axis=-1)
-        & jnp.any(attitude != 0, axis=-1)
-    )
-    if axes is not None:
-        axes = jnp.broadcast_to(axes, batch + (3, 3))
-        valid = valid & jnp.all(jnp.isfinite(axes), axis=(-2, -1))
-    inertia = jnp.where(valid[..., None], inertia, jnp.nan)
-    angular_momentum = jnp.where(valid[..., None], angular_momentum, jnp.nan)
-    attitude = jnp.where(valid[..., None], attitude, jnp.nan)
+    inertia, angular_momentum, attitude, axes, valid = _validated(inertia, angular_momentum, attitude, axes)
     attitude = attitude / jnp.sqrt(sum_last(attitude * attitude))[..., None]
 
     # Normalised in the working frame (a signed permutation: exact), where the components come in
@@ -272,7 +247,9 @@ def _construct(inertia, angular_momentum, attitude, axes=None):
 
 
 def _validated(inertia, angular_momentum, attitude, axes):
-    """``_prepare``'s broadcast and checked inputs: (inertia, L0, q0 (not normalised), axes, valid)."""
+    """The inputs in the working dtype, broadcast and checked: (inertia, L0, q0 (not normalised), axes,
+    valid).  Invalid values (possible only under tracing; _validate rejects concrete ones): every
+    per-body input becomes NaN, and with it every output of that body (class docstring)."""
     dtype = _working_dtype(inertia, angular_momentum)
     inertia, angular_momentum, attitude = (jnp.asarray(a, dtype) for a in (inertia, angular_momentum, attitude))
     shapes = [inertia.shape[:-1], angular_momentum.shape[:-1], attitude.shape[:-1]]
