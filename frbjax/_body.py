@@ -210,7 +210,7 @@ def _evaluate(consts, tau, attitude=True):
 def _construct(inertia, angular_momentum, attitude, axes=None):
     """The fields of a FreeRigidBody (see its docstring) from validated inputs, as one jitted program:
     one compiled kernel (``_construct_compiled``) where the motion's kernels are selected."""
-    if _compiled_motion.selected(jnp.zeros((), _working_dtype(inertia, angular_momentum))):
+    if _compiled_motion.selected(_working_dtype(inertia, angular_momentum)):
         return _construct_compiled(inertia, angular_momentum, attitude, axes)
     (inertia, angular_momentum, attitude, valid, permutation, sorted_inertia, unit_working, norm, regime) = _prepare(
         inertia, angular_momentum, attitude, axes

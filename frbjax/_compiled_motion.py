@@ -86,8 +86,8 @@ def working_motion(inertia, unit_momentum, regime, tau, attitude=True):
 
 
 def selected(inertia) -> bool:
-    """Whether the compiled kernel evaluates the one-time motion of bodies of ``inertia``'s dtype:
-    wherever the special functions' kernels are selected (``FRBJAX_KERNELS``), unless
+    """Whether the compiled kernels evaluate the motion of bodies of ``inertia``'s dtype (an array or a
+    dtype): wherever the special functions' kernels are selected (``FRBJAX_KERNELS``), unless
     ``FRBJAX_MOTION_KERNEL=jax`` keeps the JAX formulas for the motion alone.
 
     Where the CPU has FMA instructions the kernel fuses the motion's products and sums as XLA:CPU
@@ -205,9 +205,7 @@ def body_record_size(dtype) -> int:
 def body_record(inertia, angular_momentum, attitude, axes=None):
     """Each body's record (csrc/body.hpp; values: the derivatives are the flow kernels'): moments,
     L0 (..., 3) and q0 (..., 4) in the body frame and its principal axes (..., 3, 3) or None, of one
-    batch and dtype.  Offsets: ``BODY_NORM`` |L| (NaN for an invalid body), ``BODY_REGIME``,
-    ``BODY_PERMUTATION`` (3 x 3, the working axes in body coordinates), ``BODY_ATTITUDE_MAP`` (4 x 4),
-    ``BODY_PRINCIPAL_PERMUTATION`` (the working axes in principal coordinates)."""
+    batch and dtype.  ``body_offsets`` gives where its fields start."""
     if _compiled._module() is None:
         raise RuntimeError("frbjax's compiled kernels are not available (see frbjax.special._compiled)")
     arguments = [inertia, angular_momentum, attitude] + ([] if axes is None else [axes])
@@ -217,7 +215,9 @@ def body_record(inertia, angular_momentum, attitude, axes=None):
 
 
 def body_offsets(dtype):
-    """(norm, regime, permutation, attitude map, principal permutation) offsets in a body's record."""
+    """Offsets in a body's record (csrc/body.hpp's BodyLayout): |L| (NaN for an invalid body), the
+    regime, the working axes in body coordinates (3 x 3), the attitude map (4 x 4) and the working
+    axes in principal coordinates (3 x 3)."""
     start = record_size(dtype)
     return start, start + 1, start + 2, start + 11, start + 43
 

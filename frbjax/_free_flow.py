@@ -21,7 +21,7 @@ def _state_in_principal_frame(inertia, angular_momentum, attitude, t, axes):
     """``motion_once`` of a body with principal ``axes``: through the flow kernels where they are
     selected (``_body.flow_state``: one custom call and its derivatives' matrices), else the composite."""
     dtype = _working_dtype(inertia, angular_momentum)
-    if _compiled_motion.selected(inertia.astype(dtype)):
+    if _compiled_motion.selected(dtype):
         arguments = (a.astype(dtype) for a in (inertia, axes, angular_momentum, attitude, t))
         return flow_state(*arguments)
     return motion_once(inertia, angular_momentum, attitude, t, True, axes)

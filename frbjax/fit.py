@@ -497,7 +497,7 @@ def _solve(options, *args, **static):
     if options is None:
         options = {}
         if jax.default_backend() == "cpu":
-            kernels = _compiled_motion.selected(jnp.zeros((), args[0].dtype))
+            kernels = _compiled_motion.selected(args[0].dtype)
             options = KERNEL_COMPILER_OPTIONS if kernels else DEFAULT_COMPILER_OPTIONS
         try:
             return _compiled_fit(tuple(sorted(options.items())))(*args, **static)
