@@ -144,33 +144,45 @@ void body_record(const R* inertia, const R* momentum, const R* attitude, const R
     for (int k = 0; k < 3; ++k) record[B::kPrincipalPermutation + 3 * i + k] = frame.permutation[i][k];
 }
 
-// L(t) (3) and, with `attitude`, q(t) (4) of a body from its record.
-template <class R>
-void body_state(const R* record, R t, bool attitude, R* out) {
+// L(t) (3) and, with `Attitude`, q(t) (4) of a body from its record at count <= kBlock times t:
+// out (count, 7 or 3), row-major.
+template <class R, bool Attitude>
+void body_state_block(const R* record, const R* t, int count, R* out) {
   using B = BodyLayout<R>;
+  constexpr int outputs = Attitude ? 7 : 3;
   if (record[B::kRegime] == R(kUniform)) {
-    for (int k = 0; k < 3; ++k) out[k] = record[B::kMomentum + k];
-    if (!attitude) return;
-    R rotation[3], spin[4];
-    for (int k = 0; k < 3; ++k) rotation[k] = t * record[B::kVelocity + k];
-    exp_pure(rotation, spin);
-    hamilton_product(record + B::kAttitude, spin, out + 3);
+    for (int i = 0; i < count; ++i) {
+      R* point = out + outputs * i;
+      for (int k = 0; k < 3; ++k) point[k] = record[B::kMomentum + k];
+      if (!Attitude) continue;
+      R rotation[3], spin[4];
+      for (int k = 0; k < 3; ++k) rotation[k] = t[i] * record[B::kVelocity + k];
+      exp_pure(rotation, spin);
+      hamilton_product(record + B::kAttitude, spin, point + 3);
+    }
     return;
   }
   const R norm = record[B::kNorm];
-  R motion[7];
-  series_motion<R>(record, norm * t, attitude, motion);
+  R tau[kBlock], motion[7][kBlock], state[7][kBlock];
+  for (int i = 0; i < count; ++i) tau[i] = norm * t[i];
+  series_motion_block<R, Attitude>(record, tau, count, motion);
   const R* permutation = record + B::kPermutation;
-  for (int i = 0; i < 3; ++i)
-    out[i] = norm * (permutation[3 * i] * motion[0] + permutation[3 * i + 1] * motion[1] +
-                     permutation[3 * i + 2] * motion[2]);
-  if (!attitude) return;
   const R* map = record + B::kAttitudeMap;
-  R moved[4];
-  for (int i = 0; i < 4; ++i)
-    moved[i] = map[4 * i] * motion[3] + map[4 * i + 1] * motion[4] + map[4 * i + 2] * motion[5] + map[4 * i + 3] * motion[6];
-  const R inverse_norm = 1 / std::sqrt(sum_of_squares<4>(moved));
-  for (int i = 0; i < 4; ++i) out[3 + i] = moved[i] * inverse_norm;
+#pragma omp simd
+  for (int i = 0; i < count; ++i) {
+    for (int k = 0; k < 3; ++k)
+      state[k][i] = norm * (permutation[3 * k] * motion[0][i] + permutation[3 * k + 1] * motion[1][i] +
+                            permutation[3 * k + 2] * motion[2][i]);
+    if (!Attitude) continue;
+    R moved[4];
+    for (int k = 0; k < 4; ++k)
+      moved[k] = map[4 * k] * motion[3][i] + map[4 * k + 1] * motion[4][i] + map[4 * k + 2] * motion[5][i] +
+                 map[4 * k + 3] * motion[6][i];
+    const R inverse_norm = 1 / std::sqrt(sum_of_squares<4>(moved));
+    for (int k = 0; k < 4; ++k) state[3 + k][i] = moved[k] * inverse_norm;
+  }
+  for (int i = 0; i < count; ++i)
+    for (int k = 0; k < outputs; ++k) out[outputs * i + k] = state[k][i];
 }
 
 }  // namespace frbjax

@@ -12,6 +12,7 @@
 // `jaxlib_version()` the jaxlib whose FFI headers they were built with.
 #include <Python.h>
 
+#include <algorithm>
 #include <cstddef>
 #include <cstdint>
 #include <string>
@@ -488,9 +489,9 @@ ffi::Error body_record_values(ffi::ThreadPool pool, ffi::RemainingArgs arguments
   });
 }
 
-// `evaluate(record, time, out)` of records (bodies, size) at times (bodies, per body), each body's
-// times contiguous (row-major): the result (..., outputs).  A record is read once per body, not
-// copied per time.  `name` names the kernel in its errors.
+// `evaluate(record, times, count, out)` of records (bodies, size) at times (bodies, per body), each
+// body's times contiguous (row-major), in blocks of at most kBlock times of one body: the result
+// (..., outputs).  A record is read once per block, not copied per time.  `name` names the kernel in its errors.
 template <class R, int Size, int Outputs, class Evaluate>
 ffi::Error run_at_times(ffi::ThreadPool& pool, ffi::RemainingArgs& arguments, ffi::AnyBuffer& result,
                         const char* name, Evaluate evaluate) {
@@ -510,10 +511,11 @@ ffi::Error run_at_times(ffi::ThreadPool& pool, ffi::RemainingArgs& arguments, ff
   R* output = static_cast<R*>(result.untyped_data());
   std::size_t per_body = bodies == 0 ? 0 : count / bodies;
   parallel_for(pool, count, grain(0) / 4, [&](std::size_t begin, std::size_t end) {
-    for (std::size_t i = begin; i < end; ++i) {
-      R out[7];
-      evaluate(record + (i / per_body) * Size, time[i], out);
-      for (int o = 0; o < Outputs; ++o) output[i * Outputs + o] = out[o];
+    for (std::size_t i = begin; i < end;) {
+      const std::size_t body = i / per_body;
+      const std::size_t stop = std::min({end, (body + 1) * per_body, i + std::size_t(kBlock)});
+      evaluate(record + body * Size, time + i, int(stop - i), output + i * Outputs);
+      i = stop;
     }
   });
   return ffi::Error::Success();
@@ -524,7 +526,8 @@ ffi::Error run_at_times(ffi::ThreadPool& pool, ffi::RemainingArgs& arguments, ff
 template <bool Attitude, class R>
 ffi::Error run_body_state(ffi::ThreadPool& pool, ffi::RemainingArgs arguments, ffi::AnyBuffer& result) {
   return run_at_times<R, BodyLayout<R>::size, Attitude ? 7 : 3>(
-      pool, arguments, result, "body_state", [](const R* record, R t, R* out) { body_state<R>(record, t, Attitude, out); });
+      pool, arguments, result, "body_state",
+      [](const R* record, const R* t, int count, R* out) { body_state_block<R, Attitude>(record, t, count, out); });
 }
 
 template <bool Attitude>
@@ -598,12 +601,12 @@ ffi::Error run_series_record(ffi::ThreadPool& pool, ffi::RemainingArgs arguments
 }
 
 // The motion from records (bodies, size) and times (bodies, per body), each body's times contiguous
-// (row-major): (bodies, per body, 7) or (..., 3).  A record is read once per body, not copied per time.
+// (row-major): (bodies, per body, 7) or (..., 3).
 template <bool Attitude, class R>
 ffi::Error run_series_motion(ffi::ThreadPool& pool, ffi::RemainingArgs arguments, ffi::AnyBuffer& result) {
   return run_at_times<R, SeriesLayout<R>::size, Attitude ? 7 : 3>(
       pool, arguments, result, "series_motion",
-      [](const R* record, R tau, R* out) { series_motion<R>(record, tau, Attitude, out); });
+      [](const R* record, const R* tau, int count, R* out) { series_motion_rows<R, Attitude>(record, tau, count, out); });
 }
 
 ffi::Error series_record_values(ffi::ThreadPool pool, ffi::RemainingArgs arguments,

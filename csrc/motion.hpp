@@ -25,6 +25,32 @@
 #include "dual.hpp"
 #include "jacobi.hpp"
 
+namespace frbjax {
+
+// q̂ = exp(psi/2 about the spatial axis) ⊗ (the rotation taking that axis to l), docs/theory.md §5:
+// built on 1 + L1 (major regime, separatrix) or 1 + L3 (minor), in the order (w, x_p, y, z) or
+// (w, y, z, x_p).  `_regimes._chart`.  Outside the fused section below: the series evaluation
+// (series.hpp) inlines it into its loops over points, which fuse nothing.
+template <class T>
+void chart(const T& half_cos, const T& half_sin, const T& l1, const T& l2, const T& l3, bool minor, T* q) {
+  using std::sqrt;
+  const T& pivot = minor ? l3 : l1;
+  const T& first = minor ? l2 : l3;
+  const T& second = minor ? l1 : l2;
+  T base = 1.0 + pivot;
+  T root = sqrt(base / 2.0), inverse = 1.0 / sqrt(2.0 * base);
+  T scalar = half_cos * root;
+  T along_pivot = half_sin * root;
+  T towards_first = (first * half_cos + second * half_sin) * inverse;
+  T towards_second = (-second * half_cos + first * half_sin) * inverse;
+  q[0] = scalar;
+  q[1] = minor ? towards_first : along_pivot;
+  q[2] = minor ? towards_second : towards_first;
+  q[3] = minor ? along_pivot : towards_second;
+}
+
+}  // namespace frbjax
+
 // In the FMA build of the kernels (frbjax._kernels_fma, chosen where the CPU has FMA instructions,
 // as XLA:CPU's own code uses them there) this file's products and sums are fused where the compiler
 // can: the one-time motion then rounds as the JAX path compiled by XLA does (XLA contracts a * b + c
@@ -103,27 +129,6 @@ T complete_third_kind(const T& n, const T& m, const T& mc) {
   if (!transformed) return tail;
   const T kappa = (1.0 - n) * (1.0 - characteristic);
   return T(1.5707963267948966) * sqrt(kappa) / kappa - tail;
-}
-
-// q̂ = exp(psi/2 about the spatial axis) ⊗ (the rotation taking that axis to l), docs/theory.md §5:
-// built on 1 + L1 (major regime, separatrix) or 1 + L3 (minor), in the order (w, x_p, y, z) or
-// (w, y, z, x_p).  `_regimes._chart`.
-template <class T>
-void chart(const T& half_cos, const T& half_sin, const T& l1, const T& l2, const T& l3, bool minor, T* q) {
-  using std::sqrt;
-  const T& pivot = minor ? l3 : l1;
-  const T& first = minor ? l2 : l3;
-  const T& second = minor ? l1 : l2;
-  T base = 1.0 + pivot;
-  T root = sqrt(base / 2.0), inverse = 1.0 / sqrt(2.0 * base);
-  T scalar = half_cos * root;
-  T along_pivot = half_sin * root;
-  T towards_first = (first * half_cos + second * half_sin) * inverse;
-  T towards_second = (-second * half_cos + first * half_sin) * inverse;
-  q[0] = scalar;
-  q[1] = minor ? towards_first : along_pivot;
-  q[2] = minor ? towards_second : towards_first;
-  q[3] = minor ? along_pivot : towards_second;
 }
 
 // (sn, cn) with sn^2 + cn^2 = 1 from a common positive multiple, scaled by a power of two first (both

@@ -12,6 +12,7 @@
 #include <limits>
 
 #include "carlson.hpp"
+#include "circular.hpp"
 #include "motion.hpp"
 
 namespace frbjax {
@@ -159,32 +160,35 @@ void series_coefficients(R m, R mc, R nu, R complete, R* record) {
   record[L::kComplementaryCnFactor] = 1 / sqrt(sqrt(q_c_over_mc));
 }
 
-// (sn_r, cn_r) up to a common positive factor and the third kind's angle's parts at u_r (|u_r| <= K),
-// from the record: the direct series, or the complementary one (`_series._evaluate_complementary`).
+// (sn_r, cn_r) up to a common positive factor and the third kind's angle's parts at u_r (|u_r| <= K)
+// from the complementary series (`_series._evaluate_complementary`).
 template <class R>
-void series_parts(const R* record, R reduced, bool jacobi, R& sn_scaled, R& cn_scaled, R& real, R& imaginary) {
+void complementary_parts(const R* record, R reduced, R& sn_scaled, R& cn_scaled, R& real, R& imaginary) {
   using L = SeriesLayout<R>;
-  using std::cos;
   using std::exp;
   using std::expm1;
-  using std::sin;
-  if (record[L::kComplementary] != 0) {
-    const R* rows = record + L::kComplementaryRows;
-    const R sign = reduced < 0 ? R(-1) : R(1);
-    const R distance = std::fabs(reduced) * record[L::kComplementaryScale];
-    const R gap = std::fmin(record[L::kComplementaryLogNome] + distance, R(0));
-    const R half = exp(-distance / 2), d = -expm1(-distance), f = exp(gap), g = -expm1(gap);
-    const R e = half * half, e2 = e * e, triple = 1 + e + e2;
-    sn_scaled = sign * d * (rows[4] + rows[5] * f * triple);
-    cn_scaled = record[L::kComplementaryCnFactor] * half * (g - rows[6] * e + rows[7] * (f * f) * (1 + e2 * e2));
-    real = rows[0] * (1 + e) + rows[1] * f * (1 + e * e2);
-    imaginary = sign * d * (rows[2] + rows[3] * f * triple);
-    return;
-  }
+  const R* rows = record + L::kComplementaryRows;
+  const R sign = reduced < 0 ? R(-1) : R(1);
+  const R distance = std::fabs(reduced) * record[L::kComplementaryScale];
+  const R gap = std::fmin(record[L::kComplementaryLogNome] + distance, R(0));
+  const R half = exp(-distance / 2), d = -expm1(-distance), f = exp(gap), g = -expm1(gap);
+  const R e = half * half, e2 = e * e, triple = 1 + e + e2;
+  sn_scaled = sign * d * (rows[4] + rows[5] * f * triple);
+  cn_scaled = record[L::kComplementaryCnFactor] * half * (g - rows[6] * e + rows[7] * (f * f) * (1 + e2 * e2));
+  real = rows[0] * (1 + e) + rows[1] * f * (1 + e * e2);
+  imaginary = sign * d * (rows[2] + rows[3] * f * triple);
+}
+
+// The same from the direct series (`_series.evaluate_series`): straight-line code, vectorised over a
+// block's points.
+template <class R, bool Jacobi>
+FRBJAX_INLINE void direct_parts(const R* record, R reduced, R& sn_scaled, R& cn_scaled, R& real, R& imaginary) {
+  using L = SeriesLayout<R>;
   constexpr int terms = L::terms;
   const R* rows = record + L::kRows;
   const R v = reduced * R(1.5707963267948966) / record[L::kQuarter];
-  const R sin_v = sin(v), cos_v = cos(v);
+  R sin_v, cos_v;
+  circular::cos_sin(v, cos_v, sin_v);
   R sines[2 * terms], cosines[2 * terms];
   sines[0] = sin_v;
   cosines[0] = cos_v;
@@ -194,7 +198,7 @@ void series_parts(const R* record, R reduced, bool jacobi, R& sn_scaled, R& cn_s
   }
   sn_scaled = 0;
   cn_scaled = 0;
-  if (jacobi) {
+  if (Jacobi) {
     for (int j = 0; j < terms; ++j) {
       sn_scaled += rows[j] * sines[2 * j];
       cn_scaled += rows[terms + j] * cosines[2 * j];
@@ -208,20 +212,30 @@ void series_parts(const R* record, R reduced, bool jacobi, R& sn_scaled, R& cn_s
   }
 }
 
+// The third kind's angle's parts at one u_r (the record's phase): either series.
+template <class R>
+void angle_parts(const R* record, R reduced, R& real, R& imaginary) {
+  R sn_scaled, cn_scaled;
+  if (record[SeriesLayout<R>::kComplementary] != 0)
+    complementary_parts<R>(record, reduced, sn_scaled, cn_scaled, real, imaginary);
+  else
+    direct_parts<R, false>(record, reduced, sn_scaled, cn_scaled, real, imaginary);
+}
+
 // The expanded integral from 0 to u_r: u_r slope + A arg theta(...).
 template <class R>
-R reduced_third_kind(const R* record, R reduced, R real, R imaginary) {
+FRBJAX_INLINE R reduced_third_kind(const R* record, R reduced, R real, R imaginary) {
   using L = SeriesLayout<R>;
-  return reduced * record[L::kSlope] + record[L::kSeriesAmplitude] * std::atan2(imaginary, real);
+  return reduced * record[L::kSlope] + record[L::kSeriesAmplitude] * circular::arctangent2(imaginary, real);
 }
 
 // psi's bounded part at unit L (l1, l2, l3) and the integral's value: orientation (atan2(l2, l_o) -
 // alpha third_kind), `_regimes.evaluate` and `reference`.
 template <class R>
-R bounded_angle(const R* record, R l1, R l2, R l3, R third_kind) {
+FRBJAX_INLINE R bounded_angle(const R* record, R l1, R l2, R l3, R third_kind) {
   using L = SeriesLayout<R>;
   const bool minor = record[L::kMinor] != 0;
-  const R angle = std::atan2(l2, minor ? l1 : l3) - record[L::kAlpha] * third_kind;
+  const R angle = circular::arctangent2(l2, minor ? l1 : l3) - record[L::kAlpha] * third_kind;
   return minor ? -angle : angle;
 }
 
@@ -288,37 +302,88 @@ void series_record(const R* given, int regime, R* record) {
   // (psi - psi(0)), as the one-time motion's do: q = q0 ⊗ P ⊗ conj(q̂(0)) ⊗ q̂(tau) ⊗ conj(P) is the
   // same (the rotation by psi(0) about the spatial axis cancels), and both kernels then compute one
   // function, whose derivatives the one-time kernel gives.
-  R sn_scaled, cn_scaled, real, imaginary;
-  series_parts<R>(record, record[L::kU0], false, sn_scaled, cn_scaled, real, imaginary);
+  R real, imaginary;
+  angle_parts<R>(record, record[L::kU0], real, imaginary);
   record[L::kPsiReference] =
       bounded_angle<R>(record, in[3], in[4], in[5], reduced_third_kind<R>(record, record[L::kU0], real, imaginary));
   chart<R>(R(1), R(0), in[3], in[4], in[5], minor, record + L::kReference);
 }
 
-// Unit L (3) and q̂(tau) (4) in the working frame from a record (`_regimes.evaluate`).
-template <class R>
-void series_motion(const R* record, R tau, bool attitude, R* out) {
+// Points evaluated together: each stage of `series_motion_block` is a loop over a block's points,
+// which the compiler vectorises (circular.hpp's functions are straight-line code).
+constexpr int kBlock = 32;
+
+// Unit L (3) and, with `Attitude`, q̂(tau) (4) in the working frame at count <= kBlock times tau of
+// one body, from its record (`_regimes.evaluate`): out[component][point].
+template <class R, bool Attitude>
+void series_motion_block(const R* record, const R* tau, int count, R (&out)[7][kBlock]) {
   using L = SeriesLayout<R>;
-  using std::sqrt;
-  const R u = record[L::kU0] + record[L::kRate] * tau;
-  const R quarter = record[L::kQuarter];
-  const R turns = record[L::kPeriodic] != 0 ? std::nearbyint(u / (2 * quarter)) : R(0);
-  const R reduced = u - 2 * quarter * turns;
-  R sn_scaled, cn_scaled, real, imaginary;
-  series_parts<R>(record, reduced, true, sn_scaled, cn_scaled, real, imaginary);
-  const R norm = sqrt(sn_scaled * sn_scaled + cn_scaled * cn_scaled);
-  const R parity = std::fmod(std::fabs(turns), R(2)) == 1 ? R(-1) : R(1);
-  const R sn = parity * sn_scaled / norm, cn = parity * cn_scaled / norm;
-  const R dn = sqrt(cn * cn + record[L::kMc] * (sn * sn));
+  R turns[kBlock], reduced[kBlock], sn_scaled[kBlock], cn_scaled[kBlock], real[kBlock], imaginary[kBlock];
+  const R phase = record[L::kU0], rate = record[L::kRate], quarter = record[L::kQuarter];
+  const bool periodic = record[L::kPeriodic] != 0;
+#pragma omp simd
+  for (int i = 0; i < count; ++i) {
+    const R u = phase + rate * tau[i];
+    turns[i] = periodic ? std::nearbyint(u / (2 * quarter)) : R(0);
+    reduced[i] = u - 2 * quarter * turns[i];
+  }
+  if (record[L::kComplementary] != 0) {
+    for (int i = 0; i < count; ++i)
+      complementary_parts<R>(record, reduced[i], sn_scaled[i], cn_scaled[i], real[i], imaginary[i]);
+  } else {
+#pragma omp simd
+    for (int i = 0; i < count; ++i)
+      direct_parts<R, true>(record, reduced[i], sn_scaled[i], cn_scaled[i], real[i], imaginary[i]);
+  }
   const bool minor = record[L::kMinor] != 0;
-  out[0] = record[L::kAmplitude] * (minor ? dn : cn);
-  out[1] = record[L::kAmplitude + 1] * sn;
-  out[2] = record[L::kAmplitude + 2] * (minor ? cn : dn);
-  if (!attitude) return;
-  const R third_kind = 2 * turns * record[L::kThirdComplete] + reduced_third_kind<R>(record, reduced, real, imaginary);
-  const R psi = record[L::kPrecession] * tau +
-                (bounded_angle<R>(record, out[0], out[1], out[2], third_kind) - record[L::kPsiReference]);
-  chart<R>(std::cos(psi / 2), std::sin(psi / 2), out[0], out[1], out[2], minor, out + 3);
+  const R mc = record[L::kMc], precession = record[L::kPrecession], complete = record[L::kThirdComplete];
+  const R psi_reference = record[L::kPsiReference];
+  R half_angle[kBlock];
+#pragma omp simd
+  for (int i = 0; i < count; ++i) {
+    const R norm = std::sqrt(sn_scaled[i] * sn_scaled[i] + cn_scaled[i] * cn_scaled[i]);
+    // turns odd: sn and cn change sign (turns is an integer, so the difference is 0 or 1).
+    const R parity = turns[i] - 2 * std::floor(turns[i] / 2) != 0 ? R(-1) : R(1);
+    const R sn = parity * sn_scaled[i] / norm, cn = parity * cn_scaled[i] / norm;
+    const R dn = std::sqrt(cn * cn + mc * (sn * sn));
+    const R l1 = record[L::kAmplitude] * (minor ? dn : cn);
+    const R l2 = record[L::kAmplitude + 1] * sn;
+    const R l3 = record[L::kAmplitude + 2] * (minor ? cn : dn);
+    out[0][i] = l1;
+    out[1][i] = l2;
+    out[2][i] = l3;
+  }
+  if (!Attitude) return;
+#pragma omp simd
+  for (int i = 0; i < count; ++i) {
+    const R third_kind = 2 * turns[i] * complete + reduced_third_kind<R>(record, reduced[i], real[i], imaginary[i]);
+    const R psi = precession * tau[i] + (bounded_angle<R>(record, out[0][i], out[1][i], out[2][i], third_kind) - psi_reference);
+    half_angle[i] = psi / 2;
+  }
+  R half_cos[kBlock], half_sin[kBlock];
+#pragma omp simd
+  for (int i = 0; i < count; ++i) circular::cos_sin(half_angle[i], half_cos[i], half_sin[i]);
+  for (int i = 0; i < count; ++i) {
+    if (!circular::reduces(half_angle[i])) {  // |psi| beyond 2^20 pi, or not finite
+      half_cos[i] = std::cos(half_angle[i]);
+      half_sin[i] = std::sin(half_angle[i]);
+    }
+  }
+  for (int i = 0; i < count; ++i) {
+    R q[4];
+    chart<R>(half_cos[i], half_sin[i], out[0][i], out[1][i], out[2][i], minor, q);
+    for (int k = 0; k < 4; ++k) out[3 + k][i] = q[k];
+  }
+}
+
+// The same with out (count, 7 or 3), row-major.
+template <class R, bool Attitude>
+void series_motion_rows(const R* record, const R* tau, int count, R* out) {
+  constexpr int outputs = Attitude ? 7 : 3;
+  R block[7][kBlock];
+  series_motion_block<R, Attitude>(record, tau, count, block);
+  for (int i = 0; i < count; ++i)
+    for (int k = 0; k < outputs; ++k) out[outputs * i + k] = block[k][i];
 }
 
 }  // namespace frbjax

@@ -213,6 +213,33 @@ def test_the_series_kernel_agrees_with_the_jax_series(dtype):
         assert (error / scale).max() <= 2 * VALUE_TOLERANCE[dtype]
 
 
+def test_the_series_kernel_at_long_times_within_one_block():
+    """Times whose half angle psi/2 lies beyond 2^19 pi/2, where csrc/circular.hpp's reduction stops
+    and the C library's cosine and sine take over, interleaved with times short of it in the same
+    blocks of points (csrc/series.hpp), against the JAX series, whose cos_sin switches at the same
+    bound: measured 6.9e-17 (1 + |tau|) (2026-11-29), held to the bound of the test above."""
+    from frbjax import _quaternion as quaternion
+
+    inertia, unit, regime, _ = _bodies(48, np.float64)
+    chosen = np.array([4, 30, 46])  # on the separatrix, a symmetric body, a random one
+    inertia, unit, regime = inertia[chosen], unit[chosen], regime[chosen]
+    # psi ~ tau / J2 with J2 = 2 for the first two: psi/2 crosses 823550 near |tau| = 3.3e6.
+    magnitudes = np.geomspace(1e5, 3e7, 40)
+    tau = jnp.asarray(np.stack([magnitudes * (-1) ** np.arange(40), magnitudes[::-1]], -1).reshape(-1))
+    tau = jnp.broadcast_to(tau, (3, 80))
+    theirs_q, theirs_l = _jax_series(inertia[:, None], unit[:, None], regime[:, None], tau)
+    record = _compiled_motion.series_record(inertia, unit, regime)
+    ours_q, ours_l = _compiled_motion.series_motion(
+        record[:, None], inertia[:, None], unit[:, None], regime[:, None], tau
+    )
+    start = _compiled_motion.working_motion(inertia, unit, regime, jnp.zeros(3))[1]
+    ours_q = quaternion.multiply(quaternion.conjugate(start)[:, None], ours_q)
+    scale = 1 + np.abs(np.asarray(tau))
+    for ours, theirs in ((ours_l, theirs_l), (ours_q, theirs_q)):
+        error = np.abs(np.asarray(ours) - np.asarray(theirs)).max(-1)
+        assert (error / scale).max() <= 2 * VALUE_TOLERANCE[np.float64]
+
+
 def test_the_series_kernel_reads_one_record_per_body():
     """Records (bodies, size) with each body's times contiguous: bodies (3, 1) at times (3, 5), one
     body at times (2, 5), bodies (3, 1, 1) at times (4, 5) broadcast against each other, under
