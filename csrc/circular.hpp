@@ -124,6 +124,15 @@ FRBJAX_INLINE void cos_sin(double x, double& cosine, double& sine) {
   sine = x == 0 ? x : (quadrant >= 2 ? -sin_value : sin_value);
 }
 
+// (cos r, sin r) for |r| <= pi/4, no reduction (float32 through float64).
+template <class R>
+FRBJAX_INLINE void cos_sin_small(R r, R& cosine, R& sine) {
+  double c, s;
+  cos_sin_near_zero(double(r), 0.0, c, s);
+  cosine = R(c);
+  sine = R(s);
+}
+
 FRBJAX_INLINE void cos_sin(float x, float& cosine, float& sine) {
   double c, s;
   cos_sin(double(x), c, s);

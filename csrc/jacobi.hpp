@@ -16,6 +16,7 @@
 #include <limits>
 
 #include "carlson.hpp"
+#include "circular.hpp"
 
 namespace frbjax {
 
@@ -48,13 +49,12 @@ R complete_first(R mc) {
   return above ? value / sqrt(mc) : value;
 }
 
-template <class R>
+// `Amplitude`: whether am is computed (an arctangent; the motion takes sn, cn and dn alone).
+template <class R, bool Amplitude = true>
 JacobiValues<R> ellipj(R u, R m, R mc) {
   using std::atan;
-  using std::cos;
   using std::exp;
   using std::fabs;
-  using std::sin;
   using std::sqrt;
   using std::tanh;
   const bool is_double = sizeof(R) == 8;
@@ -66,6 +66,7 @@ JacobiValues<R> ellipj(R u, R m, R mc) {
     R decay = exp(-fabs(u));
     R sech = 2 * decay / (1 + decay * decay);
     R sn = tanh(u);
+    if (!Amplitude) return {sn, sech, sech, R(0), R(0)};
     return {sn, sech, sech, sech > 0 ? atan(sn / sech) : std::copysign(pi / 2, sn), R(0)};
   }
   const int max_levels = is_double ? 13 : 8;
@@ -101,7 +102,9 @@ JacobiValues<R> ellipj(R u, R m, R mc) {
     dn_w = 1;
   } else {
     R theta = mean * w;  // <= pi/4
-    R ratio = cos(theta) / sin(theta);
+    R cos_theta, sin_theta;
+    circular::cos_sin_small(theta, cos_theta, sin_theta);  // the JAX path's polynomials
+    R ratio = cos_theta / sin_theta;
     R cot_ratio = mean * ratio, dn = 1;
     for (int n = levels - 1; n >= 0; --n) {
       R ratio_next = ratio * cot_ratio;
@@ -125,6 +128,7 @@ JacobiValues<R> ellipj(R u, R m, R mc) {
   }
   R sn_reduced = reduced < 0 ? -sn_abs : sn_abs;
   R sign = std::fmod(fabs(turns), R(2)) == 1 ? R(-1) : R(1);
+  if (!Amplitude) return {sign * sn_reduced, sign * cn_reduced, dn, R(0), turns};
   R angle = cn_reduced > 0 ? atan(sn_reduced / cn_reduced) : std::copysign(pi / 2, sn_reduced);
   return {sign * sn_reduced, sign * cn_reduced, dn, turns * pi + angle, turns};
 }
@@ -143,7 +147,7 @@ struct JacobiTriple {
 
 template <class R>
 JacobiTriple<R> jacobi_triple(const R& u, const R& m, const R& mc) {
-  JacobiValues<R> values = ellipj(u, m, mc);
+  JacobiValues<R> values = ellipj<R, false>(u, m, mc);
   return {values.sn, values.cn, values.dn, static_cast<double>(values.turns)};
 }
 
