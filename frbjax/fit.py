@@ -493,18 +493,24 @@ def _compiled_fit(options):
     return jax.jit(_fit, static_argnames=("rtol", "atol", "max_steps"), compiler_options=dict(options) or None)
 
 
+def call_with_options(compiled, options, *args, **static):
+    """``compiled(options)(*args, **static)``, ``compiled`` a cached jit for a sorted tuple of XLA
+    compiler options; compiled without them where this XLA does not know them."""
+    try:
+        return compiled(tuple(sorted(options.items())))(*args, **static)
+    except jax.errors.JaxRuntimeError as error:  # an XLA without these options: compile without
+        if not options or "compile option" not in str(error):
+            raise
+    return compiled(())(*args, **static)
+
+
 def _solve(options, *args, **static):
     if options is None:
         options = {}
         if jax.default_backend() == "cpu":
             kernels = _compiled_motion.selected(args[0].dtype)
             options = KERNEL_COMPILER_OPTIONS if kernels else DEFAULT_COMPILER_OPTIONS
-        try:
-            return _compiled_fit(tuple(sorted(options.items())))(*args, **static)
-        except jax.errors.JaxRuntimeError as error:  # an XLA without these options: compile without
-            if "compile option" not in str(error):
-                raise
-            options = {}
+        return call_with_options(_compiled_fit, options, *args, **static)
     return _compiled_fit(tuple(sorted(options.items())))(*args, **static)
 
 

@@ -106,37 +106,37 @@ PRECESSION_PERIOD = 0.2  # days
 # search's grid of periods is the truth.
 RANGE_OFFSET = 0.0023
 # The sizes of the tests (benchmarks/lightcurve.py runs the full-size inversions, 16 samples a night,
-# 128 starts per cell of the period grid, 16 refined).  The SAM at half of each: 192 samples still
-# give periods to 1e-4 and the inertia ratios to 0.2%, and 64 starts in each of the 9 cells still
-# find the basin (its full size took 141 s of CPU on the loaded 2-core machine, this one 116 s: the
-# fit's programs take about 100 s to compile whatever the size, a second call 6 s).  The LAM keeps the
-# full size: at the SAM's size (and with 128 starts, 16 refined) its best start stopped short of
-# rtol within max_steps and fit_lightcurve raised FitError; so did the full size on the library of
-# 21:00 UTC 27 Nov 2026 (best of 16 at cost 117, 11 converged), left to the fits' owner.
+# 128 starts per cell of the period grid, 16 refined).  The SAM at half the samples and starts: 192
+# samples still give periods to 1e-4 and the inertia ratios to 0.2%, and 64 starts in each of the 9
+# cells still find the basin.  The LAM keeps the full samples and starts: with 64 starts (16 samples,
+# 8 refined) it ended in a neighbouring basin, moments 2.6% off (2026-11-29).  Both refine 4
+# candidates: the search must rank the true basin among its best four, which is what the test asks of
+# it; 8 and 16 refined found the same basin (LAM: the same digits; 47 s and 79 s on one core against
+# 41 s), and the refinement's time grows with their number.
 SAMPLES_PER_NIGHT = 16  # the full size, which benchmarks/lightcurve.py and the notebook observe
 SIZES = {
-    "SAM": dict(samples_per_night=SAMPLES_PER_NIGHT // 2, starts_per_period=64, n_refine=8),
-    "LAM": dict(samples_per_night=SAMPLES_PER_NIGHT, starts_per_period=128, n_refine=16),
+    "SAM": dict(samples_per_night=SAMPLES_PER_NIGHT // 2, starts_per_period=64, n_refine=4),
+    "LAM": dict(samples_per_night=SAMPLES_PER_NIGHT, starts_per_period=128, n_refine=4),
 }
 
 
-# Measured at the sizes above (relative errors; the issue asks periods to 1e-4): SAM P_psi 7.8e-6,
-# P_phi 8.3e-5 (standard errors 1.4e-4, 1.1e-3), moments 0.17% and 0.17%, held-out nights 1.12% rms,
-# the fitted shape's uniform-density moments against the true hull's (0.582 : 0.873 : 1), in the
-# fitted body's axes, 4.2% and 0.65%.  LAM (full size, before fit_lightcurve raised FitError): P_psi
-# 2.4e-6, P_phi 3.5e-6 (standard errors 1.2e-6, 1.9e-5), moments 2.1% and 1.9%, held-out 1.01% rms,
-# shape 0.75% and 0.10%.  The true motion and shape give 0.90% on the same
-# held-out nights (the noise).  The search's random states are seed 0 (fit_lightcurve's default);
-# benchmarks/lightcurve.py recovers both tumblers with four seeds each over wider ranges.
+# Measured at the sizes above (relative errors; the issue asks periods to 1e-4; 2026-11-29): SAM P_psi
+# 8.1e-6, P_phi 8.0e-5 (relative standard errors 1.4e-4, 1.2e-3), moments 0.005% and 0.16%, held-out nights
+# 1.11% rms, the fitted shape's uniform-density moments against the true hull's (0.582 : 0.873 : 1),
+# in the fitted body's axes, 4.0% and 0.58%.  LAM: P_psi 2.6e-6, P_phi 3.9e-6 (standard errors 5.9e-6,
+# 3.0e-5), moments 2.1% and 1.9%, held-out 1.04% rms, shape 0.52% and 0.13%.  The true motion and
+# shape give 0.90% on the same held-out nights (the noise).  The search's random states are seed 0
+# (fit_lightcurve's default); benchmarks/lightcurve.py recovers both tumblers with four seeds each
+# over wider ranges.
 BOUNDS = {
     "SAM": dict(periods=(9e-6, 9.5e-5), inertia=0.002, held_out=0.0115, shape=0.045),
     "LAM": dict(periods=(3e-6, 4.5e-6), inertia=0.0225, held_out=0.0106, shape=0.009),
 }
 
 
-# Slow: compiling the fit's programs (the search, the Levenberg-Marquardt refinement with the ellipsoid
-# and with the convex shape) takes about 100 s of CPU whatever the size.  Measured: SAM 116 s of CPU
-# (480 s wall on the loaded 2-core machine); LAM at its full size about 140 s (SAM's full size 141 s).
+# Slow: a light-curve inversion, its programs compiled (the search, the Levenberg-Marquardt refinement
+# with the ellipsoid and with the convex shape: about 20 s of XLA's compilation) and run.  Measured on
+# one core (2026-11-29): SAM 26 s, LAM 41 s.
 @pytest.mark.parametrize(
     "energy_ratio,long_axis",
     [pytest.param(1.024, False, marks=pytest.mark.slow), pytest.param(1.2, True, marks=pytest.mark.slow)],
