@@ -85,8 +85,8 @@ constexpr double kHalfPiHigh = 0x1.921fb54442d18p+0, kHalfPiLow = 0x1.1a62633145
 constexpr double kArctanCentreHigh[4] = {0.0, 0x1.f5b75f92c80ddp-3, 0x1.dac670561bb4fp-2, 0x1.921fb54442d18p-1};
 constexpr double kArctanCentreLow[4] = {0.0, 0x1.8ab6e3cf7afbdp-57, 0x1.a2b7f222f65e2p-56, 0x1.1a62633145c07p-55};
 
-// Whether cos_sin reduces x (NaN and infinities not).
-FRBJAX_INLINE bool reduces(double x) { return std::fabs(x) <= 823549.6551 /* 2^19 pi/2, rounded down */; }
+// Whether cos_sin reduces x: |x| <= 2^19 pi/2, the JAX path's bound (NaN and infinities not).
+FRBJAX_INLINE bool reduces(double x) { return std::fabs(x) <= 524288.0 * 1.5707963267948966; }
 
 // (cos, sin)(r + tail) for |r| <= pi/4 (a little beyond too), `tail` a correction of an ulp of r:
 // 1 - r^2/2 with the roundings of r^2 and of the difference added back, the tail at first order.

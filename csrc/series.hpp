@@ -3,9 +3,9 @@
 // and `evaluate_series` (docs/theory.md §5, §9; the module note of _series.py derives every form).
 //
 // `series_record` computes a body's record once (the orbit's constants, the phase u0, the complete
-// third-kind integral, the series' coefficients and q̂(0)); `series_motion` evaluates the working-frame
-// unit L and q̂(tau) from it at any tau.  Uniformly rotating bodies get a stand-in record (their motion
-// is formed in JAX around the kernels).
+// third-kind integral, the series' coefficients and q̂(0)); `series_motion_block` evaluates the
+// working-frame unit L and q̂(tau) from it at up to kBlock times at once.  Uniformly rotating bodies
+// get a stand-in record (their motion is formed in JAX around the kernels).
 #pragma once
 
 #include <cmath>
@@ -338,7 +338,6 @@ void series_motion_block(const R* record, const R* tau, int count, R (&out)[7][k
   const bool minor = record[L::kMinor] != 0;
   const R mc = record[L::kMc], precession = record[L::kPrecession], complete = record[L::kThirdComplete];
   const R psi_reference = record[L::kPsiReference];
-  R half_angle[kBlock];
 #pragma omp simd
   for (int i = 0; i < count; ++i) {
     const R norm = std::sqrt(sn_scaled[i] * sn_scaled[i] + cn_scaled[i] * cn_scaled[i]);
@@ -354,21 +353,24 @@ void series_motion_block(const R* record, const R* tau, int count, R (&out)[7][k
     out[2][i] = l3;
   }
   if (!Attitude) return;
+  R half_angle[kBlock];
 #pragma omp simd
   for (int i = 0; i < count; ++i) {
     const R third_kind = 2 * turns[i] * complete + reduced_third_kind<R>(record, reduced[i], real[i], imaginary[i]);
-    const R psi = precession * tau[i] + (bounded_angle<R>(record, out[0][i], out[1][i], out[2][i], third_kind) - psi_reference);
+    const R angle = bounded_angle<R>(record, out[0][i], out[1][i], out[2][i], third_kind);
+    const R psi = precession * tau[i] + (angle - psi_reference);
     half_angle[i] = psi / 2;
   }
   R half_cos[kBlock], half_sin[kBlock];
 #pragma omp simd
   for (int i = 0; i < count; ++i) circular::cos_sin(half_angle[i], half_cos[i], half_sin[i]);
   for (int i = 0; i < count; ++i) {
-    if (!circular::reduces(half_angle[i])) {  // |psi| beyond 2^20 pi, or not finite
+    if (!circular::reduces(half_angle[i])) {  // |psi| beyond 2^19 pi, or not finite
       half_cos[i] = std::cos(half_angle[i]);
       half_sin[i] = std::sin(half_angle[i]);
     }
   }
+  // Vectorised without `omp simd`, which GCC 12 does not apply to a loop with a local array.
   for (int i = 0; i < count; ++i) {
     R q[4];
     chart<R>(half_cos[i], half_sin[i], out[0][i], out[1][i], out[2][i], minor, q);

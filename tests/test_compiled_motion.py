@@ -216,8 +216,9 @@ def test_the_series_kernel_agrees_with_the_jax_series(dtype):
 def test_the_series_kernel_at_long_times_within_one_block():
     """Times whose half angle psi/2 lies beyond 2^19 pi/2, where csrc/circular.hpp's reduction stops
     and the C library's cosine and sine take over, interleaved with times short of it in the same
-    blocks of points (csrc/series.hpp), against the JAX series, whose cos_sin switches at the same
-    bound: measured 6.9e-17 (1 + |tau|) (2026-11-29), held to the bound of the test above."""
+    blocks of points (csrc/series.hpp), against the JAX series, whose cos_sin takes XLA's functions
+    beyond the same bound (for a whole batch holding such an argument): measured 6.9e-17 (1 + |tau|)
+    (2026-11-29), held to the bound of the test above."""
     from frbjax import _quaternion as quaternion
 
     inertia, unit, regime, _ = _bodies(48, np.float64)
