@@ -78,6 +78,7 @@ from jaxtyping import Array, Float
 
 from . import _checks as checks, _compiled_motion, _quaternion as quaternion
 from ._body import FreeRigidBody, state_with_elliptic_derivatives, with_principal_axes
+from ._cpu_options import call_with_options, DEFAULT_COMPILER_OPTIONS
 from ._errors import FitError
 from ._multistart import solve_each
 from ._trace_once import traced_once
@@ -477,9 +478,6 @@ def _fitted_body(inertia, angular_momentum, attitude, tensor=False):
         return build_traced(inertia, angular_momentum, attitude)
 
 
-# XLA:CPU compiles the solver about a quarter faster, and runs it as fast, with the fusion emitters
-# off (measured in benchmarks/fit_success.py); ignored on other backends.
-DEFAULT_COMPILER_OPTIONS = {"xla_cpu_use_fusion_emitters": False}
 # Where the motion and its derivatives are compiled kernels (the CPU's default), XLA compiles only the
 # solver's linear algebra around them, and without LLVM's optimisations it does so in half the time:
 # the first call of benchmarks/first_answer.py's fit (200 samples, 12 starts, one core, 2026-11-28)
@@ -491,17 +489,6 @@ KERNEL_COMPILER_OPTIONS = {**DEFAULT_COMPILER_OPTIONS, "xla_backend_optimization
 def _compiled_fit(options):
     """The jitted solver for XLA compiler options ``options`` (a sorted tuple of items)."""
     return jax.jit(_fit, static_argnames=("rtol", "atol", "max_steps"), compiler_options=dict(options) or None)
-
-
-def call_with_options(compiled, options, *args, **static):
-    """``compiled(options)(*args, **static)``, ``compiled`` a cached jit for a sorted tuple of XLA
-    compiler options; compiled without them where this XLA does not know them."""
-    try:
-        return compiled(tuple(sorted(options.items())))(*args, **static)
-    except jax.errors.JaxRuntimeError as error:  # an XLA without these options: compile without
-        if not options or "compile option" not in str(error):
-            raise
-    return compiled(())(*args, **static)
 
 
 def _solve(options, *args, **static):

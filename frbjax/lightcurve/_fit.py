@@ -70,10 +70,10 @@ from jaxtyping import Array, Float
 
 from .. import _checks as checks, _progress, _quaternion as quaternion
 from .._body import FreeRigidBody, quaternion_with_elliptic_derivatives
+from .._cpu_options import cpu_jit
 from .._errors import FitError
 from .._multistart import solve_each
 from .._trace_once import traced_once
-from ..fit import call_with_options, DEFAULT_COMPILER_OPTIONS
 from ._brightness import brightness as _forward, facet_brightness, LAWS
 from ._periods import momentum_from_periods, tumbler_periods
 from ._shape import ConvexShape, icosphere
@@ -294,20 +294,9 @@ def _refine_starts(parameters, references, priors, data, masks, prior_weights, c
     return solve_each(solve, (parameters, references, priors, masks))
 
 
-@functools.cache
-def _compiled_refine(options):
-    """``_refine_starts`` jitted for XLA compiler options ``options`` (a sorted tuple of items)."""
-    return jax.jit(
-        _refine_starts, static_argnames=("config", "rtol", "atol", "max_steps"), compiler_options=dict(options) or None
-    )
-
-
-def _refine(*args, **static):
-    """``_refine_starts`` compiled, on the CPU with the fits' options (``fit.DEFAULT_COMPILER_OPTIONS``,
-    XLA:CPU's fusion emitters off): the LAM test's refinement programs compiled in 7.8 s instead of
-    13.8, and ran as fast (16.8 s against 17.2 for its second call; one core, 2026-11-29)."""
-    options = DEFAULT_COMPILER_OPTIONS if jax.default_backend() == "cpu" else {}
-    return call_with_options(_compiled_refine, options, *args, **static)
+# The refinement's programs compiled in 7.8 s instead of 13.8 (the LAM test, one core, 2026-11-29),
+# and ran as fast (its second call 16.8 s against 17.2): ``frbjax._cpu_options``.
+_refine = cpu_jit(_refine_starts, static_argnames=("config", "rtol", "atol", "max_steps"))
 
 
 @functools.partial(jax.jit, static_argnames="config")
@@ -345,7 +334,10 @@ def _search(parameters, references, start_areas, data, mask, config, chunk, prog
     return np.concatenate(costs)[:count]
 
 
-@functools.partial(jax.jit, static_argnames="principal_axis")
+_momenta_from_periods = cpu_jit(jax.vmap(momentum_from_periods))
+
+
+@cpu_jit(static_argnames="principal_axis")
 def _periods_and_jacobian(theta, reference, principal_axis):
     """((P_psi, P_phi), LAM, their Jacobian in theta)."""
 
@@ -770,7 +762,7 @@ def fit_lightcurve(
         phase = rng.uniform(0, 2 * np.pi, count)
         momentum, valid = (
             np.array(x)
-            for x in jax.jit(jax.vmap(momentum_from_periods))(
+            for x in _momenta_from_periods(
                 jnp.asarray(inertia, dtype),
                 jnp.asarray(period_psi, dtype),
                 jnp.asarray(period_phi, dtype),

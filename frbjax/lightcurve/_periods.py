@@ -33,6 +33,7 @@ from jaxtyping import Array, Float
 
 from .. import special
 from .._body import _validate
+from .._cpu_options import cpu_jit
 
 
 __all__ = ["tumbler_periods"]
@@ -81,7 +82,7 @@ def tumbler_periods(inertia: Float[Array, "... 3"], angular_momentum: Float[Arra
     return _tumbler_periods(jnp.asarray(inertia), jnp.asarray(angular_momentum))
 
 
-@jax.jit  # one program per shape: eagerly, each new shape compiled the elliptic formulas' operations in turn
+@cpu_jit  # one program per shape: eagerly, each new shape compiled the elliptic formulas' operations in turn
 def _tumbler_periods(inertia, momentum):
     order = jnp.argsort(inertia, axis=-1)
     sorted_inertia = jnp.take_along_axis(inertia, order, -1)

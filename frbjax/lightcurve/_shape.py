@@ -17,8 +17,6 @@ the host); optimistix's BFGS does the minimisation in log h (the origin stays in
 
 from __future__ import annotations
 
-import functools
-
 import equinox as eqx
 import jax
 import jax.numpy as jnp
@@ -27,6 +25,7 @@ import optimistix as optx
 from jaxtyping import Array, Float, Int
 
 from .. import _checks as checks
+from .._cpu_options import cpu_jit
 
 
 __all__ = ["ConvexShape", "mesh_inertia", "icosphere"]
@@ -122,7 +121,7 @@ def _checked_mesh(vertices, faces):
     return vertices, faces
 
 
-@jax.jit  # one program per mesh size: eagerly, a new shape compiled each of its operations in turn
+@cpu_jit  # one program per mesh size: eagerly, a new shape compiled each of its operations in turn
 def _facets(vertices, faces):
     """(normals, areas) of the triangles of a closed convex mesh, normals turned outward."""
     corners = vertices[..., faces, :]  # (..., F, 3, 3)
@@ -148,7 +147,7 @@ def mesh_inertia(vertices: Float[Array, "... V 3"], faces: Int[Array, "F 3"]) ->
     return _mesh_inertia(*_checked_mesh(vertices, faces))
 
 
-@jax.jit  # one program per mesh size (see _facets)
+@cpu_jit  # one program per mesh size (see _facets)
 def _mesh_inertia(vertices, faces):
     centre = jnp.mean(vertices, -2, keepdims=True)
     corners = (vertices - centre)[..., faces, :]  # (..., F, 3, 3)
@@ -333,7 +332,7 @@ def _log_volume_jvp(primals, tangents):
     return jnp.log(volume), jnp.dot(gradient, tangents[0])
 
 
-@functools.partial(jax.jit, static_argnames=("rtol", "atol", "max_steps"))
+@cpu_jit(static_argnames=("rtol", "atol", "max_steps"))
 def _minkowski_solve(normals, weights, rtol, atol, max_steps):
     def objective(log_heights, args):
         return jnp.dot(weights, jnp.exp(log_heights)) - _log_volume(log_heights, normals)
