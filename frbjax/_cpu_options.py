@@ -32,7 +32,8 @@ def call_with_options(compiled, options, *args, **static):
 def cpu_jit(function=None, **jit_options):
     """``jax.jit(function, **jit_options)``, compiled with ``DEFAULT_COMPILER_OPTIONS`` where the
     default backend is the CPU and it is called outside any trace (a decorator, with or without
-    ``jit_options``)."""
+    ``jit_options``).  Its ``compiled(options)`` is the jit for other options (a sorted tuple of
+    items), one per options, for ``call_with_options``."""
     if function is None:
         return functools.partial(cpu_jit, **jit_options)
 
@@ -48,4 +49,5 @@ def cpu_jit(function=None, **jit_options):
         options = DEFAULT_COMPILER_OPTIONS if jax.default_backend() == "cpu" and not traced else {}
         return call_with_options(compiled, options, *args, **kwargs)
 
+    call.compiled = compiled
     return call

@@ -58,8 +58,10 @@ the elliptic formulas' own (``frbjax._body.state_with_elliptic_derivatives``): t
 the iterates of continuous parameters never are, is a conditional branch that the Jacobian would
 compile in full (without it the first call takes about a sixth less time).  The model is traced
 once although optimistix calls the residuals twice while tracing (``frbjax._trace_once``: a tenth
-of the first call).  On CPU the solver is compiled with ``DEFAULT_COMPILER_OPTIONS`` (XLA:CPU's
-fusion emitters off: about 25% less compile time, the same run time).  JAX's persistent compilation
+of the first call).  On the CPU the solver is compiled with ``KERNEL_COMPILER_OPTIONS`` where the
+motion runs as compiled kernels (no LLVM optimisation: half the compile time, a fifth more run time),
+else ``DEFAULT_COMPILER_OPTIONS`` (XLA:CPU's fusion emitters off: about 25% less compile time, the
+same run time; ``frbjax._cpu_options``).  JAX's persistent compilation
 cache (``jax_compilation_cache_dir``) keeps the program across processes.
 """
 
@@ -78,7 +80,7 @@ from jaxtyping import Array, Float
 
 from . import _checks as checks, _compiled_motion, _quaternion as quaternion
 from ._body import FreeRigidBody, state_with_elliptic_derivatives, with_principal_axes
-from ._cpu_options import call_with_options, DEFAULT_COMPILER_OPTIONS
+from ._cpu_options import call_with_options, cpu_jit, DEFAULT_COMPILER_OPTIONS
 from ._errors import FitError
 from ._multistart import solve_each
 from ._trace_once import traced_once
@@ -485,20 +487,17 @@ def _fitted_body(inertia, angular_momentum, attitude, tensor=False):
 KERNEL_COMPILER_OPTIONS = {**DEFAULT_COMPILER_OPTIONS, "xla_backend_optimization_level": 0}
 
 
-@functools.cache
-def _compiled_fit(options):
-    """The jitted solver for XLA compiler options ``options`` (a sorted tuple of items)."""
-    return jax.jit(_fit, static_argnames=("rtol", "atol", "max_steps"), compiler_options=dict(options) or None)
+_fit_program = cpu_jit(_fit, static_argnames=("rtol", "atol", "max_steps"))
 
 
 def _solve(options, *args, **static):
-    if options is None:
-        options = {}
-        if jax.default_backend() == "cpu":
-            kernels = _compiled_motion.selected(args[0].dtype)
-            options = KERNEL_COMPILER_OPTIONS if kernels else DEFAULT_COMPILER_OPTIONS
-        return call_with_options(_compiled_fit, options, *args, **static)
-    return _compiled_fit(tuple(sorted(options.items())))(*args, **static)
+    """The solver compiled with ``options``; by default ``DEFAULT_COMPILER_OPTIONS`` on the CPU
+    (``cpu_jit``), ``KERNEL_COMPILER_OPTIONS`` where the motion's kernels are selected there."""
+    if options is not None:
+        return _fit_program.compiled(tuple(sorted(options.items())))(*args, **static)
+    if jax.default_backend() == "cpu" and _compiled_motion.selected(args[0].dtype):
+        return call_with_options(_fit_program.compiled, KERNEL_COMPILER_OPTIONS, *args, **static)
+    return _fit_program(*args, **static)
 
 
 def _rotation_vector(q):
