@@ -186,7 +186,11 @@ T rj_duplication(T x, T y, T z, T p) {
     } else {
       w = 1.0 + (quarter * px0 * ix * ix) * (quarter * py0 * iy * iy) * (quarter * pz0 * iz * iz);
     }
-    correction = correction + quarter * rc_one_plus(w) * (ix * iy * iz);
+    // After the first steps |e_k| <= 0.1716 (e_k shrinks by about 4^-3 a step): R_C's polynomial takes
+    // e_k = w - 1 (exact for w in [1/2, 2]) at once, without rc_one_plus's own duplication step.
+    const T e = w - 1.0;
+    const T rc = magnitude(e) <= 0.1716 ? rc_polynomial(e) : rc_one_plus(w);
+    correction = correction + quarter * rc * (ix * iy * iz);
     x = (x + lambda) / 4.0;
     y = (y + lambda) / 4.0;
     z = (z + lambda) / 4.0;
