@@ -45,7 +45,7 @@ typecheck: $(STAMP)
 # the run waiting until CI's limit (seen with pytest-xdist 3.8 and --dist loadfile).
 PYTEST := OPENBLAS_NUM_THREADS=1 $(BIN)/python -m pytest -n 2 --dist loadfile --max-worker-restart 0 -q \
 	--durations=15 --timeout 600 --timeout-method thread
-SLOW_TOTAL ?= 2400
+SLOW_TOTAL ?= 180
 test: $(STAMP) lint
 	$(PYTEST) -m "not slow" tests; rc=$$?; \
 	if [ $$rc -eq 5 ]; then echo "pytest collected no tests"; fi; exit $$rc
