@@ -21,7 +21,11 @@ solver of benchmarks/work_precision.py) in the same run.  Rows (issue 41's targe
   ``value_and_grad`` in (I, L), frbjax against diffrax;
 * ``fit``: the first ``fit_attitude`` call (200 samples) against diffrax's ``value_and_grad`` compile;
 * ``throughput``: a prebuilt body's quaternion per point (1e4 and 1e6 points) and ``free_flow`` per
-  body (16384 bodies), compiled (second call).
+  body (16384 bodies), compiled (second call);
+* ``lightcurve`` (the default path only): the light-curve inversion of benchmarks/lightcurve.py (LAM,
+  seed 0, its full size), its first ``fit_lightcurve`` call and the part of it that JAX spent
+  tracing, lowering and XLA compiling (``jax_log_compiles``' timings of every program compiled during
+  the call): compile's share of the first call.
 
 Usage: python benchmarks/first_answer.py [--quick] [--output-dir DIR]
 Writes first_answer.json and first_answer.png into benchmarks/results/ (or --output-dir).
@@ -254,6 +258,49 @@ def _throughput(quick):
     return row
 
 
+def _lightcurve(quick):
+    import logging
+    import re
+
+    import jax
+
+    sys.path.insert(0, str(Path(__file__).parent))
+    import lightcurve
+
+    seconds = {"compilation": 0.0, "tracing": 0.0, "lowering": 0.0}
+    kinds = {"XLA compilation": "compilation", "tracing": "tracing", "jaxpr to MLIR module conversion": "lowering"}
+    pattern = re.compile(r"Finished (XLA compilation|tracing|jaxpr to MLIR module conversion) .* in ([0-9.e+-]+) s")
+
+    class Timings(logging.Handler):
+        def emit(self, record):
+            found = pattern.search(record.getMessage())
+            if found:
+                seconds[kinds[found.group(1)]] += float(found.group(2))
+
+    logger = logging.getLogger("jax._src.dispatch")
+    logger.addHandler(Timings(logging.DEBUG))
+    logger.setLevel(logging.DEBUG)
+    logger.propagate = False  # the timings, not JAX's messages on stderr
+    jax.config.update("jax_log_compiles", True)
+    fit = lightcurve.fit_lightcurve
+    row = {}
+
+    def timed(*args, **kwargs):
+        before = dict(seconds)
+        start = time.perf_counter()
+        result = fit(*args, **kwargs)
+        row["first_call_s"] = time.perf_counter() - start
+        row.update({f"{kind}_s": seconds[kind] - before[kind] for kind in seconds})
+        return result
+
+    lightcurve.fit_lightcurve = timed
+    grid, states, refine = ([2, 2], 4, 2) if quick else ([5, 3], 128, 32)
+    summary = lightcurve.inversion("LAM", 0, 0.01, grid, states, refine, False, 0.0023, None)[0]
+    row["recovered"] = bool(summary["recovered"])
+    row["compile_share"] = (row["compilation_s"] + row["tracing_s"] + row["lowering_s"]) / row["first_call_s"]
+    return row
+
+
 def _run_scenario(name, quick):
     import jax
 
@@ -268,6 +315,8 @@ def _run_scenario(name, quick):
         return _fit(quick)
     if name == "throughput":
         return _throughput(quick)
+    if name == "lightcurve":
+        return _lightcurve(quick)
     raise ValueError(name)
 
 
@@ -294,7 +343,7 @@ def main(argv=None):
     )
     for path in paths:
         row = {"readme_s": _whole_process(README, path)}
-        for name in ("one_body", "batched", "fit", "throughput"):
+        for name in ("one_body", "batched", "fit", "throughput") + (("lightcurve",) if path == "motion" else ()):
             row.update({f"{name}.{k}": v for k, v in _scenario(name, path, options.quick).items()})
         result["paths"][path] = row
         print(path, json.dumps(row, indent=1), flush=True)
@@ -309,6 +358,8 @@ def main(argv=None):
             "body_call_vs_trivial": row["one_body.body_call_s"] / row["one_body.trivial_call_s"],
             "free_flow_call_vs_trivial": row["one_body.free_flow_call_s"] / row["one_body.trivial_call_s"],
         }
+        if "lightcurve.compile_share" in row:
+            ratios[path]["lightcurve_compile_share"] = row["lightcurve.compile_share"]
         if "jax" in result["paths"]:
             reference = result["paths"]["jax"]
             for key in [k for k in row if k.startswith("throughput.")]:

@@ -28,6 +28,9 @@ the gradient of the masked branch.
 
 from __future__ import annotations
 
+import functools
+
+import jax
 import jax.numpy as jnp
 from jaxtyping import Array, Float
 
@@ -120,6 +123,18 @@ def brightness(
     observer = jnp.asarray(observer)
     check_directions("sun", sun, times.shape[0])
     check_directions("observer", observer, times.shape[0])
+    checks.choice("law", law, LAWS)
+    if checks.is_concrete(c):
+        checks.scalar("c", c, positive=True, allow_zero=True)
+    if checks.is_concrete(shape.normals):
+        checks.check_finite("normals", checks.real_array("normals", shape.normals))
+    return _flux(body, shape, times, sun, observer, law, c)
+
+
+# One program for the evaluation: called eagerly (a fit's result, its `predict`), each of its
+# operations was otherwise compiled in turn (about twenty small programs on a first call).
+@functools.partial(jax.jit, static_argnames="law")
+def _flux(body, shape, times, sun, observer, law, c):
     sun = jnp.broadcast_to(sun, times.shape + (3,))
     observer = jnp.broadcast_to(observer, times.shape + (3,))
     batch = body.inertia.shape[:-1]

@@ -72,7 +72,7 @@ from .. import _checks as checks, _progress, _quaternion as quaternion
 from .._body import FreeRigidBody, quaternion_with_elliptic_derivatives
 from .._cpu_options import cpu_jit
 from .._errors import FitError
-from .._multistart import solve_each
+from .._multistart import solve_each, starts_in_sequence
 from .._trace_once import traced_once
 from ._brightness import brightness as _forward, facet_brightness, LAWS
 from ._periods import momentum_from_periods, tumbler_periods
@@ -120,6 +120,10 @@ def _body(theta, reference):
     attitude = quaternion.multiply(attitude_ref, quaternion.exp_pure(theta[3:6]))
     direction = _sphere_exp(direction_ref, theta[6:8] @ basis)
     return FreeRigidBody(inertia, jnp.exp(theta[2]) * direction, attitude)
+
+
+# The fitted body in one program (eagerly, each of _body's operations was compiled in turn).
+_body_program = jax.jit(_body)
 
 
 def _ellipsoid_shape(shape_parameters, subdivisions):
@@ -325,7 +329,7 @@ def _search(parameters, references, start_areas, data, mask, config, chunk, prog
         for start in range(0, count, chunk):
             rows = np.arange(start, start + chunk)
             rows = np.where(rows < count, rows, 0)
-            take = lambda tree: jax.tree.map(lambda x: x[rows], tree)  # noqa: E731
+            take = lambda tree: jax.tree.map(lambda x: np.asarray(x)[rows], tree)  # noqa: E731
             costs.append(
                 np.asarray(_search_costs(take(parameters), take(references), take(start_areas), data, mask, config))
             )
@@ -423,7 +427,12 @@ def _random_rotations(rng, count):
 
 
 def _rotate(q, v):
-    return np.asarray(jnp.einsum("...ij,...j->...i", quaternion.as_matrix(jnp.asarray(q)), jnp.asarray(v)))
+    """v rotated by the unit quaternion q (w, x, y, z): v + 2w (u x v) + 2u x (u x v), u = (x, y, z)
+    (numpy: eagerly, JAX would compile each operation)."""
+    q, v = np.asarray(q), np.asarray(v)
+    scalar, vector = q[..., :1], q[..., 1:]
+    twice_cross = 2 * np.cross(vector, v)
+    return v + scalar * twice_cross + np.cross(vector, twice_cross)
 
 
 def _ellipsoid_axes(inertia):
@@ -892,17 +901,25 @@ def fit_lightcurve(
             log_areas = np.log(_gaussian_image_areas(fitted_axes, normals, solid_angles))
             log_areas -= log_areas.mean(-1, keepdims=True)
             parameters0 = np.concatenate([fitted[:, :8], log_areas], 1)
-            # All the data, no prior.
-            out = _refine(
-                as_jax(parameters0),
-                as_jax(refs),
-                None,
-                data,
-                jnp.asarray(start_masks[:, -1:], dtype),
-                None,
-                config,
-                **solver_settings,
-            )
+            # All the data, no prior.  Where the starts are solved one after another anyway (the CPU,
+            # ``solve_each``), each is its own call of the one-start program, which the leader's
+            # continued solves below then reuse instead of compiling it for themselves (the LAM
+            # benchmark's first call: about 2.5 s of its 12 s of compilation).
+            batches = [slice(k, k + 1) for k in range(len(best))] if starts_in_sequence() else [slice(None)]
+            parts = [
+                _refine(
+                    as_jax(parameters0[rows]),
+                    as_jax(tuple(r[rows] for r in refs)),
+                    None,
+                    data,
+                    jnp.asarray(start_masks[rows, -1:], dtype),
+                    None,
+                    config,
+                    **solver_settings,
+                )
+                for rows in batches
+            ]
+            out = jax.tree.map(lambda *pieces: np.concatenate([np.asarray(piece) for piece in pieces]), *parts)
         # A leader that stopped at max_steps still moving is solved on from where it stopped (all the data,
         # no prior), alone: Levenberg-Marquardt on a convex shape's hundreds of areas can take more than
         # max_steps to meet rtol (the LAM test's leader: three more solves).
@@ -948,7 +965,7 @@ def fit_lightcurve(
     covariance = np.zeros((free.size, free.size))
     covariance[np.ix_(free > 0, free > 0)] = (right[kept].T / singular[kept] ** 2) @ right[kept] * variance
 
-    body = _body(jnp.asarray(p[:8], dtype), reference)
+    body = _body_program(jnp.asarray(p[:8], dtype), reference)
     if shape == "convex":
         fitted_shape = ConvexShape(jnp.asarray(normals, dtype), jnp.exp(jnp.asarray(p[8:], dtype)))
     else:
