@@ -283,10 +283,13 @@ def body_state(record, t, attitude=True):
     without ``attitude``; ``t`` broadcasts against the records' batch."""
     batch = jnp.broadcast_shapes(record.shape[:-1], jnp.shape(t))
     t = jax.lax.stop_gradient(jnp.broadcast_to(jnp.asarray(t, record.dtype), batch))
-    records = _records_by_body(jax.lax.stop_gradient(record), batch)
+    order, bodies = _bodies_first(record, batch)
+    records = _records_by_body(jax.lax.stop_gradient(record), batch, order, bodies)
     # (bodies, times per body): the kernel's layout (each body's times contiguous).
+    t = jnp.transpose(t, order)
     times = t.reshape((records.shape[0], -1)) if t.size else t.reshape((0, 1))
-    out = _body_state_kernels[attitude](records, times).reshape(batch + ((7 if attitude else 3),))
+    out = _body_state_kernels[attitude](records, times).reshape(t.shape + ((7 if attitude else 3),))
+    out = jnp.transpose(out, _inverse(order) + (len(batch),))
     return (out[..., :3], out[..., 3:]) if attitude else (out, None)
 
 
@@ -320,17 +323,24 @@ _series_motion = _series_kernel(True)
 _series_momentum = _series_kernel(False)
 
 
-def _records_by_body(record, batch):
-    """The records as (bodies, size) for points of shape ``batch``, each body's points contiguous.
-
-    The records are broadcast over the leading axes of ``batch`` up to their last non-unit axis, and
-    no further: bodies (B, 1) at times (B, T) pass B records, not B x T copies."""
+def _bodies_first(record, batch):
+    """The order of ``batch``'s axes that puts the bodies' axes (those along which the records
+    vary) first, and their number: the kernels take each body's points contiguous, so that bodies
+    (N,) at times (K, N) are N records of K points each (not K x N records of one point)."""
     shape = (1,) * (len(batch) - (record.ndim - 1)) + record.shape[:-1]
-    leading = max((k + 1 for k, n in enumerate(shape) if n != 1), default=0)
-    record = jnp.broadcast_to(
-        record.reshape(shape + record.shape[-1:]), batch[:leading] + shape[leading:] + record.shape[-1:]
-    )
-    return record.reshape((math.prod(batch[:leading]), record.shape[-1]))
+    bodies = tuple(k for k, n in enumerate(shape) if n != 1)
+    return bodies + tuple(k for k in range(len(batch)) if k not in bodies), len(bodies)
+
+
+def _records_by_body(record, batch, order, bodies):
+    """The records as (bodies, size) in the order of ``_bodies_first``."""
+    shape = (1,) * (len(batch) - (record.ndim - 1)) + record.shape[:-1]
+    record = jnp.transpose(record.reshape(shape + record.shape[-1:]), order + (len(batch),))
+    return record.reshape((math.prod(batch[k] for k in order[:bodies]), record.shape[-1]))
+
+
+def _inverse(order):
+    return tuple(sorted(range(len(order)), key=order.__getitem__))
 
 
 def series_motion(record, inertia, unit_momentum, regime, tau, attitude=True):
@@ -340,8 +350,11 @@ def series_motion(record, inertia, unit_momentum, regime, tau, attitude=True):
     columns += [jnp.broadcast_to(unit_momentum[..., k], batch) for k in range(3)]
     columns.append(jnp.broadcast_to(jnp.asarray(tau, inertia.dtype), batch))
     regime = jnp.broadcast_to(regime, batch).astype(jnp.int32)
-    record = _records_by_body(jax.lax.stop_gradient(record), batch)
+    order, bodies = _bodies_first(record, batch)
+    record = _records_by_body(jax.lax.stop_gradient(record), batch, order, bodies)
+    columns, regime = [jnp.transpose(column, order) for column in columns], jnp.transpose(regime, order)
+    back = _inverse(order) + (len(batch),)
     if not attitude:
-        return _series_momentum(record, *columns, regime), None
-    out = _series_motion(record, *columns, regime)
+        return jnp.transpose(_series_momentum(record, *columns, regime), back), None
+    out = jnp.transpose(_series_motion(record, *columns, regime), back)
     return out[..., 3:], out[..., :3]
