@@ -20,8 +20,9 @@ solver of benchmarks/work_precision.py) in the same run.  Rows (issue 41's targe
 * ``batched``: a quaternion loss over 1000 bodies x 100 times, compile of the forward program and of
   ``value_and_grad`` in (I, L), frbjax against diffrax;
 * ``fit``: the first ``fit_attitude`` call (200 samples) against diffrax's ``value_and_grad`` compile;
-* ``throughput``: a prebuilt body's quaternion per point (1e4 and 1e6 points) and ``free_flow`` per
-  body (16384 bodies), compiled (second call);
+* ``throughput``: a prebuilt body's quaternion per point (1e4 and 1e6 points), ``free_flow`` per
+  body and building a body (16384 bodies), and the batched loss's ``value_and_grad`` per point
+  (1000 bodies x 100 times), compiled (second call);
 * ``lightcurve`` (the default path only): the light-curve inversion of benchmarks/lightcurve.py (LAM,
   seed 0, its full size), its first ``fit_lightcurve`` call and the part of it that JAX spent
   tracing, lowering and XLA compiling (``jax_log_compiles``' timings of every program compiled during
@@ -255,6 +256,20 @@ def _throughput(quick):
     t = jnp.linspace(0.0, 10.0, n)
     flow = jax.jit(free_flow)
     row["free_flow_per_body_ns"] = _best(lambda: flow(inertia, momentum, attitude, t), 3 if quick else 10) / n * 1e9
+    # Building bodies (their records), and the batched loss's value_and_grad once compiled (the
+    # "batched" scenario's program: 1000 bodies x 100 times, the bodies built in the loss).
+    build = jax.jit(FreeRigidBody)
+    row["construction_per_body_ns"] = _best(lambda: build(inertia, momentum, attitude), 3 if quick else 10) / n * 1e9
+    bodies, count = _bodies(100 if quick else 1000), 10 if quick else 100
+    times = jnp.linspace(1.0, 100.0, count)[:, None]
+    weights = jnp.arange(1.0, 5.0)
+
+    def loss(inertia, momentum):
+        return jnp.sum(FreeRigidBody(inertia, momentum, bodies[2]).quaternion(times) * weights)
+
+    both = jax.jit(jax.value_and_grad(loss, argnums=(0, 1)))
+    points = count * len(bodies[0])
+    row["value_and_grad_per_point_ns"] = _best(lambda: both(*bodies[:2]), 3 if quick else 5) / points * 1e9
     return row
 
 
