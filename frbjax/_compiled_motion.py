@@ -283,8 +283,7 @@ def body_state(record, t, attitude=True):
     without ``attitude``; ``t`` broadcasts against the records' batch."""
     batch = jnp.broadcast_shapes(record.shape[:-1], jnp.shape(t))
     t = jax.lax.stop_gradient(jnp.broadcast_to(jnp.asarray(t, record.dtype), batch))
-    order, bodies = _bodies_first(record, batch)
-    records = _records_by_body(jax.lax.stop_gradient(record), batch, order, bodies)
+    records, order = _records_by_body(jax.lax.stop_gradient(record), batch)
     # (bodies, times per body): the kernel's layout (each body's times contiguous).
     t = jnp.transpose(t, order)
     times = t.reshape((records.shape[0], -1)) if t.size else t.reshape((0, 1))
@@ -323,20 +322,15 @@ _series_motion = _series_kernel(True)
 _series_momentum = _series_kernel(False)
 
 
-def _bodies_first(record, batch):
-    """The order of ``batch``'s axes that puts the bodies' axes (those along which the records
-    vary) first, and their number: the kernels take each body's points contiguous, so that bodies
-    (N,) at times (K, N) are N records of K points each (not K x N records of one point)."""
+def _records_by_body(record, batch):
+    """The records as (bodies, size), and the order of ``batch``'s axes that puts the bodies' axes
+    (those along which the records vary) first: the kernels take each body's points contiguous, so
+    that bodies (N,) at times (K, N) are N records of K points each (not K x N records of one point)."""
     shape = (1,) * (len(batch) - (record.ndim - 1)) + record.shape[:-1]
     bodies = tuple(k for k, n in enumerate(shape) if n != 1)
-    return bodies + tuple(k for k in range(len(batch)) if k not in bodies), len(bodies)
-
-
-def _records_by_body(record, batch, order, bodies):
-    """The records as (bodies, size) in the order of ``_bodies_first``."""
-    shape = (1,) * (len(batch) - (record.ndim - 1)) + record.shape[:-1]
+    order = bodies + tuple(k for k in range(len(batch)) if k not in bodies)
     record = jnp.transpose(record.reshape(shape + record.shape[-1:]), order + (len(batch),))
-    return record.reshape((math.prod(batch[k] for k in order[:bodies]), record.shape[-1]))
+    return record.reshape((math.prod(batch[k] for k in bodies), record.shape[-1])), order
 
 
 def _inverse(order):
@@ -350,8 +344,7 @@ def series_motion(record, inertia, unit_momentum, regime, tau, attitude=True):
     columns += [jnp.broadcast_to(unit_momentum[..., k], batch) for k in range(3)]
     columns.append(jnp.broadcast_to(jnp.asarray(tau, inertia.dtype), batch))
     regime = jnp.broadcast_to(regime, batch).astype(jnp.int32)
-    order, bodies = _bodies_first(record, batch)
-    record = _records_by_body(jax.lax.stop_gradient(record), batch, order, bodies)
+    record, order = _records_by_body(jax.lax.stop_gradient(record), batch)
     columns, regime = [jnp.transpose(column, order) for column in columns], jnp.transpose(regime, order)
     back = _inverse(order) + (len(batch),)
     if not attitude:

@@ -28,14 +28,12 @@ the gradient of the masked branch.
 
 from __future__ import annotations
 
-import functools
-
-import jax
 import jax.numpy as jnp
 from jaxtyping import Array, Float
 
 from .. import _checks as checks
 from .._body import FreeRigidBody
+from .._cpu_options import cpu_jit
 from ._shape import ConvexShape
 
 
@@ -53,13 +51,18 @@ def _scattering(mu, mu0, law, c):
     return lommel_seeliger + c * mu * mu0
 
 
+def _check_law(law, c):
+    """Refused (ValueError): an unknown ``law``, a non-finite or negative ``c`` (a concrete one)."""
+    checks.choice("law", law, LAWS)
+    if checks.is_concrete(c):
+        checks.scalar("c", c, positive=True, allow_zero=True)
+
+
 def facet_brightness(normals, sun_body, observer_body, law="lommel_seeliger_lambert", c=0.1):
     """S(mu, mu0) 1(mu > 0 and mu0 > 0) per facet: (..., T, F) for normals (..., F, 3) and body-frame
     directions (..., T, 3).  The brightness is this contracted with the areas; it is linear in them.
     Refused (ValueError): an unknown ``law``, a non-finite or negative ``c``, trailing axes other than 3."""
-    checks.choice("law", law, LAWS)
-    if checks.is_concrete(c):
-        checks.scalar("c", c, positive=True, allow_zero=True)
+    _check_law(law, c)
     for name, value in (("normals", normals), ("sun_body", sun_body), ("observer_body", observer_body)):
         if checks.is_concrete(value):
             checks.check_finite(name, checks.real_array(name, value))
@@ -123,17 +126,13 @@ def brightness(
     observer = jnp.asarray(observer)
     check_directions("sun", sun, times.shape[0])
     check_directions("observer", observer, times.shape[0])
-    checks.choice("law", law, LAWS)
-    if checks.is_concrete(c):
-        checks.scalar("c", c, positive=True, allow_zero=True)
-    if checks.is_concrete(shape.normals):
-        checks.check_finite("normals", checks.real_array("normals", shape.normals))
+    _check_law(law, c)  # here, where c is still concrete (the shape checked its normals when made)
     return _flux(body, shape, times, sun, observer, law, c)
 
 
 # One program for the evaluation: called eagerly (a fit's result, its `predict`), each of its
 # operations was otherwise compiled in turn (about twenty small programs on a first call).
-@functools.partial(jax.jit, static_argnames="law")
+@cpu_jit(static_argnames="law")
 def _flux(body, shape, times, sun, observer, law, c):
     sun = jnp.broadcast_to(sun, times.shape + (3,))
     observer = jnp.broadcast_to(observer, times.shape + (3,))

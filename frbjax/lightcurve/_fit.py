@@ -123,7 +123,7 @@ def _body(theta, reference):
 
 
 # The fitted body in one program (eagerly, each of _body's operations was compiled in turn).
-_body_program = jax.jit(_body)
+_body_program = cpu_jit(_body)
 
 
 def _ellipsoid_shape(shape_parameters, subdivisions):
@@ -329,7 +329,7 @@ def _search(parameters, references, start_areas, data, mask, config, chunk, prog
         for start in range(0, count, chunk):
             rows = np.arange(start, start + chunk)
             rows = np.where(rows < count, rows, 0)
-            take = lambda tree: jax.tree.map(lambda x: np.asarray(x)[rows], tree)  # noqa: E731
+            take = lambda tree: jax.tree.map(lambda x: x[rows], tree)  # noqa: E731
             costs.append(
                 np.asarray(_search_costs(take(parameters), take(references), take(start_areas), data, mask, config))
             )
@@ -426,13 +426,9 @@ def _random_rotations(rng, count):
     return q * np.where(q[:, :1] < 0, -1, 1)
 
 
+@cpu_jit  # one program: eagerly, each of its operations was compiled in turn
 def _rotate(q, v):
-    """v rotated by the unit quaternion q (w, x, y, z): v + 2w (u x v) + 2u x (u x v), u = (x, y, z)
-    (numpy: eagerly, JAX would compile each operation)."""
-    q, v = np.asarray(q), np.asarray(v)
-    scalar, vector = q[..., :1], q[..., 1:]
-    twice_cross = 2 * np.cross(vector, v)
-    return v + scalar * twice_cross + np.cross(vector, twice_cross)
+    return jnp.einsum("...ij,...j->...i", quaternion.as_matrix(q), v)
 
 
 def _ellipsoid_axes(inertia):
@@ -849,10 +845,12 @@ def fit_lightcurve(
 
     # ---- the search: every start's cost on the first window
     as_jax = lambda tree: jax.tree.map(lambda x: jnp.asarray(x, dtype), tree)  # noqa: E731
+    # The search's chunks are taken in numpy (eagerly, JAX would compile each gather).
+    as_numpy = lambda tree: jax.tree.map(lambda x: np.asarray(x, dtype), tree)  # noqa: E731
     costs = _search(
-        as_jax(theta),
-        as_jax(references),
-        as_jax(start_areas),
+        as_numpy(theta),
+        as_numpy(references),
+        as_numpy(start_areas),
         data,
         jnp.asarray(masks[0], dtype),
         config,
@@ -986,7 +984,7 @@ def fit_lightcurve(
         d_log[:, j] = (np.arange(3) == j).astype(float) - float(largest == j)
     inertia_sigma = moments * np.sqrt(np.maximum(np.diag(d_log @ covariance[:8, :8] @ d_log.T), 0))
     l_body = np.asarray(body.initial_angular_momentum)
-    momentum_direction = _rotate(np.asarray(body.initial_attitude), l_body / np.linalg.norm(l_body))
+    momentum_direction = np.asarray(_rotate(body.initial_attitude, l_body / np.linalg.norm(l_body)))
     energy_ratio = float(np.sum(l_body**2 / inertia_fit) * inertia_fit.max() / np.sum(l_body**2))
 
     # Scales and residuals of the fitted model, per curve.
