@@ -71,9 +71,10 @@ void nome(R m, R mc, R& q, R& q_over_m) {
   q_over_m = q / m;
 }
 
-// The series' coefficients (`_series.coefficients`) for characteristic chi = nu <= 0.
+// The series' coefficients (`_series.coefficients`) for characteristic chi = nu <= 0; `quarter` is
+// K(m) = R_F(0, mc, 1), which the caller has computed already.
 template <class R>
-void series_coefficients(R m, R mc, R nu, R complete, R* record) {
+void series_coefficients(R m, R mc, R nu, R complete, R quarter, R* record) {
   using L = SeriesLayout<R>;
   using std::exp;
   using std::expm1;
@@ -83,7 +84,6 @@ void series_coefficients(R m, R mc, R nu, R complete, R* record) {
   const R minus_chi = moving ? -nu : R(1);
   const R gap = m + minus_chi;
   const R complement_parameter = m > R(0.5) ? m : R(0.5);
-  const R quarter = elliprf<R>(R(0), mc, R(1));
   const R shift_integral = elliprf<R>(m / gap, m * (1 + minus_chi) / gap, R(1));
   const R distance_integral = elliprf<R>(minus_chi / (1 + minus_chi), gap / (1 + minus_chi), R(1));
   const R complement_quarter = elliprf<R>(R(0), complement_parameter, R(1));
@@ -265,7 +265,7 @@ void series_record(const R* given, int regime, R* record) {
     record[L::kThirdComplete] = complete_third_kind<R>(R(-0.5), R(0.5), R(0.5));  // stand-in: no periods
     // The limit m = 1 of the complementary series (`_series.at_separatrix`): third kind
     // A arctan(tan beta' tanh u), sin beta' = A1, cos beta' = A3, A = (1 + A1)/A3, no slope.
-    series_coefficients<R>(R(0.5), R(0.5), R(-0.5), complete_third_kind<R>(R(-0.5), R(0.5), R(0.5)), record);
+    series_coefficients<R>(R(0.5), R(0.5), R(-0.5), record[L::kThirdComplete], elliprf<R>(R(0), R(0.5), R(1)), record);
     const R rows_c[8] = {orbit.amplitude_3, 0, orbit.amplitude_1, 0, 1, 0, 0, 0};
     for (int k = 0; k < 8; ++k) record[L::kComplementaryRows + k] = rows_c[k];
     record[L::kQuarter] = 1;
@@ -296,7 +296,7 @@ void series_record(const R* given, int regime, R* record) {
     record[L::kU0] = reflected ? sign * (quarter - cn0 * phase_integral) : sn0 * phase_integral;
     const R complete = complete_third_kind<R>(orbit.nu, m, mc);
     record[L::kThirdComplete] = complete;
-    series_coefficients<R>(m, mc, orbit.nu, complete, record);
+    series_coefficients<R>(m, mc, orbit.nu, complete, quarter, record);
   }
   // psi at u0 on the given unit L itself (`_regimes.reference`).  The charts count psi from tau = 0
   // (psi - psi(0)), as the one-time motion's do: q = q0 ⊗ P ⊗ conj(q̂(0)) ⊗ q̂(tau) ⊗ conj(P) is the
