@@ -136,6 +136,11 @@ inline Dual<T, N>& operator+=(Dual<T, N>& a, const U& b) {
 }
 
 // f(a) with f(a.v) = value and f'(a.v) = slope, by the chain rule.
+template <class T, int N, class U>
+inline Dual<T, N>& operator*=(Dual<T, N>& a, const U& b) {
+  a = a * b;
+  return a;
+}
 template <class T, int N, class U, class V>
 inline Dual<T, N> chain(const Dual<T, N>& a, const U& value, const V& slope) {
   Dual<T, N> r;
@@ -178,6 +183,12 @@ inline Dual<T, N> exp(const Dual<T, N>& a) {
   using std::exp;
   T e = exp(a.v);
   return chain(a, e, e);
+}
+template <class T, int N>
+inline Dual<T, N> expm1(const Dual<T, N>& a) {
+  using std::exp;
+  using std::expm1;
+  return chain(a, expm1(a.v), exp(a.v));
 }
 template <class T, int N>
 inline Dual<T, N> sin(const Dual<T, N>& a) {

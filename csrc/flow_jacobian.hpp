@@ -23,6 +23,7 @@
 #include <type_traits>
 
 #include "free_flow.hpp"
+#include "series.hpp"
 
 namespace frbjax {
 
@@ -281,12 +282,11 @@ void seed_motion(MotionDual2<R>& x, R value, int index) {
   x.d[index].v = R(1);
 }
 
-// (L(t), q(t)) of a moving body on the flow's numbers D: the working frame P (and the regime) locally
-// constant, L_w = P^T L, the sorted moments, |L|, the working motion, L(t) = |L| P l̂(tau) and
-// q(t) = start ⊗ (w, P v) with (w, v) = conj(q̂(0)) ⊗ q̂(tau), normalised (free_flow.hpp).
-template <class R, class D, class M>
-void moving_flow(const WorkingFrame<R>& frame, R t, const D* moments, const D* angular_momentum, const D& time,
-                 const D* start, D* result) {
+// The working motion's inputs on the flow's numbers D: the working frame P (and the regime) locally
+// constant, L_w = P^T L, the sorted moments, the unit L_w / |L| and tau = |L| t; and |L|.
+template <class R, class D>
+void flow_inputs(const WorkingFrame<R>& frame, const D* moments, const D* angular_momentum, const D& time, D* inputs,
+                 D& norm) {
   D working_moments[3], working_momentum[3];
   for (int k = 0; k < 3; ++k) {
     working_momentum[k] = D(0.0);
@@ -295,20 +295,21 @@ void moving_flow(const WorkingFrame<R>& frame, R t, const D* moments, const D* a
       working_momentum[k] += angular_momentum[i] * double(frame.permutation[i][k]);
     }
   }
-  const D norm = sqrt(working_momentum[0] * working_momentum[0] + working_momentum[1] * working_momentum[1] +
-                      working_momentum[2] * working_momentum[2]);
-  D inputs[kMotionInputs];
+  norm = sqrt(working_momentum[0] * working_momentum[0] + working_momentum[1] * working_momentum[1] +
+              working_momentum[2] * working_momentum[2]);
   for (int k = 0; k < 3; ++k) {
     inputs[k] = working_moments[k];
     inputs[3 + k] = working_momentum[k] / norm;
   }
   inputs[6] = norm * time;
-  const R input_values[kMotionInputs] = {frame.inertia[0],       frame.inertia[1],       frame.inertia[2],
-                                         frame.unit_momentum[0], frame.unit_momentum[1], frame.unit_momentum[2],
-                                         frame.norm * t};
-  M seeded[kMotionInputs], motion[kMotionOutputs];
-  for (int j = 0; j < kMotionInputs; ++j) seed_motion(seeded[j], input_values[j], j);
-  working_motion<M>(seeded, frame.regime, true, motion);
+}
+
+// (L(t), q(t)) on the flow's numbers D from the working motion's outputs on M (their partial
+// derivatives in its 7 inputs): L(t) = |L| P l̂(tau) and q(t) = start ⊗ (w, P v) with
+// (w, v) = conj(q̂(0)) ⊗ q̂(tau), normalised (free_flow.hpp).
+template <class R, class D, class M>
+void flow_from_motion(const WorkingFrame<R>& frame, const D& norm, const D* inputs, const M* motion, const D* start,
+                      D* result) {
   D carried[kMotionOutputs];
   carry(motion, inputs, carried);
   for (int i = 0; i < 3; ++i) {
@@ -328,6 +329,21 @@ void moving_flow(const WorkingFrame<R>& frame, R t, const D* moments, const D* a
   const D inverse =
       1.0 / sqrt(product[0] * product[0] + product[1] * product[1] + product[2] * product[2] + product[3] * product[3]);
   for (int k = 0; k < 4; ++k) result[3 + k] = product[k] * inverse;
+}
+
+// (L(t), q(t)) of a moving body on the flow's numbers D, the working motion (motion.hpp) on M.
+template <class R, class D, class M>
+void moving_flow(const WorkingFrame<R>& frame, R t, const D* moments, const D* angular_momentum, const D& time,
+                 const D* start, D* result) {
+  D inputs[kMotionInputs], norm;
+  flow_inputs(frame, moments, angular_momentum, time, inputs, norm);
+  const R input_values[kMotionInputs] = {frame.inertia[0],       frame.inertia[1],       frame.inertia[2],
+                                         frame.unit_momentum[0], frame.unit_momentum[1], frame.unit_momentum[2],
+                                         frame.norm * t};
+  M seeded[kMotionInputs], motion[kMotionOutputs];
+  for (int j = 0; j < kMotionInputs; ++j) seed_motion(seeded[j], input_values[j], j);
+  working_motion<M>(seeded, frame.regime, true, motion);
+  flow_from_motion<R, D, M>(frame, norm, inputs, motion, start, result);
 }
 
 // The uniform rotation's rule (frbjax/_uniform.py): the tangent of (L(t), q(t)) along each of the 11
@@ -491,6 +507,77 @@ void free_flow_derivatives(const R* inertia, const R* momentum, const R* attitud
     if constexpr (Order == 2)
       for (int a = 0; a < kFlowInputs; ++a)
         for (int b = 0; b < kFlowInputs; ++b) out[o * W + 1 + kFlowInputs + a * kFlowInputs + b] = second[o][a][b];
+  }
+}
+
+// The first derivatives of a FreeRigidBody's evaluations (its series, series.hpp) at one time per
+// point, the points of one body at its times one after another: free_flow_derivatives<R, 1>'s
+// output, from one record of dual numbers per body (the series' constants and their partial
+// derivatives in the working moments and unit L, series_record on Dual<R, 7>) and the series at each
+// tau on dual numbers (series_motion_point), instead of the one-time motion's constants on dual
+// numbers at every point.  A body's record is kept while the next point has the same moments, L0 and
+// q0 (bit for bit), so a point's result does not depend on its neighbours.  Bodies on the separatrix,
+// uniform rotations, symmetric bodies next to the plane of their equal moments (the precession's
+// derivatives) and invalid bodies take free_flow_derivatives<R, 1> itself.
+template <class R>
+struct SeriesFlow {
+  bool ready = false;
+  bool series = false;
+  R key[10];
+  WorkingFrame<R> frame;
+  FlowDual<R> moments[3], angular_momentum[3], start[4];
+  MotionDual1<R> record[SeriesLayout<R>::size];
+};
+
+template <class R>
+void series_flow_derivatives(const R* inertia, const R* momentum, const R* attitude, R t, SeriesFlow<R>& body, R* out) {
+  constexpr int W = flow_width<1>();
+  const R key[10] = {inertia[0],  inertia[1],  inertia[2],  momentum[0], momentum[1],
+                     momentum[2], attitude[0], attitude[1], attitude[2], attitude[3]};
+  bool same = body.ready;
+  for (int k = 0; k < 10 && same; ++k) same = key[k] == body.key[k];
+  if (!same) {
+    for (int k = 0; k < 10; ++k) body.key[k] = key[k];
+    body.ready = true;
+    body.series = false;
+    if (valid_body(inertia, momentum, attitude)) {
+      body.frame = working_frame<R>(inertia, momentum);
+      const int regime = body.frame.regime;
+      body.series = (regime == kMajor || regime == kMinor) && !precessing<R>(inertia, momentum, regime);
+    }
+    if (body.series) {
+      FlowDual<R> quaternion[4];
+      for (int k = 0; k < 3; ++k) {
+        seed(body.moments[k], inertia[k], k);
+        seed(body.angular_momentum[k], momentum[k], 3 + k);
+      }
+      for (int k = 0; k < 4; ++k) seed(quaternion[k], attitude[k], 6 + k);
+      unit_attitude(quaternion, body.start);
+      MotionDual1<R> seeded[6];
+      for (int j = 0; j < 3; ++j) {
+        seed_motion(seeded[j], body.frame.inertia[j], j);
+        seed_motion(seeded[3 + j], body.frame.unit_momentum[j], 3 + j);
+      }
+      series_record<MotionDual1<R>>(seeded, body.frame.regime, body.record);
+    }
+  }
+  if (!body.series) return free_flow_derivatives<R, 1>(inertia, momentum, attitude, t, out);
+  using L = SeriesLayout<R>;
+  FlowDual<R> time, inputs[kMotionInputs], norm, result[kFlowOutputs];
+  seed(time, t, 10);
+  flow_inputs(body.frame, body.moments, body.angular_momentum, time, inputs, norm);
+  MotionDual1<R> tau, now[7], motion[kMotionOutputs];
+  seed_motion(tau, body.frame.norm * t, 6);
+  series_motion_point<MotionDual1<R>>(body.record, tau, now);
+  for (int k = 0; k < 3; ++k) motion[k] = now[k];
+  for (int k = 0; k < 4; ++k) {
+    motion[3 + k] = body.record[L::kReference + k];
+    motion[7 + k] = now[3 + k];
+  }
+  flow_from_motion<R, FlowDual<R>, MotionDual1<R>>(body.frame, norm, inputs, motion, body.start, result);
+  for (int o = 0; o < kFlowOutputs; ++o) {
+    out[o * W] = result[o].v;
+    for (int a = 0; a < kFlowInputs; ++a) out[o * W + 1 + a] = result[o].d[a];
   }
 }
 

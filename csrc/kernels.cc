@@ -402,7 +402,9 @@ XLA_FFI_DEFINE_HANDLER(FreeFlow, free_flow_values,
 // (..., 7, W): per output (L(t) (3), q(t) (4)) its value, then its derivatives in the moments (3), L0
 // (3), q0 (4) and t (Order 1, W = 12), then their derivatives (Order 2, W = 133).
 // frbjax/_body.py's JVP rules are products of these with the tangents.
-template <int Order, class R>
+// `Series`: a FreeRigidBody's evaluations (Order 1): series_flow_derivatives, a record per body kept
+// over the body's consecutive points.
+template <int Order, class R, bool Series = false>
 ffi::Error run_free_flow_derivatives(ffi::ThreadPool& pool, const ffi::AnyBuffer& inertia,
                                      const ffi::AnyBuffer& momentum, const ffi::AnyBuffer& attitude,
                                      const ffi::AnyBuffer& time, ffi::AnyBuffer& result) {
@@ -422,27 +424,33 @@ ffi::Error run_free_flow_derivatives(ffi::ThreadPool& pool, const ffi::AnyBuffer
   const R* t = static_cast<const R*>(time.untyped_data());
   R* output = static_cast<R*>(result.untyped_data());
   parallel_for(pool, count, grain(Order) / 4, [&](std::size_t begin, std::size_t end) {
-    for (std::size_t i = begin; i < end; ++i)
-      free_flow_derivatives<R, Order>(j + 3 * i, l + 3 * i, q + 4 * i, t[i], output + i * kFlowOutputs * W);
+    if constexpr (Series) {
+      SeriesFlow<R> body;
+      for (std::size_t i = begin; i < end; ++i)
+        series_flow_derivatives<R>(j + 3 * i, l + 3 * i, q + 4 * i, t[i], body, output + i * kFlowOutputs * W);
+    } else {
+      for (std::size_t i = begin; i < end; ++i)
+        free_flow_derivatives<R, Order>(j + 3 * i, l + 3 * i, q + 4 * i, t[i], output + i * kFlowOutputs * W);
+    }
   });
   return ffi::Error::Success();
 }
 
-template <int Order>
+template <int Order, bool Series = false>
 ffi::Error free_flow_derivative_values(ffi::ThreadPool pool, ffi::AnyBuffer inertia, ffi::AnyBuffer momentum,
                                        ffi::AnyBuffer attitude, ffi::AnyBuffer time, ffi::Result<ffi::AnyBuffer> result) {
   switch (result->element_type()) {
     case ffi::DataType::F64:
-      return run_free_flow_derivatives<Order, double>(pool, inertia, momentum, attitude, time, *result);
+      return run_free_flow_derivatives<Order, double, Series>(pool, inertia, momentum, attitude, time, *result);
     case ffi::DataType::F32:
-      return run_free_flow_derivatives<Order, float>(pool, inertia, momentum, attitude, time, *result);
+      return run_free_flow_derivatives<Order, float, Series>(pool, inertia, momentum, attitude, time, *result);
     default:
       return ffi::Error::InvalidArgument("free_flow_derivatives: float32 or float64 only");
   }
 }
 
-#define FRBJAX_FLOW_DERIVATIVES_HANDLER(ORDER)                                                              \
-  XLA_FFI_DEFINE_HANDLER(FreeFlow_##ORDER, free_flow_derivative_values<ORDER>,                            \
+#define FRBJAX_FLOW_DERIVATIVES_HANDLER(NAME, ORDER, SERIES)                                                \
+  XLA_FFI_DEFINE_HANDLER(NAME, (free_flow_derivative_values<ORDER, SERIES>),                              \
                          ffi::Ffi::Bind()                                                                 \
                              .Ctx<ffi::ThreadPool>()                                                      \
                              .Arg<ffi::AnyBuffer>()                                                       \
@@ -451,8 +459,9 @@ ffi::Error free_flow_derivative_values(ffi::ThreadPool pool, ffi::AnyBuffer iner
                              .Arg<ffi::AnyBuffer>()                                                       \
                              .Ret<ffi::AnyBuffer>())
 
-FRBJAX_FLOW_DERIVATIVES_HANDLER(1);
-FRBJAX_FLOW_DERIVATIVES_HANDLER(2);
+FRBJAX_FLOW_DERIVATIVES_HANDLER(FreeFlow_1, 1, false);
+FRBJAX_FLOW_DERIVATIVES_HANDLER(FreeFlow_2, 2, false);
+FRBJAX_FLOW_DERIVATIVES_HANDLER(FreeFlowSeries_1, 1, true);
 
 // A FreeRigidBody's records (body.hpp): inertia (..., 3), L0 (..., 3), q0 (..., 4) and optionally the
 // principal axes (..., 3, 3), all of the result's dtype and of one batch; the result (..., size).
@@ -647,7 +656,7 @@ const Entry kHandlers[] = {
     {"frbjax_series_record", SeriesRecord}, {"frbjax_series_motion", SeriesMotion},
     {"frbjax_series_momentum", SeriesMomentum},
     {"frbjax_momentum_0", Momentum_0}, {"frbjax_momentum_1", Momentum_1}, {"frbjax_momentum_2", Momentum_2},
-    {"frbjax_free_flow", FreeFlow},    {"frbjax_free_flow_1", FreeFlow_1}, {"frbjax_body_record", BodyRecord}, {"frbjax_body_state", BodyState}, {"frbjax_body_momentum", BodyMomentum}, {"frbjax_free_flow_2", FreeFlow_2},    {"frbjax_free_flow_frame", FreeFlowFrame},
+    {"frbjax_free_flow", FreeFlow},    {"frbjax_free_flow_1", FreeFlow_1}, {"frbjax_body_record", BodyRecord}, {"frbjax_body_state", BodyState}, {"frbjax_body_momentum", BodyMomentum}, {"frbjax_free_flow_2", FreeFlow_2}, {"frbjax_free_flow_series_1", FreeFlowSeries_1},    {"frbjax_free_flow_frame", FreeFlowFrame},
 };
 
 PyObject* handlers(PyObject*, PyObject*) {

@@ -1,4 +1,4 @@
-// The theta series of a body's motion (values; the derivatives are the one-time kernel's): the compiled form of
+// The theta series of a body's motion: the compiled form of
 // frbjax/_regimes.py's `constants`, `reference` and `evaluate` with frbjax/_series.py's `coefficients`
 // and `evaluate_series` (docs/theory.md §5, §9; the module note of _series.py derives every form).
 //
@@ -6,6 +6,11 @@
 // third-kind integral, the series' coefficients and q̂(0)); `series_motion_block` evaluates the
 // working-frame unit L and q̂(tau) from it at up to kBlock times at once.  Uniformly rotating bodies
 // get a stand-in record (their motion is formed in JAX around the kernels).
+//
+// The record and the evaluation at one point are written on any number type (`series_motion_point`):
+// on dual numbers they give a body's evaluations' partial derivatives from one record of dual
+// numbers per body (flow_jacobian.hpp's `SeriesFlow`), instead of the one-time motion's per point.
+// Branches compare values (dual.hpp's `value`); the real type decides the number of terms.
 #pragma once
 
 #include <cmath>
@@ -13,9 +18,28 @@
 
 #include "carlson.hpp"
 #include "circular.hpp"
+#include "dual.hpp"
 #include "motion.hpp"
 
 namespace frbjax {
+
+// cos and sin, and atan2: circular.hpp's vectorisable forms for real numbers, dual.hpp's on dual ones.
+template <class T>
+FRBJAX_INLINE void series_cos_sin(const T& x, T& cosine, T& sine) {
+  if constexpr (is_dual<T>::value) {
+    cosine = cos(x);
+    sine = sin(x);
+  } else {
+    circular::cos_sin(x, cosine, sine);
+  }
+}
+template <class T>
+FRBJAX_INLINE T series_arctangent2(const T& y, const T& x) {
+  if constexpr (is_dual<T>::value)
+    return atan2(y, x);
+  else
+    return circular::arctangent2(y, x);
+}
 
 template <class R>
 struct SeriesLayout {
@@ -64,7 +88,7 @@ template <class R>
 void nome(R m, R mc, R& q, R& q_over_m) {
   using std::exp;
   using std::log;
-  if (m <= R(0.5)) return landen_nome(m, mc, q, q_over_m);
+  if (value(m) <= 0.5) return landen_nome(m, mc, q, q_over_m);
   R q_complement, unused;
   landen_nome(mc, m, q_complement, unused);
   q = exp(R(9.869604401089358) / log(q_complement));
@@ -75,15 +99,16 @@ void nome(R m, R mc, R& q, R& q_over_m) {
 // K(m) = R_F(0, mc, 1), which the caller has computed already.
 template <class R>
 void series_coefficients(R m, R mc, R nu, R complete, R quarter, R* record) {
-  using L = SeriesLayout<R>;
+  using L = SeriesLayout<real_t<R>>;
   using std::exp;
   using std::expm1;
+  using std::sin;
   using std::sqrt;
   const R pi = R(3.141592653589793);
-  const bool moving = nu < 0;
+  const bool moving = value(nu) < 0;
   const R minus_chi = moving ? -nu : R(1);
   const R gap = m + minus_chi;
-  const R complement_parameter = m > R(0.5) ? m : R(0.5);
+  const R complement_parameter = value(m) > 0.5 ? m : R(0.5);
   const R shift_integral = elliprf<R>(m / gap, m * (1 + minus_chi) / gap, R(1));
   const R distance_integral = elliprf<R>(minus_chi / (1 + minus_chi), gap / (1 + minus_chi), R(1));
   const R complement_quarter = elliprf<R>(R(0), complement_parameter, R(1));
@@ -129,13 +154,13 @@ void series_coefficients(R m, R mc, R nu, R complete, R quarter, R* record) {
     q_even_power *= q_squared;
     q_odd *= q_even_power;
   }
-  const bool without_first_kind = nu >= -1;
+  const bool without_first_kind = value(nu) >= -1;
   // The complementary series from the nome q' of mc (stand-ins where m <= 1/2).
-  const bool candidate = m > R(0.5);
+  const bool candidate = value(m) > 0.5;
   R q_c, q_c_over_mc;
   nome(candidate ? mc : R(0.5), candidate ? m : R(0.5), q_c, q_c_over_mc);
-  const R sin_shift = std::sin(pi / 2 * shift / complement_quarter);
-  const R cos_shift = std::sin(pi / 2 * distance / complement_quarter);
+  const R sin_shift = sin(pi / 2 * shift / complement_quarter);
+  const R cos_shift = sin(pi / 2 * distance / complement_quarter);
   const R cos_triple = cos_shift * (4 * cos_shift * cos_shift - 3);
   const R sin_triple = sin_shift * (3 - 4 * sin_shift * sin_shift);
   const R sin_double = 2 * sin_shift * cos_shift;
@@ -146,15 +171,15 @@ void series_coefficients(R m, R mc, R nu, R complete, R quarter, R* record) {
   const R zeta = (pi / 2) / complement_quarter * theta_derivative / theta;
   const R slope_complementary = moving ? (without_first_kind ? -minus_chi : m) / gap + amplitude * zeta : R(0);
   R* complementary_rows = record + L::kComplementaryRows;
-  const R rows_c[8] = {cos_shift, q_c * cos_triple, sin_shift, q_c * sin_triple, 1, -q_c, q_c, q_c * q_c};
+  const R rows_c[8] = {cos_shift, q_c * cos_triple, sin_shift, q_c * sin_triple, R(1), -q_c, q_c, q_c * q_c};
   for (int k = 0; k < 8; ++k) complementary_rows[k] = rows_c[k];
-  const bool complementary = q > R(L::largest_nome);
+  const bool complementary = value(q) > L::largest_nome;
   record[L::kSeriesAmplitude] = amplitude;
   record[L::kOrigin] = origin;
   record[L::kQuarter] = quarter;
   record[L::kSlope] = complementary ? slope_complementary : complete / quarter;
-  record[L::kComplementary] = complementary ? 1 : 0;
-  record[L::kPeriodic] = 1;
+  record[L::kComplementary] = R(complementary ? 1 : 0);
+  record[L::kPeriodic] = R(1);
   record[L::kComplementaryLogNome] = -pi * quarter / complement_quarter;
   record[L::kComplementaryScale] = pi / complement_quarter;
   record[L::kComplementaryCnFactor] = 1 / sqrt(sqrt(q_c_over_mc));
@@ -164,18 +189,20 @@ void series_coefficients(R m, R mc, R nu, R complete, R quarter, R* record) {
 // from the complementary series (`_series._evaluate_complementary`).
 template <class R>
 void complementary_parts(const R* record, R reduced, R& sn_scaled, R& cn_scaled, R& real, R& imaginary) {
-  using L = SeriesLayout<R>;
+  using L = SeriesLayout<real_t<R>>;
   using std::exp;
   using std::expm1;
+  using std::fabs;
   const R* rows = record + L::kComplementaryRows;
-  const R sign = reduced < 0 ? R(-1) : R(1);
-  const R distance = std::fabs(reduced) * record[L::kComplementaryScale];
-  const R gap = std::fmin(record[L::kComplementaryLogNome] + distance, R(0));
-  const R half = exp(-distance / 2), d = -expm1(-distance), f = exp(gap), g = -expm1(gap);
-  const R e = half * half, e2 = e * e, triple = 1 + e + e2;
+  const R sign = value(reduced) < 0 ? R(-1) : R(1);
+  const R distance = fabs(reduced) * record[L::kComplementaryScale];
+  const R sum = record[L::kComplementaryLogNome] + distance;
+  const R gap = value(sum) < 0 ? sum : R(0);  // min(sum, 0)
+  const R half = exp(-distance / 2.0), d = -expm1(-distance), f = exp(gap), g = -expm1(gap);
+  const R e = half * half, e2 = e * e, triple = 1.0 + e + e2;
   sn_scaled = sign * d * (rows[4] + rows[5] * f * triple);
-  cn_scaled = record[L::kComplementaryCnFactor] * half * (g - rows[6] * e + rows[7] * (f * f) * (1 + e2 * e2));
-  real = rows[0] * (1 + e) + rows[1] * f * (1 + e * e2);
+  cn_scaled = record[L::kComplementaryCnFactor] * half * (g - rows[6] * e + rows[7] * (f * f) * (1.0 + e2 * e2));
+  real = rows[0] * (1.0 + e) + rows[1] * f * (1.0 + e * e2);
   imaginary = sign * d * (rows[2] + rows[3] * f * triple);
 }
 
@@ -183,32 +210,48 @@ void complementary_parts(const R* record, R reduced, R& sn_scaled, R& cn_scaled,
 // block's points.
 template <class R, bool Jacobi>
 FRBJAX_INLINE void direct_parts(const R* record, R reduced, R& sn_scaled, R& cn_scaled, R& real, R& imaginary) {
-  using L = SeriesLayout<R>;
+  using L = SeriesLayout<real_t<R>>;
   constexpr int terms = L::terms;
   const R* rows = record + L::kRows;
   const R v = reduced * R(1.5707963267948966) / record[L::kQuarter];
-  R sin_v, cos_v;
-  circular::cos_sin(v, cos_v, sin_v);
   R sines[2 * terms], cosines[2 * terms];
-  sines[0] = sin_v;
-  cosines[0] = cos_v;
-  for (int k = 1; k < 2 * terms; ++k) {
-    cosines[k] = cosines[k - 1] * cos_v - sines[k - 1] * sin_v;
-    sines[k] = sines[k - 1] * cos_v + cosines[k - 1] * sin_v;
+  if constexpr (is_dual<R>::value) {
+    // On dual numbers of reals: the multiples' values by the same recurrence, their derivatives
+    // d sin(k v) = k cos(k v) dv and d cos(k v) = -k sin(k v) dv at once.
+    using V = decltype(v.v);
+    V sine[2 * terms], cosine[2 * terms];
+    circular::cos_sin(v.v, cosine[0], sine[0]);
+    for (int k = 1; k < 2 * terms; ++k) {
+      cosine[k] = cosine[k - 1] * cosine[0] - sine[k - 1] * sine[0];
+      sine[k] = sine[k - 1] * cosine[0] + cosine[k - 1] * sine[0];
+    }
+    for (int k = 0; k < 2 * terms; ++k) {
+      sines[k] = chain(v, sine[k], V(k + 1) * cosine[k]);
+      cosines[k] = chain(v, cosine[k], -V(k + 1) * sine[k]);
+    }
+  } else {
+    R sin_v, cos_v;
+    series_cos_sin(v, cos_v, sin_v);
+    sines[0] = sin_v;
+    cosines[0] = cos_v;
+    for (int k = 1; k < 2 * terms; ++k) {
+      cosines[k] = cosines[k - 1] * cos_v - sines[k - 1] * sin_v;
+      sines[k] = sines[k - 1] * cos_v + cosines[k - 1] * sin_v;
+    }
   }
-  sn_scaled = 0;
-  cn_scaled = 0;
+  sn_scaled = R(0);
+  cn_scaled = R(0);
   if (Jacobi) {
     for (int j = 0; j < terms; ++j) {
-      sn_scaled += rows[j] * sines[2 * j];
-      cn_scaled += rows[terms + j] * cosines[2 * j];
+      sn_scaled = sn_scaled + rows[j] * sines[2 * j];
+      cn_scaled = cn_scaled + rows[terms + j] * cosines[2 * j];
     }
   }
   real = record[L::kOrigin];
-  imaginary = 0;
+  imaginary = R(0);
   for (int j = 0; j < terms; ++j) {
-    real -= 2 * rows[2 * terms + j] * (sines[j] * sines[j]);
-    imaginary -= rows[3 * terms + j] * sines[2 * j + 1];
+    real = real - 2.0 * rows[2 * terms + j] * (sines[j] * sines[j]);
+    imaginary = imaginary - rows[3 * terms + j] * sines[2 * j + 1];
   }
 }
 
@@ -216,7 +259,7 @@ FRBJAX_INLINE void direct_parts(const R* record, R reduced, R& sn_scaled, R& cn_
 template <class R>
 void angle_parts(const R* record, R reduced, R& real, R& imaginary) {
   R sn_scaled, cn_scaled;
-  if (record[SeriesLayout<R>::kComplementary] != 0)
+  if (value(record[SeriesLayout<real_t<R>>::kComplementary]) != 0)
     complementary_parts<R>(record, reduced, sn_scaled, cn_scaled, real, imaginary);
   else
     direct_parts<R, false>(record, reduced, sn_scaled, cn_scaled, real, imaginary);
@@ -225,33 +268,33 @@ void angle_parts(const R* record, R reduced, R& real, R& imaginary) {
 // The expanded integral from 0 to u_r: u_r slope + A arg theta(...).
 template <class R>
 FRBJAX_INLINE R reduced_third_kind(const R* record, R reduced, R real, R imaginary) {
-  using L = SeriesLayout<R>;
-  return reduced * record[L::kSlope] + record[L::kSeriesAmplitude] * circular::arctangent2(imaginary, real);
+  using L = SeriesLayout<real_t<R>>;
+  return reduced * record[L::kSlope] + record[L::kSeriesAmplitude] * series_arctangent2(imaginary, real);
 }
 
 // psi's bounded part at unit L (l1, l2, l3) and the integral's value: orientation (atan2(l2, l_o) -
 // alpha third_kind), `_regimes.evaluate` and `reference`.
 template <class R>
 FRBJAX_INLINE R bounded_angle(const R* record, R l1, R l2, R l3, R third_kind) {
-  using L = SeriesLayout<R>;
-  const bool minor = record[L::kMinor] != 0;
-  const R angle = circular::arctangent2(l2, minor ? l1 : l3) - record[L::kAlpha] * third_kind;
+  using L = SeriesLayout<real_t<R>>;
+  const bool minor = value(record[L::kMinor]) != 0;
+  const R angle = series_arctangent2(l2, minor ? l1 : l3) - record[L::kAlpha] * third_kind;
   return minor ? -angle : angle;
 }
 
 // A body's record from its sorted moments and unit working-frame L (in[0..5]) and its regime.
 template <class R>
 void series_record(const R* given, int regime, R* record) {
-  using L = SeriesLayout<R>;
+  using L = SeriesLayout<real_t<R>>;
   using std::sqrt;
-  for (int k = 0; k < L::size; ++k) record[k] = 0;
+  for (int k = 0; k < L::size; ++k) record[k] = R(0);
   R in[6];
-  const R safe[6] = {1, 2, 3, R(0.3), 0, R(0.9539392014169456)};  // `_regimes._SAFE_MAJOR`
+  const R safe[6] = {R(1), R(2), R(3), R(0.3), R(0), R(0.9539392014169456)};  // `_regimes._SAFE_MAJOR`
   const bool uniform = regime == kUniform || regime < 0 || regime > kUniform;
   for (int k = 0; k < 6; ++k) in[k] = uniform ? safe[k] : given[k];
   if (uniform) regime = kMajor;
   const bool minor = regime == kMinor;
-  record[L::kMinor] = minor ? 1 : 0;
+  record[L::kMinor] = R(minor ? 1 : 0);
   if (regime == kSeparatrix) {
     const SeparatrixOrbit<R> orbit = separatrix_orbit(in);
     record[L::kAmplitude] = orbit.amplitude_1;
@@ -273,7 +316,7 @@ void series_record(const R* given, int regime, R* record) {
     record[L::kSlope] = 0;
     record[L::kComplementary] = 1;
     record[L::kPeriodic] = 0;
-    record[L::kComplementaryLogNome] = -std::numeric_limits<R>::infinity();
+    record[L::kComplementaryLogNome] = R(-std::numeric_limits<real_t<R>>::infinity());
     record[L::kComplementaryScale] = 2;
     record[L::kComplementaryCnFactor] = 2;
   } else {
@@ -287,12 +330,12 @@ void series_record(const R* given, int regime, R* record) {
     // The phase u0 = F(am0|m) = sn0 R_F(cn0^2, dn0^2, 1), or from the quarter period where cn0^2 <
     // mc sn0^2 (`_regimes.constants`).
     const R mc_sn0_squared = mc * (sn0 * sn0);
-    const bool reflected = cn0 * cn0 < mc_sn0_squared;
+    const bool reflected = value(cn0 * cn0) < value(mc_sn0_squared);
     const R dn0_squared = cn0 * cn0 + mc_sn0_squared;
     const R phase_integral = reflected ? elliprf<R>(mc_sn0_squared, mc, dn0_squared)
                                        : elliprf<R>(cn0 * cn0, dn0_squared, R(1));
     const R quarter = elliprf<R>(R(0), mc, R(1));
-    const R sign = sn0 < 0 ? R(-1) : R(1);
+    const R sign = value(sn0) < 0 ? R(-1) : R(1);
     record[L::kU0] = reflected ? sign * (quarter - cn0 * phase_integral) : sn0 * phase_integral;
     const R complete = complete_third_kind<R>(orbit.nu, m, mc);
     record[L::kThirdComplete] = complete;
@@ -307,6 +350,37 @@ void series_record(const R* given, int regime, R* record) {
   record[L::kPsiReference] =
       bounded_angle<R>(record, in[3], in[4], in[5], reduced_third_kind<R>(record, record[L::kU0], real, imaginary));
   chart<R>(R(1), R(0), in[3], in[4], in[5], minor, record + L::kReference);
+}
+
+// Unit L (3) and q̂(tau) (4) in the working frame at one time tau of one body from its record:
+// `series_motion_block`'s operations for one point, on any number type (for dual numbers).
+template <class T>
+void series_motion_point(const T* record, const T& tau, T* out) {
+  using L = SeriesLayout<real_t<T>>;
+  using std::sqrt;
+  const bool periodic = value(record[L::kPeriodic]) != 0;
+  const T u = record[L::kU0] + record[L::kRate] * tau;
+  const double turns = periodic ? std::nearbyint(double(value(u / (2.0 * record[L::kQuarter])))) : 0.0;
+  const T reduced = u - 2.0 * record[L::kQuarter] * turns;
+  T sn_scaled, cn_scaled, real, imaginary;
+  if (value(record[L::kComplementary]) != 0)
+    complementary_parts<T>(record, reduced, sn_scaled, cn_scaled, real, imaginary);
+  else
+    direct_parts<T, true>(record, reduced, sn_scaled, cn_scaled, real, imaginary);
+  const bool minor = value(record[L::kMinor]) != 0;
+  const T norm = sqrt(sn_scaled * sn_scaled + cn_scaled * cn_scaled);
+  const double parity = turns - 2 * std::floor(turns / 2) != 0 ? -1.0 : 1.0;
+  const T sn = parity * sn_scaled / norm, cn = parity * cn_scaled / norm;
+  const T dn = sqrt(cn * cn + record[L::kMc] * (sn * sn));
+  out[0] = record[L::kAmplitude] * (minor ? dn : cn);
+  out[1] = record[L::kAmplitude + 1] * sn;
+  out[2] = record[L::kAmplitude + 2] * (minor ? cn : dn);
+  const T third_kind = 2.0 * turns * record[L::kThirdComplete] + reduced_third_kind<T>(record, reduced, real, imaginary);
+  const T angle = bounded_angle<T>(record, out[0], out[1], out[2], third_kind);
+  const T psi = record[L::kPrecession] * tau + (angle - record[L::kPsiReference]);
+  T half_cos, half_sin;
+  series_cos_sin(psi / 2.0, half_cos, half_sin);
+  chart<T>(half_cos, half_sin, out[0], out[1], out[2], minor, out + 3);
 }
 
 // Points evaluated together: each stage of `series_motion_block` is a loop over a block's points,

@@ -417,7 +417,7 @@ def motion_once(inertia, angular_momentum, attitude, t, with_attitude=True, axes
     return motion(inertia, angular_momentum, attitude, t, axes)
 
 
-def flow_state(inertia, axes, angular_momentum, attitude, t):
+def flow_state(inertia, axes, angular_momentum, attitude, t, series=False):
     """(L(t), q(t)) in the body frame from the flow kernels (``_compiled_motion.flow``), arguments of one
     batch, differentiable (the kernels' first and second derivatives, ``motion_once``'s conventions).
 
@@ -426,6 +426,9 @@ def flow_state(inertia, axes, angular_momentum, attitude, t):
     made zeros in value as ``_prepare`` makes them (so that the kernel sees the same uniform rotations),
     q_p = q0 ⊗ r, and L(t) = R L_p(t), q(t) = q_p(t) ⊗ conj(r) (r: R as a quaternion).  The turn of
     the axes enters the derivatives through these products.
+
+    ``series``: the first derivatives from the body's series (``_compiled_motion.series_flow``), for a
+    FreeRigidBody's evaluations, whose arguments come with each body's points consecutive.
     """
     if axes is not None:
         principal = to_principal(axes, angular_momentum)
@@ -436,7 +439,8 @@ def flow_state(inertia, axes, angular_momentum, attitude, t):
         )
         rotation = quaternion.from_matrix(axes)
         attitude = quaternion.multiply(attitude, rotation)
-    state = _compiled_motion.flow(inertia, angular_momentum, attitude, t)
+    flow = _compiled_motion.series_flow if series else _compiled_motion.flow
+    state = flow(inertia, angular_momentum, attitude, t)
     momentum, attitude = state[..., :3], state[..., 3:]
     if axes is None:
         return momentum, attitude
@@ -448,7 +452,9 @@ def _with_flow_jacobian(method, outputs):
     moments, principal axes, initial L and unit initial attitude and in t: every field of a body is a
     function of those, and its motion at t is ``motion_once``'s, so the JVP is the kernels' matrix of
     partial derivatives times their tangents (the derived fields' tangents are not needed, and JAX
-    drops their computation)."""
+    drops their computation).  The first derivatives come from the body's series on dual numbers (one
+    record per body for all its times: ``_compiled_motion.series_flow``), the second ones from the
+    one-time kernel."""
     wrapped = jax.custom_jvp(method)
 
     def rule(primals, tangents):
@@ -459,12 +465,28 @@ def _with_flow_jacobian(method, outputs):
         value = wrapped(body, t)
         batch = jax.tree.leaves(value)[0].shape[:-1]
 
+        # Each body's points consecutive (the axes along which the bodies differ first, those along
+        # which they are broadcast last), so that the kernel builds a body's series record once for all
+        # its times.
+        shape = (1,) * (len(batch) - body.inertia.ndim + 1) + body.inertia.shape[:-1]
+        order = tuple(k for k in range(len(batch)) if shape[k] != 1) + tuple(
+            k for k in range(len(batch)) if shape[k] == 1
+        )
+        restore = tuple(int(k) for k in np.argsort(order))
+
+        def first(a, trailing):
+            a = jnp.broadcast_to(a, batch + a.shape[len(a.shape) - trailing :])
+            return jnp.transpose(a, order + tuple(range(len(batch), len(batch) + trailing)))
+
+        def back(a):
+            return jnp.transpose(a, restore + (len(batch),))
+
         def state(inertia, axes, momentum, attitude, t):
-            axes = None if axes is None else jnp.broadcast_to(axes, batch + (3, 3))
-            inertia, momentum, attitude = (
-                jnp.broadcast_to(a, batch + a.shape[-1:]) for a in (inertia, momentum, attitude)
-            )
-            momentum, attitude = flow_state(inertia, axes, momentum, attitude, jnp.broadcast_to(t, batch))
+            axes = None if axes is None else first(axes, 2)
+            inertia, momentum, attitude = (first(a, 1) for a in (inertia, momentum, attitude))
+            t = jnp.transpose(jnp.broadcast_to(t, batch), order)
+            momentum, attitude = flow_state(inertia, axes, momentum, attitude, t, series=True)
+            momentum, attitude = back(momentum), back(attitude)
             return {"momentum": momentum, "attitude": attitude, "state": (momentum, attitude)}[outputs]
 
         fields = ("inertia", "principal_axes", "initial_angular_momentum", "initial_attitude")

@@ -155,6 +155,28 @@ flow, flow_with_jacobian = _compiled.differentiable(
 )
 
 
+def _series_flow_kernel(order, arguments):
+    """``_flow_kernel`` for a FreeRigidBody's evaluations, its order-1 kernel from the body's series
+    (csrc/flow_jacobian.hpp's ``series_flow_derivatives``: one record of dual numbers per body, kept
+    over the body's consecutive points); orders 0 and 2 are the one-time motion's (the same function)."""
+    if order != 1:
+        return _flow_kernel(order, arguments)
+    if _compiled._module() is None:
+        raise RuntimeError("frbjax's compiled kernels are not available (see frbjax.special._compiled)")
+    inertia, t = arguments[0], arguments[3]
+    result = jax.ShapeDtypeStruct(t.shape + (7, 1 + _FLOW_INPUTS), inertia.dtype)
+    return jax.ffi.ffi_call("frbjax_free_flow_series_1", result, vmap_method="broadcast_all")(*arguments)
+
+
+# ``flow`` for a FreeRigidBody's evaluations (``_body._with_flow_jacobian``): its arguments with each
+# body's points consecutive, so that a body's series record is built once for all its times.
+series_flow, _ = _compiled.differentiable(
+    _series_flow_kernel,
+    _FLOW_INPUTS,
+    lambda primals, tangents: flow_direction(tangents, primals[3].shape, primals[0].dtype),
+)
+
+
 def free_flow_frame(inertia, angular_momentum):
     """The kernel's working frame per body, for the tests: (sorted inertia, unit working L, |L|,
     regime), to compare bit for bit with ``_body._prepare``'s."""
@@ -174,8 +196,9 @@ def series_selected(inertia) -> bool:
     """Whether a ``FreeRigidBody`` of ``inertia``'s dtype builds and evaluates its theta series with the
     compiled kernels (csrc/series.hpp): wherever the special functions' kernels are selected
     (``FRBJAX_KERNELS``).  Its values are the JAX series' to rounding (the same formulas); its
-    derivatives are the one-time kernel's, which computes the same function (the charts count psi
-    from tau = 0 on both)."""
+    derivatives are those of the same function (the charts count psi from tau = 0 on both): the
+    first ones from the series on dual numbers (``series_flow``), the second ones the one-time
+    kernel's."""
     return _compiled.selected(inertia)
 
 
