@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import dataclasses
 import functools
+import math
 
 import equinox as eqx
 import jax
@@ -481,11 +482,16 @@ def _with_flow_jacobian(method, outputs):
         def back(a):
             return jnp.transpose(a, restore + (len(batch),))
 
+        # A body's record pays off from a few times on (measured: 6.2 us for a record and one point
+        # against the one-time kernel's 4.3 us, 1.6 us a point at ten times): bodies at one time
+        # each take the one-time kernel.
+        times_per_body = math.prod(batch[k] for k in range(len(batch)) if shape[k] == 1)
+
         def state(inertia, axes, momentum, attitude, t):
             axes = None if axes is None else first(axes, 2)
             inertia, momentum, attitude = (first(a, 1) for a in (inertia, momentum, attitude))
             t = jnp.transpose(jnp.broadcast_to(t, batch), order)
-            momentum, attitude = flow_state(inertia, axes, momentum, attitude, t, series=True)
+            momentum, attitude = flow_state(inertia, axes, momentum, attitude, t, series=times_per_body > 1)
             momentum, attitude = back(momentum), back(attitude)
             return {"momentum": momentum, "attitude": attitude, "state": (momentum, attitude)}[outputs]
 
