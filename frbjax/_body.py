@@ -475,12 +475,14 @@ def _with_flow_jacobian(method, outputs):
         )
         restore = tuple(int(k) for k in np.argsort(order))
 
+        identity = order == tuple(range(len(batch)))
+
         def first(a, trailing):
             a = jnp.broadcast_to(a, batch + a.shape[len(a.shape) - trailing :])
-            return jnp.transpose(a, order + tuple(range(len(batch), len(batch) + trailing)))
+            return a if identity else jnp.transpose(a, order + tuple(range(len(batch), len(batch) + trailing)))
 
         def back(a):
-            return jnp.transpose(a, restore + (len(batch),))
+            return a if identity else jnp.transpose(a, restore + (len(batch),))
 
         # A body's record pays off from a few times on (measured: 6.2 us for a record and one point
         # against the one-time kernel's 4.3 us, 1.6 us a point at ten times): bodies at one time
@@ -490,7 +492,7 @@ def _with_flow_jacobian(method, outputs):
         def state(inertia, axes, momentum, attitude, t):
             axes = None if axes is None else first(axes, 2)
             inertia, momentum, attitude = (first(a, 1) for a in (inertia, momentum, attitude))
-            t = jnp.transpose(jnp.broadcast_to(t, batch), order)
+            t = jnp.broadcast_to(t, batch) if identity else jnp.transpose(jnp.broadcast_to(t, batch), order)
             momentum, attitude = flow_state(inertia, axes, momentum, attitude, t, series=times_per_body > 1)
             momentum, attitude = back(momentum), back(attitude)
             return {"momentum": momentum, "attitude": attitude, "state": (momentum, attitude)}[outputs]
