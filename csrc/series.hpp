@@ -190,6 +190,7 @@ void series_coefficients(R m, R mc, R nu, R complete, R quarter, R* record) {
 template <class R>
 void complementary_parts(const R* record, R reduced, R& sn_scaled, R& cn_scaled, R& real, R& imaginary) {
   using L = SeriesLayout<real_t<R>>;
+  using Real = real_t<R>;
   using std::exp;
   using std::expm1;
   using std::fabs;
@@ -198,11 +199,11 @@ void complementary_parts(const R* record, R reduced, R& sn_scaled, R& cn_scaled,
   const R distance = fabs(reduced) * record[L::kComplementaryScale];
   const R sum = record[L::kComplementaryLogNome] + distance;
   const R gap = value(sum) < 0 ? sum : R(0);  // min(sum, 0)
-  const R half = exp(-distance / 2.0), d = -expm1(-distance), f = exp(gap), g = -expm1(gap);
-  const R e = half * half, e2 = e * e, triple = 1.0 + e + e2;
+  const R half = exp(-distance / Real(2)), d = -expm1(-distance), f = exp(gap), g = -expm1(gap);
+  const R e = half * half, e2 = e * e, triple = Real(1) + e + e2;
   sn_scaled = sign * d * (rows[4] + rows[5] * f * triple);
-  cn_scaled = record[L::kComplementaryCnFactor] * half * (g - rows[6] * e + rows[7] * (f * f) * (1.0 + e2 * e2));
-  real = rows[0] * (1.0 + e) + rows[1] * f * (1.0 + e * e2);
+  cn_scaled = record[L::kComplementaryCnFactor] * half * (g - rows[6] * e + rows[7] * (f * f) * (Real(1) + e2 * e2));
+  real = rows[0] * (Real(1) + e) + rows[1] * f * (Real(1) + e * e2);
   imaginary = sign * d * (rows[2] + rows[3] * f * triple);
 }
 
@@ -250,7 +251,7 @@ FRBJAX_INLINE void direct_parts(const R* record, R reduced, R& sn_scaled, R& cn_
   real = record[L::kOrigin];
   imaginary = R(0);
   for (int j = 0; j < terms; ++j) {
-    real = real - 2.0 * rows[2 * terms + j] * (sines[j] * sines[j]);
+    real = real - real_t<R>(2) * rows[2 * terms + j] * (sines[j] * sines[j]);
     imaginary = imaginary - rows[3 * terms + j] * sines[2 * j + 1];
   }
 }
