@@ -448,6 +448,27 @@ def flow_state(inertia, axes, angular_momentum, attitude, t, series=False):
     return to_body(axes, momentum), quaternion.multiply(attitude, quaternion.conjugate(rotation))
 
 
+def _bodies_first(body_batch, batch):
+    """(first, back, times per body) for arrays of ``batch`` (+ trailing axes) whose bodies have the
+    batch shape ``body_batch`` (broadcast against ``batch``): ``first(a, trailing)`` broadcasts ``a``
+    to the batch and moves the axes along which the bodies differ before those along which they are
+    broadcast, so that each body's points are consecutive (the kernel then builds a body's series
+    record once for all its times); ``back(a)`` restores the batch's order of a result (..., k)."""
+    shape = (1,) * (len(batch) - len(body_batch)) + tuple(body_batch)
+    order = tuple(k for k in range(len(batch)) if shape[k] != 1) + tuple(k for k in range(len(batch)) if shape[k] == 1)
+    restore = tuple(int(k) for k in np.argsort(order))
+    identity = order == tuple(range(len(batch)))
+
+    def first(a, trailing):
+        a = jnp.broadcast_to(a, batch + jnp.shape(a)[jnp.ndim(a) - trailing :])
+        return a if identity else jnp.transpose(a, order + tuple(range(len(batch), len(batch) + trailing)))
+
+    def back(a):
+        return a if identity else jnp.transpose(a, restore + (len(batch),))
+
+    return first, back, math.prod(batch[k] for k in range(len(batch)) if shape[k] == 1)
+
+
 def _with_flow_jacobian(method, outputs):
     """``method(body, t)`` with the derivatives of the flow kernels (``flow_state``) in the body's
     moments, principal axes, initial L and unit initial attitude and in t: every field of a body is a
@@ -466,34 +487,15 @@ def _with_flow_jacobian(method, outputs):
         value = wrapped(body, t)
         batch = jax.tree.leaves(value)[0].shape[:-1]
 
-        # Each body's points consecutive (the axes along which the bodies differ first, those along
-        # which they are broadcast last), so that the kernel builds a body's series record once for all
-        # its times.
-        shape = (1,) * (len(batch) - body.inertia.ndim + 1) + body.inertia.shape[:-1]
-        order = tuple(k for k in range(len(batch)) if shape[k] != 1) + tuple(
-            k for k in range(len(batch)) if shape[k] == 1
-        )
-        restore = tuple(int(k) for k in np.argsort(order))
-
-        identity = order == tuple(range(len(batch)))
-
-        def first(a, trailing):
-            a = jnp.broadcast_to(a, batch + a.shape[len(a.shape) - trailing :])
-            return a if identity else jnp.transpose(a, order + tuple(range(len(batch), len(batch) + trailing)))
-
-        def back(a):
-            return a if identity else jnp.transpose(a, restore + (len(batch),))
-
-        # A body's record pays off from a few times on (measured: 6.2 us for a record and one point
-        # against the one-time kernel's 4.3 us, 1.6 us a point at ten times): bodies at one time
-        # each take the one-time kernel.
-        times_per_body = math.prod(batch[k] for k in range(len(batch)) if shape[k] == 1)
+        first, back, times_per_body = _bodies_first(body.inertia.shape[:-1], batch)
 
         def state(inertia, axes, momentum, attitude, t):
             axes = None if axes is None else first(axes, 2)
             inertia, momentum, attitude = (first(a, 1) for a in (inertia, momentum, attitude))
-            t = jnp.broadcast_to(t, batch) if identity else jnp.transpose(jnp.broadcast_to(t, batch), order)
-            momentum, attitude = flow_state(inertia, axes, momentum, attitude, t, series=times_per_body > 1)
+            # A body's record pays off from a few times on (measured: a record and one point 6.2 us
+            # against the one-time kernel's 4.3 us; 1.6 us a point at ten times).
+            series = times_per_body > 1
+            momentum, attitude = flow_state(inertia, axes, momentum, attitude, first(t, 0), series=series)
             momentum, attitude = back(momentum), back(attitude)
             return {"momentum": momentum, "attitude": attitude, "state": (momentum, attitude)}[outputs]
 
