@@ -19,6 +19,7 @@
 #pragma once
 
 #include <cmath>
+#include <cstring>
 #include <limits>
 #include <type_traits>
 
@@ -534,8 +535,8 @@ void series_flow_derivatives(const R* inertia, const R* momentum, const R* attit
   constexpr int W = flow_width<1>();
   const R key[10] = {inertia[0],  inertia[1],  inertia[2],  momentum[0], momentum[1],
                      momentum[2], attitude[0], attitude[1], attitude[2], attitude[3]};
-  bool same = body.ready;
-  for (int k = 0; k < 10 && same; ++k) same = key[k] == body.key[k];
+  // Bit for bit (signed zeros apart too), so that the kept record is the one these inputs build.
+  const bool same = body.ready && std::memcmp(key, body.key, sizeof key) == 0;
   if (!same) {
     for (int k = 0; k < 10; ++k) body.key[k] = key[k];
     body.ready = true;
