@@ -9,8 +9,8 @@
 //   take every step (their series converge a power of the spread more slowly).
 // * R_J's step carries R_C(1, 1 + e_k) (Carlson 1995, eq. (2.19)), with 1 + e_k computed without
 //   cancellation when e_k -> -1, R_C's polynomial taken at e_k directly where |e_k| <= 0.1716 (the JAX
-//   path takes one duplication step of R_C first at every step: the same function to rounding); for p much larger than x, y, z, DLMF 19.21.12 trades p for a
-//   parameter close to the largest argument.
+//   path takes one duplication step of R_C first at every step: the same function to rounding); for
+//   p much larger than x, y, z, DLMF 19.21.12 trades p for a parameter close to the largest argument.
 // * R_C: its closed forms (DLMF 19.2.18-19.2.19), a series near x = y, the principal value for y < 0
 //   (DLMF 19.6.16).
 #pragma once

@@ -135,12 +135,13 @@ inline Dual<T, N>& operator+=(Dual<T, N>& a, const U& b) {
   return a;
 }
 
-// f(a) with f(a.v) = value and f'(a.v) = slope, by the chain rule.
 template <class T, int N, class U>
 inline Dual<T, N>& operator*=(Dual<T, N>& a, const U& b) {
   a = a * b;
   return a;
 }
+
+// f(a) with f(a.v) = value and f'(a.v) = slope, by the chain rule.
 template <class T, int N, class U, class V>
 inline Dual<T, N> chain(const Dual<T, N>& a, const U& value, const V& slope) {
   Dual<T, N> r;

@@ -526,7 +526,9 @@ struct SeriesFlow {
   bool series = false;
   R key[10];
   WorkingFrame<R> frame;
-  FlowDual<R> moments[3], angular_momentum[3], start[4];
+  // The working motion's inputs on the flow's numbers (flow_inputs; tau, inputs[6], per point), |L|
+  // and the unit q0: functions of the body alone.
+  FlowDual<R> inputs[kMotionInputs], norm, start[4];
   MotionDual1<R> record[SeriesLayout<R>::size];
 };
 
@@ -547,13 +549,15 @@ void series_flow_derivatives(const R* inertia, const R* momentum, const R* attit
       body.series = (regime == kMajor || regime == kMinor) && !precessing<R>(inertia, momentum, regime);
     }
     if (body.series) {
-      FlowDual<R> quaternion[4];
+      FlowDual<R> moments[3], angular_momentum[3], quaternion[4], time;
       for (int k = 0; k < 3; ++k) {
-        seed(body.moments[k], inertia[k], k);
-        seed(body.angular_momentum[k], momentum[k], 3 + k);
+        seed(moments[k], inertia[k], k);
+        seed(angular_momentum[k], momentum[k], 3 + k);
       }
       for (int k = 0; k < 4; ++k) seed(quaternion[k], attitude[k], 6 + k);
       unit_attitude(quaternion, body.start);
+      seed(time, R(0), 10);
+      flow_inputs(body.frame, moments, angular_momentum, time, body.inputs, body.norm);
       MotionDual1<R> seeded[6];
       for (int j = 0; j < 3; ++j) {
         seed_motion(seeded[j], body.frame.inertia[j], j);
@@ -564,9 +568,9 @@ void series_flow_derivatives(const R* inertia, const R* momentum, const R* attit
   }
   if (!body.series) return free_flow_derivatives<R, 1>(inertia, momentum, attitude, t, out);
   using L = SeriesLayout<R>;
-  FlowDual<R> time, inputs[kMotionInputs], norm, result[kFlowOutputs];
+  FlowDual<R> time, result[kFlowOutputs];
   seed(time, t, 10);
-  flow_inputs(body.frame, body.moments, body.angular_momentum, time, inputs, norm);
+  body.inputs[6] = body.norm * time;  // flow_inputs' tau
   MotionDual1<R> tau, now[7], motion[kMotionOutputs];
   seed_motion(tau, body.frame.norm * t, 6);
   series_motion_point<MotionDual1<R>>(body.record, tau, now);
@@ -575,7 +579,7 @@ void series_flow_derivatives(const R* inertia, const R* momentum, const R* attit
     motion[3 + k] = body.record[L::kReference + k];
     motion[7 + k] = now[3 + k];
   }
-  flow_from_motion<R, FlowDual<R>, MotionDual1<R>>(body.frame, norm, inputs, motion, body.start, result);
+  flow_from_motion<R, FlowDual<R>, MotionDual1<R>>(body.frame, body.norm, body.inputs, motion, body.start, result);
   for (int o = 0; o < kFlowOutputs; ++o) {
     out[o * W] = result[o].v;
     for (int a = 0; a < kFlowInputs; ++a) out[o * W + 1 + a] = result[o].d[a];

@@ -454,9 +454,8 @@ def _bodies_first(body_batch, batch):
     to the batch and moves the axes along which the bodies differ before those along which they are
     broadcast, so that each body's points are consecutive (the kernel then builds a body's series
     record once for all its times); ``back(a)`` restores the batch's order of a result (..., k)."""
-    shape = (1,) * (len(batch) - len(body_batch)) + tuple(body_batch)
-    order = tuple(k for k in range(len(batch)) if shape[k] != 1) + tuple(k for k in range(len(batch)) if shape[k] == 1)
-    restore = tuple(int(k) for k in np.argsort(order))
+    order, bodies = _compiled_motion.bodies_first(body_batch, batch)
+    restore = _compiled_motion.inverse_order(order)
     identity = order == tuple(range(len(batch)))
 
     def first(a, trailing):
@@ -466,7 +465,7 @@ def _bodies_first(body_batch, batch):
     def back(a):
         return a if identity else jnp.transpose(a, restore + (len(batch),))
 
-    return first, back, math.prod(batch[k] for k in range(len(batch)) if shape[k] == 1)
+    return first, back, math.prod(batch) // max(bodies, 1)  # the points per body
 
 
 def _with_flow_jacobian(method, outputs):

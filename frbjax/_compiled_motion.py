@@ -20,6 +20,7 @@ with those conventions computed in C++, so that a JVP is a product of a matrix w
 
 from __future__ import annotations
 
+import functools
 import math
 import os
 
@@ -129,9 +130,13 @@ def flow_direction(tangents, batch, dtype):
     return jnp.concatenate(vectors + [jnp.broadcast_to(jnp.asarray(time)[..., None], batch + (1,))], -1)
 
 
-def _flow_kernel(order, arguments):
+def _flow_kernel(order, arguments, series=False):
     """The free flow's values (order 0: csrc/free_flow.hpp) or values and partial derivatives (orders 1
-    and 2: csrc/flow_jacobian.hpp) of bodies with principal moments, as (..., 7, width)."""
+    and 2: csrc/flow_jacobian.hpp) of bodies with principal moments, as (..., 7, width).
+
+    ``series``: a FreeRigidBody's evaluations, whose order-1 kernel takes the body's series
+    (``series_flow_derivatives``: one record of dual numbers per body, kept over the body's
+    consecutive points); orders 0 and 2 are the one-time motion's either way (the same function)."""
     inertia, angular_momentum, attitude, t = arguments
     if order == 0:
         return jnp.concatenate(free_flow(inertia, angular_momentum, attitude, t), -1)[..., None]
@@ -139,7 +144,8 @@ def _flow_kernel(order, arguments):
         raise RuntimeError("frbjax's compiled kernels are not available (see frbjax.special._compiled)")
     width = 1 + _FLOW_INPUTS + (_FLOW_INPUTS**2 if order == 2 else 0)
     result = jax.ShapeDtypeStruct(t.shape + (7, width), inertia.dtype)
-    return jax.ffi.ffi_call(f"frbjax_free_flow_{order}", result, vmap_method="broadcast_all")(*arguments)
+    name = "frbjax_free_flow_series_1" if series and order == 1 else f"frbjax_free_flow_{order}"
+    return jax.ffi.ffi_call(name, result, vmap_method="broadcast_all")(*arguments)
 
 
 _FLOW_INPUTS = 11  # moments (3), L0 (3), q0 (4), t
@@ -155,17 +161,7 @@ flow, flow_with_jacobian = _compiled.differentiable(
 )
 
 
-def _series_flow_kernel(order, arguments):
-    """``_flow_kernel`` for a FreeRigidBody's evaluations, its order-1 kernel from the body's series
-    (csrc/flow_jacobian.hpp's ``series_flow_derivatives``: one record of dual numbers per body, kept
-    over the body's consecutive points); orders 0 and 2 are the one-time motion's (the same function)."""
-    if order != 1:
-        return _flow_kernel(order, arguments)
-    if _compiled._module() is None:
-        raise RuntimeError("frbjax's compiled kernels are not available (see frbjax.special._compiled)")
-    inertia, t = arguments[0], arguments[3]
-    result = jax.ShapeDtypeStruct(t.shape + (7, 1 + _FLOW_INPUTS), inertia.dtype)
-    return jax.ffi.ffi_call("frbjax_free_flow_series_1", result, vmap_method="broadcast_all")(*arguments)
+_series_flow_kernel = functools.partial(_flow_kernel, series=True)
 
 
 # ``flow`` for a FreeRigidBody's evaluations (``_body._with_flow_jacobian``): its arguments with each
@@ -311,7 +307,7 @@ def body_state(record, t, attitude=True):
     t = jnp.transpose(t, order)
     times = t.reshape((records.shape[0], -1)) if t.size else t.reshape((0, 1))
     out = _body_state_kernels[attitude](records, times).reshape(t.shape + ((7 if attitude else 3),))
-    out = jnp.transpose(out, _inverse(order) + (len(batch),))
+    out = jnp.transpose(out, inverse_order(order) + (len(batch),))
     return (out[..., :3], out[..., 3:]) if attitude else (out, None)
 
 
@@ -345,19 +341,29 @@ _series_motion = _series_kernel(True)
 _series_momentum = _series_kernel(False)
 
 
-def _records_by_body(record, batch):
-    """The records as (bodies, size), and the order of ``batch``'s axes that puts the bodies' axes
-    (those along which the records vary) first: the kernels take each body's points contiguous, so
-    that bodies (N,) at times (K, N) are N records of K points each (not K x N records of one point)."""
-    shape = (1,) * (len(batch) - (record.ndim - 1)) + record.shape[:-1]
+def bodies_first(body_batch, batch):
+    """(order, bodies): the order of ``batch``'s axes that puts the axes along which bodies of batch
+    shape ``body_batch`` (broadcast against ``batch``) differ before those along which they are
+    broadcast, and the number of bodies.  The kernels take each body's points contiguous, so that
+    bodies (N,) at times (K, N) are N bodies of K points each (not K x N bodies of one point)."""
+    shape = (1,) * (len(batch) - len(body_batch)) + tuple(body_batch)
     bodies = tuple(k for k, n in enumerate(shape) if n != 1)
     order = bodies + tuple(k for k in range(len(batch)) if k not in bodies)
-    record = jnp.transpose(record.reshape(shape + record.shape[-1:]), order + (len(batch),))
-    return record.reshape((math.prod(batch[k] for k in bodies), record.shape[-1])), order
+    return order, math.prod(batch[k] for k in bodies)
 
 
-def _inverse(order):
+def inverse_order(order):
+    """The permutation that undoes ``order`` (a transpose's axes)."""
     return tuple(sorted(range(len(order)), key=order.__getitem__))
+
+
+def _records_by_body(record, batch):
+    """The records as (bodies, size), each body's points contiguous in ``batch`` transposed to the
+    order of ``bodies_first`` (returned with them)."""
+    order, bodies = bodies_first(record.shape[:-1], batch)
+    shape = (1,) * (len(batch) - (record.ndim - 1)) + record.shape[:-1]
+    record = jnp.transpose(record.reshape(shape + record.shape[-1:]), order + (len(batch),))
+    return record.reshape((bodies, record.shape[-1])), order
 
 
 def series_motion(record, inertia, unit_momentum, regime, tau, attitude=True):
@@ -369,7 +375,7 @@ def series_motion(record, inertia, unit_momentum, regime, tau, attitude=True):
     regime = jnp.broadcast_to(regime, batch).astype(jnp.int32)
     record, order = _records_by_body(jax.lax.stop_gradient(record), batch)
     columns, regime = [jnp.transpose(column, order) for column in columns], jnp.transpose(regime, order)
-    back = _inverse(order) + (len(batch),)
+    back = inverse_order(order) + (len(batch),)
     if not attitude:
         return jnp.transpose(_series_momentum(record, *columns, regime), back), None
     out = jnp.transpose(_series_motion(record, *columns, regime), back)

@@ -306,7 +306,6 @@ def test_bodies_along_a_trailing_axis_are_one_record_each():
     layout): the kernels read 3 records of 5 points each, not 15 records of one point (which had cost
     640 ns a point against 49 at 1000 bodies x 100 times), and give each body's points to the bit as
     a body alone does; for the series kernel, the evaluation of a FreeRigidBody and its momentum."""
-    from frbjax import FreeRigidBody
 
     inertia, unit, regime, tau = _bodies(48, np.float64)
     chosen = np.array([4, 30, 46])  # on the separatrix, a symmetric body, a random one
