@@ -113,13 +113,19 @@ def _sphere_exp(base, tangent):
     return cosine * base + sinc * tangent
 
 
-def _body(theta, reference):
-    """The FreeRigidBody of motion parameters theta (8,) with the start's reference frame."""
+def _initial_state(theta, reference):
+    """(moments (I1, I2, 1), body-frame L, attitude q) of motion parameters theta (8,) with the start's
+    reference frame."""
     attitude_ref, direction_ref, basis = reference
     inertia = jnp.exp(jnp.concatenate([theta[:2], jnp.zeros(1, theta.dtype)]))
     attitude = quaternion.multiply(attitude_ref, quaternion.exp_pure(theta[3:6]))
     direction = _sphere_exp(direction_ref, theta[6:8] @ basis)
-    return FreeRigidBody(inertia, jnp.exp(theta[2]) * direction, attitude)
+    return inertia, jnp.exp(theta[2]) * direction, attitude
+
+
+def _body(theta, reference):
+    """The FreeRigidBody of motion parameters theta (8,) with the start's reference frame."""
+    return FreeRigidBody(*_initial_state(theta, reference))
 
 
 # The fitted body in one program (eagerly, each of _body's operations was compiled in turn).
@@ -187,8 +193,9 @@ def _periods(theta, reference, principal_axis):
     """((P_psi, P_phi), LAM) of motion parameters theta.  A principal-axis rotation has one period,
     2 pi I3 / |L| (I3 = 1), reported as P_psi with P_phi infinite: the limit of the tumbler's
     (P_psi, P_phi) at vanishing nutation is not it (1/P = 1/P_psi - 1/P_phi there, for SAM)."""
-    moving = _body(theta, reference)
-    p_psi, p_phi, long_axis = tumbler_periods(moving.inertia, moving.initial_angular_momentum)
+    # The moments and L alone: building the body (its records) is work the periods do not need.
+    inertia, momentum, _ = _initial_state(theta, reference)
+    p_psi, p_phi, long_axis = tumbler_periods(inertia, momentum)
     if principal_axis:
         p_psi, p_phi = 2 * jnp.pi / jnp.exp(theta[2]), jnp.asarray(jnp.inf, theta.dtype)
     return jnp.stack([p_psi, p_phi]), long_axis
@@ -277,13 +284,19 @@ def _solve_start(parameters, reference, prior, data, masks, prior_weights, confi
         solution = optx.least_squares(fn, solver, current, args=args, has_aux=True, max_steps=max_steps, throw=False)
         finite = jnp.all(jnp.isfinite(solution.value))
         value = jnp.where(finite, solution.value, current)
+        # The residuals and Jacobian at solution.value, the solver's last accepted point: the aux that
+        # optimistix's Gauss-Newton state keeps with it (0.0.10 to 0.1.0; from 0.1.0 the solution's
+        # own aux is that of the point before).  The last window's cost and covariance come without
+        # another copy of the model in the program: the refinement's compilation 4.6 -> 3.0 s (LAM,
+        # one core).  A window whose solution is not finite leaves no valid cost.
+        residual, jacobian = solution.state.aux
+        residual = jnp.where(finite, residual, jnp.nan)
         # One window of one start done: the refinement's progress bar (``frbjax._progress``).
         jax.debug.callback(_progress.advance, "lightcurve refinement", 1)
-        return value, solution.result == optx.RESULTS.successful
+        return value, (solution.result == optx.RESULTS.successful, residual, jacobian)
 
-    parameters, ok = jax.lax.scan(stage, parameters, (masks, prior_weights))
-    last = (masks[-1], prior, jax.tree.map(lambda weights: weights[-1], prior_weights))
-    residual, jacobian = _residuals_and_jacobian(parameters, reference, data, last, config)
+    parameters, (ok, residuals, jacobians) = jax.lax.scan(stage, parameters, (masks, prior_weights))
+    residual, jacobian = residuals[-1], jacobians[-1]
     cost = 0.5 * jnp.sum(residual**2)
     return parameters, jnp.where(jnp.isfinite(cost), cost, jnp.inf), ok[-1], residual, jacobian
 

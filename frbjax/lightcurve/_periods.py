@@ -46,7 +46,10 @@ def _mode_quantities(sorted_inertia, momentum_squared, twice_energy, long_axis):
     last = jnp.where(long_axis, i1, i3)
     p = (last - i2) * (momentum_squared - twice_energy * first)
     k2 = jnp.clip((i2 - first) * (twice_energy * last - momentum_squared) / p, 0.0, 1.0)
-    quarter = special.ellipk(k2)
+    # K = R_F(0, 1 - k^2, 1) (DLMF 19.25.1): one compiled kernel with its derivative on the CPU, where
+    # ellipk's polynomials and, for its derivative, E's were compiled into every program that
+    # differentiates the periods (the light-curve refinement's period prior).
+    quarter = special.elliprf(jnp.zeros_like(k2), 1 - k2, jnp.ones_like(k2))
     period_phi = 4 * quarter * jnp.sqrt(i1 * i2 * i3 / p)
     # dpsi/dt / M = (alpha + beta s) / (gamma (1 - n s)), s = sn^2 u, n = -delta/gamma.  Over a period
     # of u, <1 / (1 - n s)> = Pi(n | k^2) / K(k^2) = 1 + n R / (3 K) and <s / (1 - n s)> = R / (3 K), with
