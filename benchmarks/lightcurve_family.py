@@ -79,7 +79,7 @@ def invert(case, width, options):
     epoch = float(np.median(case.times))
     body = case.body
     truth = FreeRigidBody(case.inertia, np.asarray(body.angular_momentum(epoch)), np.asarray(body.quaternion(epoch)))
-    refined = fit_lightcurve(*data, periods=None, initial=truth, **common, **options)
+    refined = fit_lightcurve(*data, periods=ranges, initial=truth, **common, **options)
     samples = len(case.times)
     periods, sigma = np.asarray(found.periods), np.asarray(found.period_sigma)
     z = np.abs(periods[: len(true_periods)] - true_periods) / sigma[: len(true_periods)]

@@ -284,11 +284,11 @@ def _solve_start(parameters, reference, prior, data, masks, prior_weights, confi
         solution = optx.least_squares(fn, solver, current, args=args, has_aux=True, max_steps=max_steps, throw=False)
         finite = jnp.all(jnp.isfinite(solution.value))
         value = jnp.where(finite, solution.value, current)
-        # The residuals and Jacobian at solution.value, the solver's last accepted point: the aux that
-        # optimistix's Gauss-Newton state keeps with it (0.0.10 to 0.1.0; from 0.1.0 the solution's
-        # own aux is that of the point before).  The last window's cost and covariance come without
-        # another copy of the model in the program: the refinement's compilation 4.6 -> 3.0 s (LAM,
-        # one core).  A window whose solution is not finite leaves no valid cost.
+        # The residuals and Jacobian at solution.value, the solver's last accepted point: the aux
+        # that optimistix's Gauss-Newton state keeps with it (0.0.10 and 0.1.0 alike; in 0.1.0 the
+        # solution's own aux is that of the point before).  The last window's cost and covariance
+        # come without another copy of the model in the program: the refinement's compilation
+        # 4.6 -> 3.0 s (LAM, one core).  A window whose solution is not finite leaves no valid cost.
         residual, jacobian = solution.state.aux
         residual = jnp.where(finite, residual, jnp.nan)
         # One window of one start done: the refinement's progress bar (``frbjax._progress``).
