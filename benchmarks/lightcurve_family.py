@@ -69,6 +69,7 @@ def invert(case, width, options):
     rotator = case.kind == "PA"
     true_periods = np.asarray(case.periods[:1] if rotator else case.periods)
     ranges = tuple((p * (1 - width), p * (1 + width)) for p in true_periods)
+    ranges = ranges[0] if rotator else ranges  # a rotator's one period: (P_min, P_max)
     common = dict(lightcurve=case.night, principal_axis=rotator, throw=False, progress=False)
     data = (case.times, case.flux, case.sun, case.observer)
     start = time.perf_counter()
