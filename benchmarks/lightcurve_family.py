@@ -48,20 +48,10 @@ from frbjax.lightcurve import fit_lightcurve  # noqa: E402
 
 sys.path.insert(0, str(pathlib.Path(__file__).parent))
 import _tumbler_family  # noqa: E402
+import lightcurve  # noqa: E402  (its `problems`: tests/test_lightcurve_fit.py's helpers)
 
 
 NOISE = _tumbler_family.NOISE
-
-
-def held_out_rms(result, held_out):
-    """RMS of log(data / model) over the held-out nights, each night's scale fitted."""
-    difference = np.log(held_out["flux"]) - np.log(
-        np.asarray(result.predict(held_out["times"], held_out["sun"], held_out["observer"]))
-    )
-    night = held_out["night"]
-    for k in np.unique(night):
-        difference[night == k] -= difference[night == k].mean()
-    return float(np.sqrt(np.mean(difference**2)))
 
 
 def invert(case, width, options):
@@ -81,6 +71,8 @@ def invert(case, width, options):
     body = case.body
     truth = FreeRigidBody(case.inertia, np.asarray(body.angular_momentum(epoch)), np.asarray(body.quaternion(epoch)))
     refined = fit_lightcurve(*data, periods=ranges, initial=truth, **common, **options)
+    held_out = tuple(case.held_out[key] for key in ("times", "flux", "sun", "observer", "night"))
+    held_out_rms = lambda result: lightcurve.problems.held_out_rms(result, held_out)  # noqa: E731
     samples = len(case.times)
     periods, sigma = np.asarray(found.periods), np.asarray(found.period_sigma)
     z = np.abs(periods[: len(true_periods)] - true_periods) / sigma[: len(true_periods)]
@@ -98,8 +90,8 @@ def invert(case, width, options):
         "cost": float(found.cost),
         "truth_refined_cost": float(refined.cost),
         "cost_excess": (float(found.cost) - float(refined.cost)) / math.sqrt(samples / 2),
-        "held_out_rms": held_out_rms(found, case.held_out),
-        "truth_refined_held_out_rms": held_out_rms(refined, case.held_out),
+        "held_out_rms": held_out_rms(found),
+        "truth_refined_held_out_rms": held_out_rms(refined),
         "refine_costs": np.asarray(found.refine_costs).tolist(),
         "seconds": seconds,
     }
@@ -139,7 +131,9 @@ def main(argv=None):
         fit_options["n_refine"] = options.refine
     output = pathlib.Path(options.output_dir) / "lightcurve_family.json"
     output.parent.mkdir(parents=True, exist_ok=True)
-    members = json.loads(output.read_text())["members"] if options.resume and output.exists() else []
+    # A resumed run keeps what the file holds besides its members (e.g. a run at other settings).
+    previous = json.loads(output.read_text()) if options.resume and output.exists() else {}
+    members = previous.get("members", [])
     done = {m["index"] for m in members}
     for index in (int(x) for x in options.members.split(",")):
         if index in done:
@@ -149,6 +143,7 @@ def main(argv=None):
         members.append(member)
         print(json.dumps(member), flush=True)
         result = {
+            **previous,
             "seed": options.seed,
             "width": options.width,
             "fit_options": {k: list(v) if isinstance(v, tuple) else v for k, v in fit_options.items()},
