@@ -519,7 +519,8 @@ void free_flow_derivatives(const R* inertia, const R* momentum, const R* attitud
 // numbers at every point.  A body's record is kept while the next point has the same moments, L0 and
 // q0 (bit for bit), so a point's result does not depend on its neighbours.  Bodies on the separatrix,
 // uniform rotations, symmetric bodies next to the plane of their equal moments (the precession's
-// derivatives) and invalid bodies take free_flow_derivatives<R, 1> itself.
+// derivatives) and invalid bodies take free_flow_derivatives<R, 1> itself.  Returns whether the
+// series served the point.
 template <class R>
 struct SeriesFlow {
   bool ready = false;
@@ -533,7 +534,7 @@ struct SeriesFlow {
 };
 
 template <class R>
-void series_flow_derivatives(const R* inertia, const R* momentum, const R* attitude, R t, SeriesFlow<R>& body, R* out) {
+bool series_flow_derivatives(const R* inertia, const R* momentum, const R* attitude, R t, SeriesFlow<R>& body, R* out) {
   constexpr int W = flow_width<1>();
   const R key[10] = {inertia[0],  inertia[1],  inertia[2],  momentum[0], momentum[1],
                      momentum[2], attitude[0], attitude[1], attitude[2], attitude[3]};
@@ -566,7 +567,10 @@ void series_flow_derivatives(const R* inertia, const R* momentum, const R* attit
       series_record<MotionDual1<R>>(seeded, body.frame.regime, body.record);
     }
   }
-  if (!body.series) return free_flow_derivatives<R, 1>(inertia, momentum, attitude, t, out);
+  if (!body.series) {
+    free_flow_derivatives<R, 1>(inertia, momentum, attitude, t, out);
+    return false;
+  }
   using L = SeriesLayout<R>;
   FlowDual<R> time, result[kFlowOutputs];
   seed(time, t, 10);
@@ -584,6 +588,7 @@ void series_flow_derivatives(const R* inertia, const R* momentum, const R* attit
     out[o * W] = result[o].v;
     for (int a = 0; a < kFlowInputs; ++a) out[o * W + 1 + a] = result[o].d[a];
   }
+  return true;
 }
 
 }  // namespace frbjax

@@ -36,7 +36,7 @@ constexpr int kFreeFlowFrameOutputs = 8;  // regime, |L|, J (3), unit l (3): for
 // a * b + c as XLA:CPU rounds it: one FMA where the kernels fuse the motion (FRBJAX_FUSED_MOTION, set
 // where XLA:CPU uses FMA instructions), two roundings elsewhere.
 template <class T>
-inline T multiply_add(T a, T b, T c) {
+FRBJAX_INLINE T multiply_add(T a, T b, T c) {
 #ifdef FRBJAX_FUSED_MOTION
   return std::fma(a, b, c);
 #else
@@ -46,7 +46,7 @@ inline T multiply_add(T a, T b, T c) {
 
 // sum_k v_k^2 over N components, as frbjax._fusion.sum_last(v * v): ((v0 v0 + v1 v1) + v2 v2) + ...
 template <int N, class T>
-T sum_of_squares(const T* v) {
+FRBJAX_INLINE T sum_of_squares(const T* v) {
   T total = multiply_add(v[0], v[0], v[1] * v[1]);
   for (int k = 2; k < N; ++k) total = multiply_add(v[k], v[k], total);
   return total;
@@ -54,7 +54,7 @@ T sum_of_squares(const T* v) {
 
 // matrix @ vector for a 3 x 3 matrix (`_frame.matrix_times`: each row's products summed in order).
 template <class T>
-void matrix_times(const T (&matrix)[3][3], const T* vector, T* out) {
+FRBJAX_INLINE void matrix_times(const T (&matrix)[3][3], const T* vector, T* out) {
   for (int i = 0; i < 3; ++i)
     out[i] = multiply_add(matrix[i][2], vector[2], multiply_add(matrix[i][0], vector[0], matrix[i][1] * vector[1]));
 }
@@ -62,7 +62,7 @@ void matrix_times(const T (&matrix)[3][3], const T* vector, T* out) {
 // The Hamilton product p ⊗ q (w, x, y, z) of frbjax/_quaternion.py's `multiply`, each component's
 // products summed in the written order.
 template <class T>
-void hamilton(const T* p, const T* q, T* out) {
+FRBJAX_INLINE void hamilton(const T* p, const T* q, T* out) {
   const T &pw = p[0], &px = p[1], &py = p[2], &pz = p[3];
   const T &qw = q[0], &qx = q[1], &qy = q[2], &qz = q[3];
   out[0] = multiply_add(-pz, qz, multiply_add(-py, qy, multiply_add(pw, qw, -(px * qx))));
@@ -91,7 +91,7 @@ void hamilton_product(const T* p, const T* q, T* out) {
 // v / |v| for a quaternion, as v times 1/|v|: XLA's form, v rsqrt(|v|^2) (its reciprocal square root
 // is correctly rounded at 86% of points and within 2 ulp at the others).
 template <class T>
-void normalise_quaternion(T* v) {
+FRBJAX_INLINE void normalise_quaternion(T* v) {
   const T inverse_norm = T(1) / std::sqrt(sum_of_squares<4>(v));
   for (int k = 0; k < 4; ++k) v[k] = v[k] * inverse_norm;
 }
@@ -102,7 +102,7 @@ void normalise_quaternion(T* v) {
 // cases of §6 (L = 0, a sphere, spin about an extreme axis, on the separatrix level the middle axis
 // or the plane of a symmetric body's equal moments).
 template <class T>
-int classify(const T* j, const T* l, T norm) {
+FRBJAX_INLINE int classify(const T* j, const T* l, T norm) {
   const T &j1 = j[0], &j2 = j[1], &j3 = j[2];
   const T l1s = l[0] * l[0], l2s = l[1] * l[1], l3s = l[2] * l[2];
   const T g1 = l2s * (j2 - j1) / j2 + l3s * (j3 - j1) / j3;
@@ -127,7 +127,7 @@ struct WorkingFrame {
 };
 
 template <class T>
-WorkingFrame<T> working_frame(const T* inertia, const T* momentum) {
+FRBJAX_INLINE WorkingFrame<T> working_frame(const T* inertia, const T* momentum) {
   const T &j1 = inertia[0], &j2 = inertia[1], &j3 = inertia[2];
   // Stable ranks (ties keep their order): body axis i becomes working axis rank[i].
   const int rank[3] = {int(j2 < j1) + int(j3 < j1), int(j1 <= j2) + int(j3 < j2), int(j1 <= j3) + int(j2 <= j3)};
@@ -191,6 +191,27 @@ void exp_pure(const T* rotation, T* out) {
   for (int k = 0; k < 3; ++k) out[1 + k] = vector_scale * rotation[k];
 }
 
+// The body's state from its working-frame motion (motion.hpp's outputs): L(t) = |L| P l̂(tau) and
+// q = q0 ⊗ p ⊗ conj(q̂(0)) ⊗ q̂(tau) ⊗ conj(p) (docs/theory.md §8), where p ⊗ (w, v) ⊗ conj(p) =
+// (w, P v): the working-frame rotation conj(q̂(0)) ⊗ q̂(tau) with its axis taken to body axes.
+template <class T>
+FRBJAX_INLINE void body_state(const T (&permutation)[3][3], T norm, const T* start, const T* motion,
+                              T* momentum_out, T* attitude_out) {
+  T turned[3];
+  matrix_times(permutation, motion, turned);
+  for (int k = 0; k < 3; ++k) momentum_out[k] = norm * turned[k];
+  const T* chart_start = motion + 3;
+  const T* chart_now = motion + 7;
+  const T conjugate_start[4] = {chart_start[0], -chart_start[1], -chart_start[2], -chart_start[3]};
+  T change[4];
+  hamilton(conjugate_start, chart_now, change);
+  T body_change[4] = {change[0]};
+  matrix_times(permutation, change + 1, body_change + 1);
+  hamilton(start, body_change, attitude_out);
+  // Three products and the chart leave |q| - 1 at up to ~20 ulp (`_body._normalised`).
+  normalise_quaternion(attitude_out);
+}
+
 // (L(t), q(t)) of one body: inertia (3, principal moments, any order), momentum L0 (3), attitude q0
 // (4, w x y z, any nonzero norm), t.
 template <class T>
@@ -217,28 +238,83 @@ void free_flow(const T* inertia, const T* momentum, const T* attitude, T t, T* m
     return;
   }
 
-  // The unit problem at tau = |L| t in the working frame (motion.hpp), then L(t) = |L| P l̂(tau).
+  // The unit problem at tau = |L| t in the working frame (motion.hpp).
   const T in[kMotionInputs] = {frame.inertia[0],       frame.inertia[1],       frame.inertia[2],
                                frame.unit_momentum[0], frame.unit_momentum[1], frame.unit_momentum[2],
                                frame.norm * t};
   T motion[kMotionOutputs];
   working_motion<T>(in, frame.regime, true, motion);
-  T turned[3];
-  matrix_times(frame.permutation, motion, turned);
-  for (int k = 0; k < 3; ++k) momentum_out[k] = frame.norm * turned[k];
+  body_state(frame.permutation, frame.norm, start, motion, momentum_out, attitude_out);
+}
 
-  // q = q0 ⊗ p ⊗ conj(q̂(0)) ⊗ q̂(tau) ⊗ conj(p) (docs/theory.md §8), where p ⊗ (w, v) ⊗ conj(p) =
-  // (w, P v): the working-frame rotation conj(q̂(0)) ⊗ q̂(tau) with its axis taken to body axes.
-  const T* chart_start = motion + 3;
-  const T* chart_now = motion + 7;
-  const T conjugate_start[4] = {chart_start[0], -chart_start[1], -chart_start[2], -chart_start[3]};
-  T change[4];
-  hamilton(conjugate_start, chart_now, change);
-  T body_change[4] = {change[0]};
-  matrix_times(frame.permutation, change + 1, body_change + 1);
-  hamilton(start, body_change, attitude_out);
-  // Three products and the chart leave |q| - 1 at up to ~20 ulp (`_body._normalised`).
-  normalise_quaternion(attitude_out);
+// Up to kBlock bodies at once (`free_flow` of each): the working frames point by point, the
+// working-frame motion of the elliptic regimes as motion.hpp's block (its straight-line stages
+// vectorised), and `body_state` as one loop over the block.  Invalid and uniformly rotating bodies
+// take `free_flow` itself.
+template <class R>
+void free_flow_block(const R* inertia, const R* momentum, const R* attitude, const R* t, int count,
+                     R* momentum_out, R* attitude_out) {
+  const int lanes = whole_lanes(count);
+  // The bodies as columns, stand-ins (a unit sphere at rest) after `count` (motion.hpp's `whole_lanes`).
+  R given[10][kBlock], time[kBlock];  // J (3), L (3), q (4)
+  for (int i = 0; i < lanes; ++i) {
+    if (i < count) {
+      for (int k = 0; k < 3; ++k) given[k][i] = inertia[3 * i + k], given[3 + k][i] = momentum[3 * i + k];
+      for (int k = 0; k < 4; ++k) given[6 + k][i] = attitude[4 * i + k];
+      time[i] = t[i];
+    } else {
+      for (int k = 0; k < 10; ++k) given[k][i] = k < 3 || k == 6 ? 1 : 0;
+      time[i] = 0;
+    }
+  }
+  // The working frames and the unit attitudes, over the block (vectorised without `omp simd`, which
+  // GCC 12 does not apply to a loop with a local array).
+  R in[kMotionInputs][kBlock], permutation[3][3][kBlock], start[4][kBlock], norm[kBlock], regime_number[kBlock];
+  for (int i = 0; i < lanes; ++i) {
+    const R j[3] = {given[0][i], given[1][i], given[2][i]}, l[3] = {given[3][i], given[4][i], given[5][i]};
+    const WorkingFrame<R> frame = working_frame(j, l);
+    regime_number[i] = R(frame.regime);
+    for (int k = 0; k < 3; ++k) {
+      in[k][i] = frame.inertia[k];
+      in[3 + k][i] = frame.unit_momentum[k];
+      for (int c = 0; c < 3; ++c) permutation[k][c][i] = frame.permutation[k][c];
+    }
+    in[6][i] = frame.norm * time[i];
+    norm[i] = frame.norm;
+    R unit[4] = {given[6][i], given[7][i], given[8][i], given[9][i]};
+    normalise_quaternion(unit);
+    for (int k = 0; k < 4; ++k) start[k][i] = unit[k];
+  }
+  // Invalid and uniformly rotating bodies: `free_flow` itself; the block's stages pass them by.
+  int regime[kBlock];
+  bool alone[kBlock];
+  for (int i = 0; i < lanes; ++i) {
+    regime[i] = static_cast<int>(regime_number[i]);
+    alone[i] = i >= count || regime[i] == kUniform ||
+               !valid_body(inertia + 3 * i, momentum + 3 * i, attitude + 4 * i);
+    if (!alone[i]) continue;
+    regime[i] = kUniform;
+    if (i < count) free_flow<R>(inertia + 3 * i, momentum + 3 * i, attitude + 4 * i, t[i], momentum_out + 3 * i,
+                                attitude_out + 4 * i);
+  }
+  R motion[kMotionOutputs][kBlock];
+  working_motion_block<R, true>(in, regime, count, motion);
+  R state[7][kBlock];
+  // Vectorised without `omp simd`, which GCC 12 does not apply to a loop with a local array.
+  for (int i = 0; i < lanes; ++i) {
+    R point_permutation[3][3], point_start[4], point_motion[kMotionOutputs], point_state[7];
+    for (int k = 0; k < 3; ++k)
+      for (int c = 0; c < 3; ++c) point_permutation[k][c] = permutation[k][c][i];
+    for (int k = 0; k < 4; ++k) point_start[k] = start[k][i];
+    for (int k = 0; k < kMotionOutputs; ++k) point_motion[k] = motion[k][i];
+    body_state(point_permutation, norm[i], point_start, point_motion, point_state, point_state + 3);
+    for (int k = 0; k < 7; ++k) state[k][i] = point_state[k];
+  }
+  for (int i = 0; i < count; ++i) {
+    if (alone[i]) continue;
+    for (int k = 0; k < 3; ++k) momentum_out[3 * i + k] = state[k][i];
+    for (int k = 0; k < 4; ++k) attitude_out[4 * i + k] = state[3 + k][i];
+  }
 }
 
 // For the tests: the regime (as a number), |L|, the sorted moments and the unit working momentum of

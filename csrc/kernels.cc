@@ -283,42 +283,50 @@ ffi::Error run_motion(ffi::ThreadPool& pool, ffi::RemainingArgs arguments, ffi::
   const std::int32_t* regime = static_cast<const std::int32_t*>(regimes->untyped_data());
   R* output = static_cast<R*>(result.untyped_data());
   parallel_for(pool, count, grain(Order) / 4, [&](std::size_t begin, std::size_t end) {
-    for (std::size_t i = begin; i < end; ++i) {
-      R* out = output + i * outputs * W;
-      if constexpr (Order == 0) {
-        R in[K], values[kMotionOutputs];
-        for (int j = 0; j < K; ++j) in[j] = inputs[j][i];
-        working_motion<R>(in, regime[i], Attitude, values);
-        for (int o = 0; o < outputs; ++o) out[o] = values[o];
-      } else if constexpr (Order == 1) {
-        using D = Dual<R, K>;
-        D in[K], values[kMotionOutputs];
-        for (int j = 0; j < K; ++j) {
-          in[j] = D(0.0);
-          in[j].v = inputs[j][i];
-          in[j].d[j] = R(1);
-        }
-        working_motion<D>(in, regime[i], Attitude, values);
-        for (int o = 0; o < outputs; ++o) {
-          out[o * W] = values[o].v;
-          for (int j = 0; j < K; ++j) out[o * W + 1 + j] = values[o].d[j];
-        }
-      } else {
-        using D1 = Dual<R, K>;
-        using D2 = Dual<D1, K>;
-        D2 in[K], values[kMotionOutputs];
-        for (int j = 0; j < K; ++j) {
-          in[j] = D2(0.0);
-          in[j].v.v = inputs[j][i];
-          in[j].v.d[j] = R(1);
-          in[j].d[j].v = R(1);
-        }
-        working_motion<D2>(in, regime[i], Attitude, values);
-        for (int o = 0; o < outputs; ++o) {
-          out[o * W] = values[o].v.v;
-          for (int j = 0; j < K; ++j) out[o * W + 1 + j] = values[o].v.d[j];
-          for (int j = 0; j < K; ++j)
-            for (int k = 0; k < K; ++k) out[o * W + 1 + K + j * K + k] = values[o].d[j].d[k];
+    if constexpr (Order == 0) {
+      // Values: motion.hpp's block, whose straight-line stages are vectorised.
+      for (std::size_t i = begin; i < end; i += kBlock) {
+        const int block = static_cast<int>(std::min<std::size_t>(kBlock, end - i));
+        R in[K][kBlock], values[kMotionOutputs][kBlock];
+        for (int j = 0; j < K; ++j)
+          for (int p = 0; p < kBlock; ++p) in[j][p] = p < block ? inputs[j][i + p] : R(1);
+        working_motion_block<R, Attitude>(in, regime + i, block, values);
+        for (int p = 0; p < block; ++p)
+          for (int o = 0; o < outputs; ++o) output[(i + p) * outputs + o] = values[o][p];
+      }
+    } else {
+      for (std::size_t i = begin; i < end; ++i) {
+        R* out = output + i * outputs * W;
+        if constexpr (Order == 1) {
+          using D = Dual<R, K>;
+          D in[K], values[kMotionOutputs];
+          for (int j = 0; j < K; ++j) {
+            in[j] = D(0.0);
+            in[j].v = inputs[j][i];
+            in[j].d[j] = R(1);
+          }
+          working_motion<D>(in, regime[i], Attitude, values);
+          for (int o = 0; o < outputs; ++o) {
+            out[o * W] = values[o].v;
+            for (int j = 0; j < K; ++j) out[o * W + 1 + j] = values[o].d[j];
+          }
+        } else {
+          using D1 = Dual<R, K>;
+          using D2 = Dual<D1, K>;
+          D2 in[K], values[kMotionOutputs];
+          for (int j = 0; j < K; ++j) {
+            in[j] = D2(0.0);
+            in[j].v.v = inputs[j][i];
+            in[j].v.d[j] = R(1);
+            in[j].d[j].v = R(1);
+          }
+          working_motion<D2>(in, regime[i], Attitude, values);
+          for (int o = 0; o < outputs; ++o) {
+            out[o * W] = values[o].v.v;
+            for (int j = 0; j < K; ++j) out[o * W + 1 + j] = values[o].v.d[j];
+            for (int j = 0; j < K; ++j)
+              for (int k = 0; k < K; ++k) out[o * W + 1 + K + j * K + k] = values[o].d[j].d[k];
+          }
         }
       }
     }
@@ -370,7 +378,10 @@ ffi::Error run_free_flow(ffi::ThreadPool& pool, const ffi::AnyBuffer& inertia, c
   R* l_out = static_cast<R*>(momentum_out.untyped_data());
   R* q_out = static_cast<R*>(attitude_out.untyped_data());
   parallel_for(pool, count, grain(0) / 4, [&](std::size_t begin, std::size_t end) {
-    for (std::size_t i = begin; i < end; ++i) free_flow<R>(j + 3 * i, l + 3 * i, q + 4 * i, t[i], l_out + 3 * i, q_out + 4 * i);
+    for (std::size_t i = begin; i < end; i += kBlock) {
+      const int block = static_cast<int>(std::min<std::size_t>(kBlock, end - i));
+      free_flow_block<R>(j + 3 * i, l + 3 * i, q + 4 * i, t + i, block, l_out + 3 * i, q_out + 4 * i);
+    }
   });
   return ffi::Error::Success();
 }
@@ -424,13 +435,33 @@ ffi::Error run_free_flow_derivatives(ffi::ThreadPool& pool, const ffi::AnyBuffer
   const R* t = static_cast<const R*>(time.untyped_data());
   R* output = static_cast<R*>(result.untyped_data());
   parallel_for(pool, count, grain(Order) / 4, [&](std::size_t begin, std::size_t end) {
-    if constexpr (Series) {
-      SeriesFlow<R> body;
-      for (std::size_t i = begin; i < end; ++i)
-        series_flow_derivatives<R>(j + 3 * i, l + 3 * i, q + 4 * i, t[i], body, output + i * kFlowOutputs * W);
-    } else {
-      for (std::size_t i = begin; i < end; ++i)
-        free_flow_derivatives<R, Order>(j + 3 * i, l + 3 * i, q + 4 * i, t[i], output + i * kFlowOutputs * W);
+    SeriesFlow<R> body;
+    for (std::size_t i = begin; i < end; i += kBlock) {
+      const int block = static_cast<int>(std::min<std::size_t>(kBlock, end - i));
+      bool one_time[kBlock], any = false;
+      for (int p = 0; p < block; ++p) {
+        const std::size_t point = i + p;
+        R* out = output + point * kFlowOutputs * W;
+        if constexpr (Series) {
+          one_time[p] = !series_flow_derivatives<R>(j + 3 * point, l + 3 * point, q + 4 * point, t[point], body, out);
+        } else {
+          free_flow_derivatives<R, Order>(j + 3 * point, l + 3 * point, q + 4 * point, t[point], out);
+          one_time[p] = true;
+        }
+        any = any || one_time[p];
+      }
+      if (!any) continue;
+      // The one-time motion's values are the values kernel's (free_flow_block): the dual numbers' value
+      // parts agree with them to rounding only, its vectorised stages fusing products and sums in other
+      // places.
+      R momentum_values[3 * kBlock], attitude_values[4 * kBlock];
+      free_flow_block<R>(j + 3 * i, l + 3 * i, q + 4 * i, t + i, block, momentum_values, attitude_values);
+      for (int p = 0; p < block; ++p) {
+        if (!one_time[p]) continue;
+        R* out = output + (i + p) * kFlowOutputs * W;
+        for (int o = 0; o < 3; ++o) out[o * W] = momentum_values[3 * p + o];
+        for (int o = 0; o < 4; ++o) out[(3 + o) * W] = attitude_values[4 * p + o];
+      }
     }
   });
   return ffi::Error::Success();

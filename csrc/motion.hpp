@@ -20,8 +20,10 @@
 #pragma once
 
 #include <cmath>
+#include <cstddef>
 
 #include "carlson.hpp"
+#include "circular.hpp"
 #include "dual.hpp"
 #include "jacobi.hpp"
 
@@ -211,17 +213,148 @@ SeparatrixOrbit<T> separatrix_orbit(const T* in) {
   return orbit;
 }
 
+// The motion's atan2 and (cos, sin): circular.hpp's straight-line forms on real numbers (the block's
+// vectorised loops below take them), the C library's where those do not apply (an argument not
+// finite; |x| beyond 2^19 pi/2); on dual numbers the same values, with the derivatives of
+// dual.hpp's rules (d atan2 = (x dy - y dx)/(x^2 + y^2), d(cos, sin) = (-sin, cos) dx).
 template <class T>
-void working_motion(const T* in, int regime, bool attitude, T* out) {
+T motion_arctangent2(const T& y, const T& x) {
+  if constexpr (is_dual<T>::value) {
+    T angle = atan2(y, x);
+    angle.v = motion_arctangent2(y.v, x.v);
+    return angle;
+  } else {
+    return std::isfinite(y) && std::isfinite(x) ? circular::arctangent2(y, x) : std::atan2(y, x);
+  }
+}
+
+template <class T>
+void motion_cos_sin(const T& x, T& cosine, T& sine) {
+  if constexpr (is_dual<T>::value) {
+    motion_cos_sin(x.v, cosine.v, sine.v);
+    for (std::size_t i = 0; i < sizeof(x.d) / sizeof(x.d[0]); ++i) {
+      cosine.d[i] = -sine.v * x.d[i];
+      sine.d[i] = cosine.v * x.d[i];
+    }
+  } else if (circular::reduces(x)) {
+    circular::cos_sin(x, cosine, sine);
+  } else {
+    cosine = std::cos(x);
+    sine = std::sin(x);
+  }
+}
+
+// The elliptic regimes' motion in three stages, so that a block of points can take the branchy
+// special functions point by point and the straight-line rest as loops the compiler vectorises
+// (`working_motion_block`); `working_motion` runs the same stages at one point.
+//
+// 1. `elliptic_point` (branchy): the orbit's constants, (sn, cn, dn)(v) at v = B tau, and the
+//    third-kind integral's change over v from its reduced point and whole half-periods (DLMF 19.2.10);
+//    F is additive, so the same addition term below serves Pi - F.
+template <class T>
+struct EllipticPoint {
+  EllipticOrbit<T> orbit;
+  JacobiTriple<T> at_v;
+  T third_kind;
+};
+
+template <class T>
+EllipticPoint<T> elliptic_point(const T* in, bool minor, bool attitude) {
+  EllipticPoint<T> point;
+  point.orbit = elliptic_orbit(in, minor);
+  const EllipticOrbit<T>& orbit = point.orbit;
+  point.at_v = jacobi_triple(orbit.rate * in[6], orbit.m, orbit.mc);
+  const JacobiTriple<T>& at_v = point.at_v;
+  point.third_kind = T(0.0);
+  if (attitude) {
+    const double parity = std::fmod(std::fabs(at_v.turns), 2.0) == 1 ? -1.0 : 1.0;
+    point.third_kind = pi_without_first_kind<T>(orbit.nu, parity * at_v.sn, parity * at_v.cn, orbit.m, orbit.mc);
+    if (at_v.turns != 0)
+      point.third_kind = point.third_kind + 2.0 * at_v.turns * complete_third_kind<T>(orbit.nu, orbit.m, orbit.mc);
+  }
+  return point;
+}
+
+// 2. `elliptic_state` (straight-line): L at u0 + v from the given l and (sn, cn, dn)(v) by DLMF
+//    22.8.1-22.8.3, as increments over (sn0, cn0, dn0) for short steps (the given l exactly at tau = 0,
+//    no bias over many short steps), the normalised direct form elsewhere (`evaluate_once`, where the
+//    identities are written out); and the arguments (y, x) of the precession angle's two arctangents:
+//    the addition term of Pi (Whittaker and Watson 22.74) and the change of atan2(L2, L_o) (L_o = L3,
+//    or L1 in the minor regime, is A_o dn > 0 at both times) as one arctangent.
+template <class T>
+FRBJAX_INLINE void elliptic_state(const T& l1, const T& l2, const T& l3, bool minor, const T& amplitude_1,
+                                  const T& amplitude_middle, const T& amplitude_3, const T& m, const T& mc,
+                                  const T& nu, const T& sn0, const T& cn0, const T& sn_v, const T& cn_v,
+                                  const T& dn_v, T& k1, T& k2, T& k3, T& addition_y, T& addition_x, T& angle_y,
+                                  T& angle_x) {
+  using std::sqrt;
+  const T dn0 = sqrt(cn0 * cn0 + mc * (sn0 * sn0));
+  const T sn_v_squared = sn_v * sn_v;
+  const T one_minus_cn = value(cn_v) > 0 ? sn_v_squared / (1.0 + cn_v) : 1.0 - cn_v;
+  const T one_minus_dn = m * sn_v_squared / (1.0 + dn_v);
+  const T one_minus_dn_squared = one_minus_dn * (1.0 + dn_v);
+  const T one_minus_cn_dn = one_minus_cn + cn_v * one_minus_dn;
+  const T sn0_squared = sn0 * sn0;
+  const T denominator = cn0 * cn0 + sn0_squared * (dn_v * dn_v);
+  const bool incremental = value(denominator) >= 0.25 && value(sn_v_squared) <= 0.25;
+  // Both forms, then selects: a loop over points stays straight-line code.
+  const T sn_change = (cn0 * dn0 * sn_v - sn0 * (one_minus_cn_dn - sn0_squared * one_minus_dn_squared)) / denominator;
+  const T cn_change = (-cn0 * (one_minus_cn - sn0_squared * one_minus_dn_squared) - sn0 * dn0 * sn_v * dn_v) / denominator;
+  const T sn_direct = (sn0 * cn_v * dn_v + sn_v * cn0 * dn0) / denominator;
+  const T cn_direct = (cn0 * cn_v - sn0 * dn0 * sn_v * dn_v) / denominator;
+  const T norm = sqrt(sn_direct * sn_direct + cn_direct * cn_direct);
+  const T sn_w = incremental ? sn0 + sn_change : sn_direct / norm;
+  const T cn_w = incremental ? cn0 + cn_change : cn_direct / norm;
+  const T dn_w = sqrt(cn_w * cn_w + mc * (sn_w * sn_w));
+  // dn_w - dn0 with the rounding of sn_change scaled by mc (precision next to the saddle).
+  const T dn_change = (cn_change * (cn_w + cn0) + mc * sn_change * (sn_w + sn0)) / (dn_w + dn0);
+  k1 = incremental ? l1 + amplitude_1 * (minor ? dn_change : cn_change) : amplitude_1 * (minor ? dn_w : cn_w);
+  k2 = incremental ? l2 + amplitude_middle * sn_change : amplitude_middle * sn_w;
+  k3 = incremental ? l3 + amplitude_3 * (minor ? cn_change : dn_change) : amplitude_3 * (minor ? cn_w : dn_w);
+  const T minus_nu = -nu;
+  const T addition_scale = sqrt(minus_nu * (m + minus_nu) * (1.0 + minus_nu));
+  addition_y = addition_scale * sn0 * sn_v * sn_w;
+  addition_x = 1.0 + minus_nu * (sn_w * sn_w) - minus_nu * sn0 * sn_v * cn_w * dn_w;
+  const T &partner = minor ? k1 : k3, &partner_start = minor ? l1 : l3;
+  angle_y = k2 * partner_start - partner * l2;
+  angle_x = partner * partner_start + k2 * l2;
+}
+
+// 3. `elliptic_half_angle` (straight-line): psi/2 from the two arctangents,
+//    psi = tau / J_p + atan2 terms - alpha (Pi(nu; am u|m) [- u])  between 0 and tau.
+template <class T>
+FRBJAX_INLINE T elliptic_half_angle(const T& tau, bool minor, const T& precession, const T& alpha, const T& nu,
+                                    const T& m, const T& third_kind, const T& addition_angle,
+                                    const T& angle_change) {
+  using std::sqrt;
+  const T minus_nu = -nu;
+  const T addition_amplitude = sqrt(minus_nu) / sqrt((1.0 + minus_nu) * (m + minus_nu));
+  const T third_kind_change = third_kind - addition_amplitude * addition_angle;
+  const T psi = precession * tau + (minor ? -1.0 : 1.0) * (angle_change - alpha * third_kind_change);
+  return psi / 2.0;
+}
+
+// The separatrix's L and psi (docs/theory.md §5): L = (A1 sech, tanh, A3 sech)(u), psi = tau/J2 +
+// 2 atan(delta tanh(u/2)) from u0 to u.
+template <class T>
+void separatrix_motion(const T* in, T& k1, T& k2, T& k3, T& psi) {
   using std::atan;
-  using std::atan2;
-  using std::cos;
   using std::exp;
   using std::fabs;
-  using std::sin;
-  using std::sqrt;
   using std::tanh;
-  const T &j1 = in[0], &j2 = in[1], &j3 = in[2], &l1 = in[3], &l2 = in[4], &l3 = in[5], &tau = in[6];
+  const SeparatrixOrbit<T> orbit = separatrix_orbit(in);
+  const T u = orbit.u0 + orbit.rate * in[6];
+  const T decay = exp(-fabs(u));
+  const T sech = 2.0 * decay / (1.0 + decay * decay);
+  k1 = orbit.amplitude_1 * sech;
+  k2 = tanh(u);
+  k3 = orbit.amplitude_3 * sech;
+  psi = in[6] / in[1] + 2.0 * (atan(orbit.delta * tanh(u / 2.0)) - atan(orbit.delta * tanh(orbit.u0 / 2.0)));
+}
+
+template <class T>
+void working_motion(const T* in, int regime, bool attitude, T* out) {
+  const T &l1 = in[3], &l2 = in[4], &l3 = in[5], &tau = in[6];
   const bool minor = regime == kMinor;
   for (int k = 0; k < kMotionOutputs; ++k) out[k] = T(0.0);
   out[3] = out[7] = T(1.0);
@@ -231,91 +364,144 @@ void working_motion(const T* in, int regime, bool attitude, T* out) {
     out[2] = l3;
     return;
   }
-  T k1, k2, k3, psi;
+  T k1, k2, k3, half_psi;
   if (regime == kSeparatrix) {
-    // psi = tau/J2 + 2 atan(delta tanh(u/2)) (docs/theory.md §5).
-    const SeparatrixOrbit<T> orbit = separatrix_orbit(in);
-    const T &amplitude_1 = orbit.amplitude_1, &amplitude_3 = orbit.amplitude_3, &rate = orbit.rate;
-    const T &delta = orbit.delta, &u0 = orbit.u0;
-    const T u = u0 + rate * tau;
-    const T decay = exp(-fabs(u));
-    const T sech = 2.0 * decay / (1.0 + decay * decay);
-    k1 = amplitude_1 * sech;
-    k2 = tanh(u);
-    k3 = amplitude_3 * sech;
-    psi = tau / j2 + 2.0 * (atan(delta * tanh(u / 2.0)) - atan(delta * tanh(u0 / 2.0)));
+    T psi;
+    separatrix_motion(in, k1, k2, k3, psi);
+    half_psi = psi / 2.0;
   } else {
-    const EllipticOrbit<T> orbit = elliptic_orbit(in, minor);
-    const T &m = orbit.m, &mc = orbit.mc, &nu = orbit.nu, &sn0 = orbit.sn0, &cn0 = orbit.cn0;
-    const T &alpha = orbit.alpha, &precession = orbit.precession;
-    const T &amplitude_middle = orbit.amplitude[1], &rate = orbit.rate;
-    const T dn0 = sqrt(cn0 * cn0 + mc * (sn0 * sn0));
-    const T v = rate * tau;
-    const JacobiTriple<T> at_v = jacobi_triple(v, m, mc);
-    const T &sn_v = at_v.sn, &cn_v = at_v.cn, &dn_v = at_v.dn;
-    // DLMF 22.8.1-22.8.3 at u0 + v as increments over (sn0, cn0, dn0) for short steps (the given l
-    // exactly at tau = 0, no bias over many short steps), the normalised direct form elsewhere
-    // (`evaluate_once`, where the identities are written out).
-    const T sn_v_squared = sn_v * sn_v;
-    const T one_minus_cn = value(cn_v) > 0 ? sn_v_squared / (1.0 + cn_v) : 1.0 - cn_v;
-    const T one_minus_dn = m * sn_v_squared / (1.0 + dn_v);
-    const T one_minus_dn_squared = one_minus_dn * (1.0 + dn_v);
-    const T one_minus_cn_dn = one_minus_cn + cn_v * one_minus_dn;
-    const T sn0_squared = sn0 * sn0;
-    const T denominator = cn0 * cn0 + sn0_squared * (dn_v * dn_v);
-    const bool incremental = value(denominator) >= 0.25 && value(sn_v_squared) <= 0.25;
-    T sn_w, cn_w, sn_change(0.0), cn_change(0.0);
-    if (incremental) {
-      sn_change = (cn0 * dn0 * sn_v - sn0 * (one_minus_cn_dn - sn0_squared * one_minus_dn_squared)) / denominator;
-      cn_change = (-cn0 * (one_minus_cn - sn0_squared * one_minus_dn_squared) - sn0 * dn0 * sn_v * dn_v) / denominator;
-      sn_w = sn0 + sn_change;
-      cn_w = cn0 + cn_change;
-    } else {
-      const T sn_direct = (sn0 * cn_v * dn_v + sn_v * cn0 * dn0) / denominator;
-      const T cn_direct = (cn0 * cn_v - sn0 * dn0 * sn_v * dn_v) / denominator;
-      const T norm = sqrt(sn_direct * sn_direct + cn_direct * cn_direct);
-      sn_w = sn_direct / norm;
-      cn_w = cn_direct / norm;
-    }
-    const T dn_w = sqrt(cn_w * cn_w + mc * (sn_w * sn_w));
-    const T &amplitude_1 = orbit.amplitude[0], &amplitude_3 = orbit.amplitude[2];
-    if (incremental) {
-      // dn_w - dn0 with the rounding of sn_change scaled by mc (precision next to the saddle).
-      const T dn_change = (cn_change * (cn_w + cn0) + mc * sn_change * (sn_w + sn0)) / (dn_w + dn0);
-      k1 = l1 + amplitude_1 * (minor ? dn_change : cn_change);
-      k2 = l2 + amplitude_middle * sn_change;
-      k3 = l3 + amplitude_3 * (minor ? cn_change : dn_change);
-    } else {
-      k1 = amplitude_1 * (minor ? dn_w : cn_w);
-      k2 = amplitude_middle * sn_w;
-      k3 = amplitude_3 * (minor ? cn_w : dn_w);
-    }
-    if (attitude) {
-      // f(u0 + v) - f(u0) = f(v) - G(u0, v), f(v) = 2j Pi(nu|m) + f(v_r) (DLMF 19.2.10); F is additive,
-      // so the same G serves Pi - F.
-      const double parity = std::fmod(std::fabs(at_v.turns), 2.0) == 1 ? -1.0 : 1.0;
-      T third_kind_change = pi_without_first_kind<T>(nu, parity * sn_v, parity * cn_v, m, mc);
-      if (at_v.turns != 0) third_kind_change = third_kind_change + 2.0 * at_v.turns * complete_third_kind<T>(nu, m, mc);
-      const T minus_nu = -nu;
-      const T addition_scale = sqrt(minus_nu * (m + minus_nu) * (1.0 + minus_nu));
-      const T addition_amplitude = sqrt(minus_nu) / sqrt((1.0 + minus_nu) * (m + minus_nu));
-      const T addition = addition_amplitude * atan2(addition_scale * sn0 * sn_v * sn_w,
-                                                    1.0 + minus_nu * (sn_w * sn_w) - minus_nu * sn0 * sn_v * cn_w * dn_w);
-      third_kind_change = third_kind_change - addition;
-      // atan2(L2, L_o)(tau) - atan2(L2, L_o)(0) as one arctangent (L_o = L3, or L1 in the minor
-      // regime, is A_o dn > 0 at both times).
-      const T &partner = minor ? k1 : k3, &partner_start = minor ? l1 : l3;
-      const T angle_change = atan2(k2 * partner_start - partner * l2, partner * partner_start + k2 * l2);
-      psi = precession * tau + (minor ? -1.0 : 1.0) * (angle_change - alpha * third_kind_change);
-    }
+    const EllipticPoint<T> point = elliptic_point(in, minor, attitude);
+    const EllipticOrbit<T>& orbit = point.orbit;
+    T addition_y, addition_x, angle_y, angle_x;
+    elliptic_state(l1, l2, l3, minor, orbit.amplitude[0], orbit.amplitude[1], orbit.amplitude[2], orbit.m,
+                   orbit.mc, orbit.nu, orbit.sn0, orbit.cn0, point.at_v.sn, point.at_v.cn, point.at_v.dn, k1, k2,
+                   k3, addition_y, addition_x, angle_y, angle_x);
+    if (attitude)
+      half_psi = elliptic_half_angle(tau, minor, orbit.precession, orbit.alpha, orbit.nu, orbit.m, point.third_kind,
+                                     motion_arctangent2(addition_y, addition_x), motion_arctangent2(angle_y, angle_x));
   }
   out[0] = k1;
   out[1] = k2;
   out[2] = k3;
   if (!attitude) return;
   chart<T>(T(1.0), T(0.0), l1, l2, l3, minor, out + 3);
-  const T half_psi = psi / 2.0;
-  chart<T>(cos(half_psi), sin(half_psi), k1, k2, k3, minor, out + 7);
+  T half_cos, half_sin;
+  motion_cos_sin(half_psi, half_cos, half_sin);
+  chart<T>(half_cos, half_sin, k1, k2, k3, minor, out + 7);
+}
+
+// Points whose motion is formed together: the straight-line stages run as loops over a block's
+// points, which the compiler vectorises (series.hpp's evaluation uses the same size).
+constexpr int kBlock = 32;
+
+// The block's vectorised loops run over whole groups of kLanes points, a multiple of every vector
+// width the kernels are built for, the points after the given ones stand-ins: every point takes the
+// vectorised code (no scalar remainder, whose products and sums may fuse differently), so that a
+// point's result does not depend on its place in the batch.
+constexpr int kLanes = 8;
+
+inline int whole_lanes(int count) { return (count + kLanes - 1) / kLanes * kLanes; }
+
+// `working_motion` at up to kBlock points of real numbers: in[input][point], regime[point],
+// out[output][point].  The elliptic points take `elliptic_point` one by one, then each straight-line
+// stage as one loop over the block's lanes (`whole_lanes`), with `motion_arctangent2` and
+// `motion_cos_sin` as vectorised loops and their exceptions after them.  Other regimes take
+// `working_motion` itself.
+template <class R, bool Attitude>
+void working_motion_block(const R (&in)[kMotionInputs][kBlock], const int* regime, int count,
+                          R (&out)[kMotionOutputs][kBlock]) {
+  const int lanes = whole_lanes(count);
+  // Per point: the orbit's constants and the special functions (stage 1), stand-ins elsewhere.
+  R minor[kBlock], amplitude_1[kBlock], amplitude_middle[kBlock], amplitude_3[kBlock], m[kBlock], mc[kBlock];
+  R nu[kBlock], alpha[kBlock], precession[kBlock], sn0[kBlock], cn0[kBlock], sn_v[kBlock], cn_v[kBlock];
+  R dn_v[kBlock], third_kind[kBlock];
+  bool elliptic[kBlock];
+  for (int i = 0; i < lanes; ++i) {
+    elliptic[i] = i < count && (regime[i] == kMajor || regime[i] == kMinor);
+    if (!elliptic[i]) {
+      // A stand-in point on a regular orbit (m = 1/2 at v = 0), which no result takes.
+      minor[i] = 0, amplitude_1[i] = amplitude_middle[i] = amplitude_3[i] = 1, m[i] = mc[i] = 0.5;
+      nu[i] = -0.5, alpha[i] = precession[i] = 1, sn0[i] = 0, cn0[i] = 1, sn_v[i] = 0, cn_v[i] = dn_v[i] = 1;
+      third_kind[i] = 0;
+      continue;
+    }
+    const R point_in[kMotionInputs] = {in[0][i], in[1][i], in[2][i], in[3][i], in[4][i], in[5][i], in[6][i]};
+    const EllipticPoint<R> point = elliptic_point(point_in, regime[i] == kMinor, Attitude);
+    const EllipticOrbit<R>& orbit = point.orbit;
+    minor[i] = regime[i] == kMinor ? R(1) : R(0);
+    amplitude_1[i] = orbit.amplitude[0], amplitude_middle[i] = orbit.amplitude[1], amplitude_3[i] = orbit.amplitude[2];
+    m[i] = orbit.m, mc[i] = orbit.mc, nu[i] = orbit.nu, alpha[i] = orbit.alpha, precession[i] = orbit.precession;
+    sn0[i] = orbit.sn0, cn0[i] = orbit.cn0;
+    sn_v[i] = point.at_v.sn, cn_v[i] = point.at_v.cn, dn_v[i] = point.at_v.dn;
+    third_kind[i] = point.third_kind;
+  }
+  // Stage 2 over the block.
+  R k1[kBlock], k2[kBlock], k3[kBlock], addition_y[kBlock], addition_x[kBlock], angle_y[kBlock], angle_x[kBlock];
+  R l1[kBlock], l2[kBlock], l3[kBlock];
+  for (int i = 0; i < lanes; ++i) {
+    l1[i] = elliptic[i] ? in[3][i] : R(1);
+    l2[i] = elliptic[i] ? in[4][i] : R(0);
+    l3[i] = elliptic[i] ? in[5][i] : R(0);
+  }
+#pragma omp simd
+  for (int i = 0; i < lanes; ++i)
+    elliptic_state<R>(l1[i], l2[i], l3[i], minor[i] != 0, amplitude_1[i], amplitude_middle[i], amplitude_3[i], m[i],
+                      mc[i], nu[i], sn0[i], cn0[i], sn_v[i], cn_v[i], dn_v[i], k1[i], k2[i], k3[i], addition_y[i],
+                      addition_x[i], angle_y[i], angle_x[i]);
+  if constexpr (Attitude) {
+    R addition_angle[kBlock], angle_change[kBlock], half_psi[kBlock];
+#pragma omp simd
+    for (int i = 0; i < lanes; ++i) {
+      addition_angle[i] = circular::arctangent2(addition_y[i], addition_x[i]);
+      angle_change[i] = circular::arctangent2(angle_y[i], angle_x[i]);
+    }
+    for (int i = 0; i < lanes; ++i) {
+      // Arguments not finite: the addition term's overflows in float32 next to the plane of a
+      // symmetric body's equal moments (nu ~ -1e24).
+      if (!std::isfinite(addition_y[i]) || !std::isfinite(addition_x[i]))
+        addition_angle[i] = std::atan2(addition_y[i], addition_x[i]);
+      if (!std::isfinite(angle_y[i]) || !std::isfinite(angle_x[i])) angle_change[i] = std::atan2(angle_y[i], angle_x[i]);
+    }
+    // Stage 3 over the block.
+#pragma omp simd
+    for (int i = 0; i < lanes; ++i)
+      half_psi[i] = elliptic_half_angle<R>(in[6][i], minor[i] != 0, precession[i], alpha[i], nu[i], m[i],
+                                           third_kind[i], addition_angle[i], angle_change[i]);
+    R half_cos[kBlock], half_sin[kBlock];
+#pragma omp simd
+    for (int i = 0; i < lanes; ++i) circular::cos_sin(half_psi[i], half_cos[i], half_sin[i]);
+    for (int i = 0; i < lanes; ++i) {
+      if (!circular::reduces(half_psi[i])) {  // |psi| beyond 2^19 pi, or not finite
+        half_cos[i] = std::cos(half_psi[i]);
+        half_sin[i] = std::sin(half_psi[i]);
+      }
+    }
+    // The charts q̂(0) and q̂(tau) (vectorised without `omp simd`, which GCC 12 does not apply to a
+    // loop with a local array).
+    for (int i = 0; i < lanes; ++i) {
+      const bool is_minor = minor[i] != 0;
+      R start[4], now[4];
+      chart<R>(R(1), R(0), l1[i], l2[i], l3[i], is_minor, start);
+      chart<R>(half_cos[i], half_sin[i], k1[i], k2[i], k3[i], is_minor, now);
+      for (int k = 0; k < 4; ++k) {
+        out[3 + k][i] = start[k];
+        out[7 + k][i] = now[k];
+      }
+    }
+  }
+  for (int i = 0; i < lanes; ++i) {
+    out[0][i] = k1[i];
+    out[1][i] = k2[i];
+    out[2][i] = k3[i];
+  }
+  // The other regimes (the separatrix, uniform rotation) point by point.
+  for (int i = 0; i < count; ++i) {
+    if (elliptic[i]) continue;
+    R point_in[kMotionInputs], values[kMotionOutputs];
+    for (int k = 0; k < kMotionInputs; ++k) point_in[k] = in[k][i];
+    working_motion<R>(point_in, regime[i], Attitude, values);
+    for (int k = 0; k < (Attitude ? kMotionOutputs : 3); ++k) out[k][i] = values[k];
+  }
 }
 
 }  // namespace frbjax

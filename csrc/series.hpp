@@ -384,10 +384,8 @@ void series_motion_point(const T* record, const T& tau, T* out) {
   chart<T>(half_cos, half_sin, out[0], out[1], out[2], minor, out + 3);
 }
 
-// Points evaluated together: each stage of `series_motion_block` is a loop over a block's points,
-// which the compiler vectorises (circular.hpp's functions are straight-line code).
-constexpr int kBlock = 32;
-
+// Each stage of `series_motion_block` is a loop over a block's points (motion.hpp's kBlock), which the
+// compiler vectorises (circular.hpp's functions are straight-line code).
 // Unit L (3) and, with `Attitude`, q̂(tau) (4) in the working frame at count <= kBlock times tau of
 // one body, from its record (`_regimes.evaluate`): out[component][point].
 template <class R, bool Attitude>
