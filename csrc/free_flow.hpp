@@ -128,7 +128,7 @@ struct WorkingFrame {
 
 template <class T>
 FRBJAX_INLINE WorkingFrame<T> working_frame(const T* inertia, const T* momentum) {
-  const T &j1 = inertia[0], &j2 = inertia[1], &j3 = inertia[2];
+  const T j1 = inertia[0], j2 = inertia[1], j3 = inertia[2];  // values: see elliptic_orbit
   // Stable ranks (ties keep their order): body axis i becomes working axis rank[i].
   const int rank[3] = {int(j2 < j1) + int(j3 < j1), int(j1 <= j2) + int(j3 < j2), int(j1 <= j3) + int(j2 <= j3)};
   // An odd permutation has determinant -1: its middle working axis is flipped.

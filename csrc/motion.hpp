@@ -19,6 +19,7 @@
 // (regime 3) gets L = l and identity charts: its motion is formed in JAX (frbjax/_uniform.py).
 #pragma once
 
+#include <algorithm>
 #include <cmath>
 #include <cstddef>
 
@@ -133,16 +134,21 @@ T complete_third_kind(const T& n, const T& m, const T& mc) {
   return T(1.5707963267948966) * sqrt(kappa) / kappa - tail;
 }
 
-// (sn, cn) with sn^2 + cn^2 = 1 from a common positive multiple, scaled by a power of two first (both
-// can be ~1e-222, whose squares underflow).
+// (sn, cn) with sn^2 + cn^2 = 1 from a common positive multiple, scaled by a power of two first where
+// both are tiny or huge (both can be ~1e-222, whose squares underflow): exact, and chosen by selects,
+// so that a loop over points stays vectorisable.  The larger one is then within 2^-200..2^424 (float:
+// 2^-40..2^48); where the smaller one's square still underflows it is below the larger one's times
+// 2^-600 (float: 2^-46), which the sum does not see.
 template <class T>
-void unit_point(T sn_scaled, T cn_scaled, T& sn, T& cn) {
+FRBJAX_INLINE void unit_point(T sn_scaled, T cn_scaled, T& sn, T& cn) {
   using std::sqrt;
-  double largest = std::fmax(std::fabs(static_cast<double>(value(sn_scaled))),
-                             std::fabs(static_cast<double>(value(cn_scaled))));
-  int exponent = 0;
-  if (largest > 0) std::frexp(largest, &exponent);
-  const double scale = std::ldexp(1.0, 1 - exponent);  // exact
+  constexpr bool is_double = sizeof(real_t<T>) == 8;
+  const double largest = std::max(std::fabs(static_cast<double>(value(sn_scaled))),
+                                  std::fabs(static_cast<double>(value(cn_scaled))));
+  const double scale = largest < (is_double ? 0x1p-800 : 0x1p-100)  ? (is_double ? 0x1p1000 : 0x1p120)
+                       : largest < (is_double ? 0x1p-200 : 0x1p-40) ? (is_double ? 0x1p600 : 0x1p60)
+                       : largest > (is_double ? 0x1p200 : 0x1p40)   ? (is_double ? 0x1p-600 : 0x1p-80)
+                                                                    : 1.0;
   sn_scaled = sn_scaled * scale;
   cn_scaled = cn_scaled * scale;
   T norm = sqrt(sn_scaled * sn_scaled + cn_scaled * cn_scaled);
@@ -162,17 +168,19 @@ struct EllipticOrbit {
 };
 
 template <class T>
-EllipticOrbit<T> elliptic_orbit(const T* in, bool minor) {
+FRBJAX_INLINE EllipticOrbit<T> elliptic_orbit(const T j1, const T j2, const T j3, const T l1, const T l2, const T l3,
+                                              bool minor) {
+  // Values, not references: a select between references is one between addresses, which a loop over
+  // points does not vectorise.
   using std::fabs;
   using std::sqrt;
-  const T &j1 = in[0], &j2 = in[1], &j3 = in[2], &l1 = in[3], &l2 = in[4], &l3 = in[5];
   const T a = j2 - j1, b = j3 - j2, c = j3 - j1;
   const T g1 = l2 * l2 * a / j2 + l3 * l3 * c / j3;
   const T g3 = l1 * l1 * c / j1 + l2 * l2 * b / j2;
   const T g2 = l1 * l1 * a / j1 - l3 * l3 * b / j3;
-  const T &j_pivot = minor ? j3 : j1, &j_other = minor ? j1 : j3;
-  const T &g_pivot = minor ? g3 : g1, &g_other = minor ? g1 : g3;
-  const T &gap_pivot = minor ? a : b, &gap_other = minor ? b : a;
+  const T j_pivot = minor ? j3 : j1, j_other = minor ? j1 : j3;
+  const T g_pivot = minor ? g3 : g1, g_other = minor ? g1 : g3;
+  const T gap_pivot = minor ? a : b, gap_other = minor ? b : a;
   EllipticOrbit<T> orbit;
   const T amplitude_pivot = sqrt(j_pivot * g_other / c);
   const T amplitude_other = sqrt(j_other * g_pivot / c);
@@ -189,6 +197,11 @@ EllipticOrbit<T> elliptic_orbit(const T* in, bool minor) {
   orbit.precession = 1.0 / (value(orbit.nu) >= -1 ? j_other : j_pivot);
   unit_point(l2 * amplitude_pivot, (minor ? l3 : l1) * orbit.amplitude[1], orbit.sn0, orbit.cn0);
   return orbit;
+}
+
+template <class T>
+FRBJAX_INLINE EllipticOrbit<T> elliptic_orbit(const T* in, bool minor) {
+  return elliptic_orbit(in[0], in[1], in[2], in[3], in[4], in[5], minor);
 }
 
 // The separatrix's constants (docs/theory.md §5): L = (A1 sech, tanh, A3 sech)(u), delta = alpha, and
@@ -248,29 +261,25 @@ void motion_cos_sin(const T& x, T& cosine, T& sine) {
 // special functions point by point and the straight-line rest as loops the compiler vectorises
 // (`working_motion_block`); `working_motion` runs the same stages at one point.
 //
-// 1. `elliptic_point` (branchy): the orbit's constants, (sn, cn, dn)(v) at v = B tau, and the
-//    third-kind integral's change over v from its reduced point and whole half-periods (DLMF 19.2.10);
-//    F is additive, so the same addition term below serves Pi - F.
+// 1. `elliptic_orbit` (above; straight-line code) and `elliptic_point` (branchy): (sn, cn, dn)(v) at
+//    v = B tau, and the third-kind integral's change over v from its reduced point and whole
+//    half-periods (DLMF 19.2.10); F is additive, so the same addition term below serves Pi - F.
 template <class T>
 struct EllipticPoint {
-  EllipticOrbit<T> orbit;
   JacobiTriple<T> at_v;
   T third_kind;
 };
 
 template <class T>
-EllipticPoint<T> elliptic_point(const T* in, bool minor, bool attitude) {
+EllipticPoint<T> elliptic_point(const T& rate, const T& m, const T& mc, const T& nu, const T& tau, bool attitude) {
   EllipticPoint<T> point;
-  point.orbit = elliptic_orbit(in, minor);
-  const EllipticOrbit<T>& orbit = point.orbit;
-  point.at_v = jacobi_triple(orbit.rate * in[6], orbit.m, orbit.mc);
+  point.at_v = jacobi_triple(rate * tau, m, mc);
   const JacobiTriple<T>& at_v = point.at_v;
   point.third_kind = T(0.0);
   if (attitude) {
     const double parity = std::fmod(std::fabs(at_v.turns), 2.0) == 1 ? -1.0 : 1.0;
-    point.third_kind = pi_without_first_kind<T>(orbit.nu, parity * at_v.sn, parity * at_v.cn, orbit.m, orbit.mc);
-    if (at_v.turns != 0)
-      point.third_kind = point.third_kind + 2.0 * at_v.turns * complete_third_kind<T>(orbit.nu, orbit.m, orbit.mc);
+    point.third_kind = pi_without_first_kind<T>(nu, parity * at_v.sn, parity * at_v.cn, m, mc);
+    if (at_v.turns != 0) point.third_kind = point.third_kind + 2.0 * at_v.turns * complete_third_kind<T>(nu, m, mc);
   }
   return point;
 }
@@ -370,8 +379,8 @@ void working_motion(const T* in, int regime, bool attitude, T* out) {
     separatrix_motion(in, k1, k2, k3, psi);
     half_psi = psi / 2.0;
   } else {
-    const EllipticPoint<T> point = elliptic_point(in, minor, attitude);
-    const EllipticOrbit<T>& orbit = point.orbit;
+    const EllipticOrbit<T> orbit = elliptic_orbit(in, minor);
+    const EllipticPoint<T> point = elliptic_point(orbit.rate, orbit.m, orbit.mc, orbit.nu, tau, attitude);
     T addition_y, addition_x, angle_y, angle_x;
     elliptic_state(l1, l2, l3, minor, orbit.amplitude[0], orbit.amplitude[1], orbit.amplitude[2], orbit.m,
                    orbit.mc, orbit.nu, orbit.sn0, orbit.cn0, point.at_v.sn, point.at_v.cn, point.at_v.dn, k1, k2,
@@ -411,13 +420,24 @@ template <class R, bool Attitude>
 void working_motion_block(const R (&in)[kMotionInputs][kBlock], const int* regime, int count,
                           R (&out)[kMotionOutputs][kBlock]) {
   const int lanes = whole_lanes(count);
-  // Per point: the orbit's constants and the special functions (stage 1), stand-ins elsewhere.
-  R minor[kBlock], amplitude_1[kBlock], amplitude_middle[kBlock], amplitude_3[kBlock], m[kBlock], mc[kBlock];
-  R nu[kBlock], alpha[kBlock], precession[kBlock], sn0[kBlock], cn0[kBlock], sn_v[kBlock], cn_v[kBlock];
-  R dn_v[kBlock], third_kind[kBlock];
+  // Stage 1: the orbit's constants over the block (vectorised without `omp simd`, which GCC 12 does
+  // not apply to a loop with a local array), then the special functions point by point (stand-ins
+  // elsewhere).
+  R minor[kBlock], amplitude_1[kBlock], amplitude_middle[kBlock], amplitude_3[kBlock], rate[kBlock], m[kBlock];
+  R mc[kBlock], nu[kBlock], alpha[kBlock], precession[kBlock], sn0[kBlock], cn0[kBlock];
   bool elliptic[kBlock];
   for (int i = 0; i < lanes; ++i) {
     elliptic[i] = i < count && (regime[i] == kMajor || regime[i] == kMinor);
+    minor[i] = i < count && regime[i] == kMinor ? R(1) : R(0);
+  }
+  for (int i = 0; i < lanes; ++i) {
+    const EllipticOrbit<R> orbit = elliptic_orbit(in[0][i], in[1][i], in[2][i], in[3][i], in[4][i], in[5][i], minor[i] != 0);
+    amplitude_1[i] = orbit.amplitude[0], amplitude_middle[i] = orbit.amplitude[1], amplitude_3[i] = orbit.amplitude[2];
+    rate[i] = orbit.rate, m[i] = orbit.m, mc[i] = orbit.mc, nu[i] = orbit.nu, alpha[i] = orbit.alpha;
+    precession[i] = orbit.precession, sn0[i] = orbit.sn0, cn0[i] = orbit.cn0;
+  }
+  R sn_v[kBlock], cn_v[kBlock], dn_v[kBlock], third_kind[kBlock];
+  for (int i = 0; i < lanes; ++i) {
     if (!elliptic[i]) {
       // A stand-in point on a regular orbit (m = 1/2 at v = 0), which no result takes.
       minor[i] = 0, amplitude_1[i] = amplitude_middle[i] = amplitude_3[i] = 1, m[i] = mc[i] = 0.5;
@@ -425,13 +445,7 @@ void working_motion_block(const R (&in)[kMotionInputs][kBlock], const int* regim
       third_kind[i] = 0;
       continue;
     }
-    const R point_in[kMotionInputs] = {in[0][i], in[1][i], in[2][i], in[3][i], in[4][i], in[5][i], in[6][i]};
-    const EllipticPoint<R> point = elliptic_point(point_in, regime[i] == kMinor, Attitude);
-    const EllipticOrbit<R>& orbit = point.orbit;
-    minor[i] = regime[i] == kMinor ? R(1) : R(0);
-    amplitude_1[i] = orbit.amplitude[0], amplitude_middle[i] = orbit.amplitude[1], amplitude_3[i] = orbit.amplitude[2];
-    m[i] = orbit.m, mc[i] = orbit.mc, nu[i] = orbit.nu, alpha[i] = orbit.alpha, precession[i] = orbit.precession;
-    sn0[i] = orbit.sn0, cn0[i] = orbit.cn0;
+    const EllipticPoint<R> point = elliptic_point(rate[i], m[i], mc[i], nu[i], in[6][i], Attitude);
     sn_v[i] = point.at_v.sn, cn_v[i] = point.at_v.cn, dn_v[i] = point.at_v.dn;
     third_kind[i] = point.third_kind;
   }
