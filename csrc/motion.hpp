@@ -482,14 +482,7 @@ void working_motion_block(const R (&in)[kMotionInputs][kBlock], const int* regim
       half_psi[i] = elliptic_half_angle<R>(in[6][i], minor[i] != 0, precession[i], alpha[i], nu[i], m[i],
                                            third_kind[i], addition_angle[i], angle_change[i]);
     R half_cos[kBlock], half_sin[kBlock];
-#pragma omp simd
-    for (int i = 0; i < lanes; ++i) circular::cos_sin(half_psi[i], half_cos[i], half_sin[i]);
-    for (int i = 0; i < lanes; ++i) {
-      if (!circular::reduces(half_psi[i])) {  // |psi| beyond 2^19 pi, or not finite
-        half_cos[i] = std::cos(half_psi[i]);
-        half_sin[i] = std::sin(half_psi[i]);
-      }
-    }
+    circular::cos_sin_points(half_psi, lanes, half_cos, half_sin);
     // The charts q̂(0) and q̂(tau) (vectorised without `omp simd`, which GCC 12 does not apply to a
     // loop with a local array).
     for (int i = 0; i < lanes; ++i) {

@@ -435,14 +435,7 @@ void series_motion_block(const R* record, const R* tau, int count, R (&out)[7][k
     half_angle[i] = psi / 2;
   }
   R half_cos[kBlock], half_sin[kBlock];
-#pragma omp simd
-  for (int i = 0; i < count; ++i) circular::cos_sin(half_angle[i], half_cos[i], half_sin[i]);
-  for (int i = 0; i < count; ++i) {
-    if (!circular::reduces(half_angle[i])) {  // |psi| beyond 2^19 pi, or not finite
-      half_cos[i] = std::cos(half_angle[i]);
-      half_sin[i] = std::sin(half_angle[i]);
-    }
-  }
+  circular::cos_sin_points(half_angle, count, half_cos, half_sin);
   // Vectorised without `omp simd`, which GCC 12 does not apply to a loop with a local array.
   for (int i = 0; i < count; ++i) {
     R q[4];
