@@ -28,8 +28,10 @@
 // Inlined whatever their size: a loop over points that calls them is vectorised only so.
 #if defined(__GNUC__)
 #define FRBJAX_INLINE inline __attribute__((always_inline))
+#define FRBJAX_NOINLINE __attribute__((noinline))
 #else
 #define FRBJAX_INLINE inline
+#define FRBJAX_NOINLINE
 #endif
 
 namespace frbjax {
@@ -140,20 +142,6 @@ FRBJAX_INLINE void cos_sin(float x, float& cosine, float& sine) {
   sine = float(s);
 }
 
-// (cos x, sin x) at count points: cos_sin as one vectorised loop, then the C library's at the points it
-// does not reduce (|x| beyond 2^19 pi/2, or not finite).
-template <class R>
-FRBJAX_INLINE void cos_sin_points(const R* x, int count, R* cosine, R* sine) {
-#pragma omp simd
-  for (int i = 0; i < count; ++i) cos_sin(x[i], cosine[i], sine[i]);
-  for (int i = 0; i < count; ++i) {
-    if (!reduces(x[i])) {
-      cosine[i] = std::cos(x[i]);
-      sine[i] = std::sin(x[i]);
-    }
-  }
-}
-
 // The angle of the point (x, y) in [-pi, pi] (DLMF 4.23.34), finite arguments; atan2(+-0, -0) =
 // +-pi as IEEE 754.
 FRBJAX_INLINE double arctangent2(double y, double x) {
@@ -200,6 +188,31 @@ FRBJAX_INLINE double arctangent2(double y, double x) {
 }
 
 FRBJAX_INLINE float arctangent2(float y, float x) { return float(arctangent2(double(y), double(x))); }
+
+// The functions above at count points, each as one vectorised loop, then the C library's where they
+// do not apply: cos and sin where cos_sin does not reduce (|x| beyond 2^19 pi/2, or not finite),
+// atan2 where an argument is not finite.  Out of line: code compiled with its products and sums fused
+// (motion.hpp's section) calls them without taking them in, so that they keep the exact roundings
+// their error-free transformations rely on.
+template <class R>
+FRBJAX_NOINLINE void cos_sin_points(const R* x, int count, R* cosine, R* sine) {
+#pragma omp simd
+  for (int i = 0; i < count; ++i) cos_sin(x[i], cosine[i], sine[i]);
+  for (int i = 0; i < count; ++i) {
+    if (!reduces(x[i])) {
+      cosine[i] = std::cos(x[i]);
+      sine[i] = std::sin(x[i]);
+    }
+  }
+}
+
+template <class R>
+FRBJAX_NOINLINE void arctangent2_points(const R* y, const R* x, int count, R* angle) {
+#pragma omp simd
+  for (int i = 0; i < count; ++i) angle[i] = arctangent2(y[i], x[i]);
+  for (int i = 0; i < count; ++i)
+    if (!std::isfinite(y[i]) || !std::isfinite(x[i])) angle[i] = std::atan2(y[i], x[i]);
+}
 
 }  // namespace circular
 }  // namespace frbjax

@@ -249,59 +249,46 @@ void free_flow(const T* inertia, const T* momentum, const T* attitude, T t, T* m
 
 // Up to kBlock bodies at once (`free_flow` of each): the working frames point by point, the
 // working-frame motion of the elliptic regimes as motion.hpp's block (its straight-line stages
-// vectorised), and `body_state` as one loop over the block.  Invalid and uniformly rotating bodies
-// take `free_flow` itself.
+// vectorised), and `body_state` as one loop over the bodies.  Invalid and uniformly rotating bodies
+// take `free_flow` itself.  (This file fuses nothing, so its loops round the same, vectorised or not.)
 template <class R>
 void free_flow_block(const R* inertia, const R* momentum, const R* attitude, const R* t, int count,
                      R* momentum_out, R* attitude_out) {
-  const int lanes = whole_lanes(count);
-  // The bodies as columns, stand-ins (a unit sphere at rest) after `count` (motion.hpp's `whole_lanes`).
-  R given[10][kBlock], time[kBlock];  // J (3), L (3), q (4)
-  for (int i = 0; i < lanes; ++i) {
-    if (i < count) {
-      for (int k = 0; k < 3; ++k) given[k][i] = inertia[3 * i + k], given[3 + k][i] = momentum[3 * i + k];
-      for (int k = 0; k < 4; ++k) given[6 + k][i] = attitude[4 * i + k];
-      time[i] = t[i];
-    } else {
-      for (int k = 0; k < 10; ++k) given[k][i] = k < 3 || k == 6 ? 1 : 0;
-      time[i] = 0;
-    }
-  }
-  // The working frames and the unit attitudes, over the block (vectorised without `omp simd`, which
-  // GCC 12 does not apply to a loop with a local array).
-  R in[kMotionInputs][kBlock], permutation[3][3][kBlock], start[4][kBlock], norm[kBlock], regime_number[kBlock];
-  for (int i = 0; i < lanes; ++i) {
-    const R j[3] = {given[0][i], given[1][i], given[2][i]}, l[3] = {given[3][i], given[4][i], given[5][i]};
-    const WorkingFrame<R> frame = working_frame(j, l);
-    regime_number[i] = R(frame.regime);
+  R in[kMotionInputs][kBlock], permutation[3][3][kBlock], start[4][kBlock], norm[kBlock];
+  int regime[kBlock];
+  for (int i = 0; i < count; ++i) {
+    const WorkingFrame<R> frame = working_frame(inertia + 3 * i, momentum + 3 * i);
+    regime[i] = frame.regime;
     for (int k = 0; k < 3; ++k) {
       in[k][i] = frame.inertia[k];
       in[3 + k][i] = frame.unit_momentum[k];
       for (int c = 0; c < 3; ++c) permutation[k][c][i] = frame.permutation[k][c];
     }
-    in[6][i] = frame.norm * time[i];
+    in[6][i] = frame.norm * t[i];
     norm[i] = frame.norm;
-    R unit[4] = {given[6][i], given[7][i], given[8][i], given[9][i]};
+    R unit[4] = {attitude[4 * i], attitude[4 * i + 1], attitude[4 * i + 2], attitude[4 * i + 3]};
     normalise_quaternion(unit);
     for (int k = 0; k < 4; ++k) start[k][i] = unit[k];
   }
+  // Stand-ins for the motion block's lanes after `count` (motion.hpp's `whole_lanes`): a body
+  // (1, 2, 3) spinning about its first axis.
+  for (int i = count; i < whole_lanes<R>(count); ++i) {
+    for (int k = 0; k < kMotionInputs; ++k) in[k][i] = k < 3 ? R(k + 1) : R(k == 3);
+    regime[i] = kUniform;
+  }
   // Invalid and uniformly rotating bodies: `free_flow` itself; the block's stages pass them by.
-  int regime[kBlock];
   bool alone[kBlock];
-  for (int i = 0; i < lanes; ++i) {
-    regime[i] = static_cast<int>(regime_number[i]);
-    alone[i] = i >= count || regime[i] == kUniform ||
-               !valid_body(inertia + 3 * i, momentum + 3 * i, attitude + 4 * i);
+  for (int i = 0; i < count; ++i) {
+    alone[i] = regime[i] == kUniform || !valid_body(inertia + 3 * i, momentum + 3 * i, attitude + 4 * i);
     if (!alone[i]) continue;
     regime[i] = kUniform;
-    if (i < count) free_flow<R>(inertia + 3 * i, momentum + 3 * i, attitude + 4 * i, t[i], momentum_out + 3 * i,
-                                attitude_out + 4 * i);
+    free_flow<R>(inertia + 3 * i, momentum + 3 * i, attitude + 4 * i, t[i], momentum_out + 3 * i, attitude_out + 4 * i);
   }
   R motion[kMotionOutputs][kBlock];
   working_motion_block<R, true>(in, regime, count, motion);
   R state[7][kBlock];
   // Vectorised without `omp simd`, which GCC 12 does not apply to a loop with a local array.
-  for (int i = 0; i < lanes; ++i) {
+  for (int i = 0; i < count; ++i) {
     R point_permutation[3][3], point_start[4], point_motion[kMotionOutputs], point_state[7];
     for (int k = 0; k < 3; ++k)
       for (int c = 0; c < 3; ++c) point_permutation[k][c] = permutation[k][c][i];

@@ -226,10 +226,9 @@ SeparatrixOrbit<T> separatrix_orbit(const T* in) {
   return orbit;
 }
 
-// The motion's atan2 and (cos, sin): circular.hpp's straight-line forms on real numbers (the block's
-// vectorised loops below take them), the C library's where those do not apply (an argument not
-// finite; |x| beyond 2^19 pi/2); on dual numbers the same values, with the derivatives of
-// dual.hpp's rules (d atan2 = (x dy - y dx)/(x^2 + y^2), d(cos, sin) = (-sin, cos) dx).
+// The motion's atan2 and (cos, sin): circular.hpp's forms on real numbers (`arctangent2_points`,
+// `cos_sin_points`, which the block below calls on its points), on dual numbers the same values with
+// the derivatives of dual.hpp's rules (d atan2 = (x dy - y dx)/(x^2 + y^2), d(cos, sin) = (-sin, cos) dx).
 template <class T>
 T motion_arctangent2(const T& y, const T& x) {
   if constexpr (is_dual<T>::value) {
@@ -237,7 +236,9 @@ T motion_arctangent2(const T& y, const T& x) {
     angle.v = motion_arctangent2(y.v, x.v);
     return angle;
   } else {
-    return std::isfinite(y) && std::isfinite(x) ? circular::arctangent2(y, x) : std::atan2(y, x);
+    T angle;
+    circular::arctangent2_points(&y, &x, 1, &angle);
+    return angle;
   }
 }
 
@@ -249,11 +250,8 @@ void motion_cos_sin(const T& x, T& cosine, T& sine) {
       cosine.d[i] = -sine.v * x.d[i];
       sine.d[i] = cosine.v * x.d[i];
     }
-  } else if (circular::reduces(x)) {
-    circular::cos_sin(x, cosine, sine);
   } else {
-    cosine = std::cos(x);
-    sine = std::sin(x);
+    circular::cos_sin_points(&x, 1, &cosine, &sine);
   }
 }
 
@@ -403,23 +401,26 @@ void working_motion(const T* in, int regime, bool attitude, T* out) {
 // points, which the compiler vectorises (series.hpp's evaluation uses the same size).
 constexpr int kBlock = 32;
 
-// The block's vectorised loops run over whole groups of kLanes points, a multiple of every vector
-// width the kernels are built for, the points after the given ones stand-ins: every point takes the
-// vectorised code (no scalar remainder, whose products and sums may fuse differently), so that a
-// point's result does not depend on its place in the batch.
-constexpr int kLanes = 8;
-
-inline int whole_lanes(int count) { return (count + kLanes - 1) / kLanes * kLanes; }
+// The block's vectorised loops with fused products and sums run over whole vectors of points (the 32
+// bytes of the widest vectors the kernels are built for, AVX), the points after the given ones
+// stand-ins: every point takes the vectorised code (no scalar remainder, whose products and sums may
+// fuse differently), so that a point's result does not depend on its place in the batch.  (The loops
+// of free_flow.hpp fuse nothing: each operation rounds once, vectorised or not.)
+template <class R>
+inline int whole_lanes(int count) {
+  constexpr int lanes = 32 / sizeof(R);
+  return (count + lanes - 1) / lanes * lanes;
+}
 
 // `working_motion` at up to kBlock points of real numbers: in[input][point], regime[point],
 // out[output][point].  The elliptic points take `elliptic_point` one by one, then each straight-line
-// stage as one loop over the block's lanes (`whole_lanes`), with `motion_arctangent2` and
-// `motion_cos_sin` as vectorised loops and their exceptions after them.  Other regimes take
-// `working_motion` itself.
+// stage as one loop over the block's lanes (`whole_lanes`), and the arctangents, cosine and sine as
+// circular.hpp's `arctangent2_points` and `cos_sin_points`.  Other regimes take `working_motion`
+// itself.
 template <class R, bool Attitude>
 void working_motion_block(const R (&in)[kMotionInputs][kBlock], const int* regime, int count,
                           R (&out)[kMotionOutputs][kBlock]) {
-  const int lanes = whole_lanes(count);
+  const int lanes = whole_lanes<R>(count);
   // Stage 1: the orbit's constants over the block (vectorised without `omp simd`, which GCC 12 does
   // not apply to a loop with a local array), then the special functions point by point (stand-ins
   // elsewhere).
@@ -464,18 +465,10 @@ void working_motion_block(const R (&in)[kMotionInputs][kBlock], const int* regim
                       addition_x[i], angle_y[i], angle_x[i]);
   if constexpr (Attitude) {
     R addition_angle[kBlock], angle_change[kBlock], half_psi[kBlock];
-#pragma omp simd
-    for (int i = 0; i < lanes; ++i) {
-      addition_angle[i] = circular::arctangent2(addition_y[i], addition_x[i]);
-      angle_change[i] = circular::arctangent2(angle_y[i], angle_x[i]);
-    }
-    for (int i = 0; i < lanes; ++i) {
-      // Arguments not finite: the addition term's overflows in float32 next to the plane of a
-      // symmetric body's equal moments (nu ~ -1e24).
-      if (!std::isfinite(addition_y[i]) || !std::isfinite(addition_x[i]))
-        addition_angle[i] = std::atan2(addition_y[i], addition_x[i]);
-      if (!std::isfinite(angle_y[i]) || !std::isfinite(angle_x[i])) angle_change[i] = std::atan2(angle_y[i], angle_x[i]);
-    }
+    // (The addition term's arguments overflow in float32 next to the plane of a symmetric body's
+    // equal moments, nu ~ -1e24: the C library's atan2 there.)
+    circular::arctangent2_points(addition_y, addition_x, lanes, addition_angle);
+    circular::arctangent2_points(angle_y, angle_x, lanes, angle_change);
     // Stage 3 over the block.
 #pragma omp simd
     for (int i = 0; i < lanes; ++i)
