@@ -128,7 +128,7 @@ struct WorkingFrame {
 
 template <class T>
 FRBJAX_INLINE WorkingFrame<T> working_frame(const T* inertia, const T* momentum) {
-  const T j1 = inertia[0], j2 = inertia[1], j3 = inertia[2];  // values: see elliptic_orbit
+  const T &j1 = inertia[0], &j2 = inertia[1], &j3 = inertia[2];
   // Stable ranks (ties keep their order): body axis i becomes working axis rank[i].
   const int rank[3] = {int(j2 < j1) + int(j3 < j1), int(j1 <= j2) + int(j3 < j2), int(j1 <= j3) + int(j2 <= j3)};
   // An odd permutation has determinant -1: its middle working axis is flipped.
@@ -270,12 +270,7 @@ void free_flow_block(const R* inertia, const R* momentum, const R* attitude, con
     normalise_quaternion(unit);
     for (int k = 0; k < 4; ++k) start[k][i] = unit[k];
   }
-  // Stand-ins for the motion block's lanes after `count` (motion.hpp's `whole_lanes`): a body
-  // (1, 2, 3) spinning about its first axis.
-  for (int i = count; i < whole_lanes<R>(count); ++i) {
-    for (int k = 0; k < kMotionInputs; ++k) in[k][i] = k < 3 ? R(k + 1) : R(k == 3);
-    regime[i] = kUniform;
-  }
+  fill_stand_ins(in, count);
   // Invalid and uniformly rotating bodies: `free_flow` itself; the block's stages pass them by.
   bool alone[kBlock];
   for (int i = 0; i < count; ++i) {

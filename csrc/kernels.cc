@@ -289,7 +289,8 @@ ffi::Error run_motion(ffi::ThreadPool& pool, ffi::RemainingArgs arguments, ffi::
         const int block = static_cast<int>(std::min<std::size_t>(kBlock, end - i));
         R in[K][kBlock], values[kMotionOutputs][kBlock];
         for (int j = 0; j < K; ++j)
-          for (int p = 0; p < kBlock; ++p) in[j][p] = p < block ? inputs[j][i + p] : R(1);
+          for (int p = 0; p < block; ++p) in[j][p] = inputs[j][i + p];
+        fill_stand_ins(in, block);
         working_motion_block<R, Attitude>(in, regime + i, block, values);
         for (int p = 0; p < block; ++p)
           for (int o = 0; o < outputs; ++o) output[(i + p) * outputs + o] = values[o][p];

@@ -412,8 +412,16 @@ inline int whole_lanes(int count) {
   return (count + lanes - 1) / lanes * lanes;
 }
 
-// `working_motion` at up to kBlock points of real numbers: in[input][point], regime[point],
-// out[output][point].  The elliptic points take `elliptic_point` one by one, then each straight-line
+// The inputs of a block's lanes after `count` up to `whole_lanes`, which its vectorised stages read:
+// a body (1, 2, 3) spinning about its first axis, which no result takes.
+template <class R>
+void fill_stand_ins(R (&in)[kMotionInputs][kBlock], int count) {
+  for (int i = count; i < whole_lanes<R>(count); ++i)
+    for (int k = 0; k < kMotionInputs; ++k) in[k][i] = k < 3 ? R(k + 1) : R(k == 3);
+}
+
+// `working_motion` at up to kBlock points of real numbers: in[input][point] (`fill_stand_ins` after
+// `count`), regime[point], out[output][point].  The elliptic points take `elliptic_point` one by one, then each straight-line
 // stage as one loop over the block's lanes (`whole_lanes`), and the arctangents, cosine and sine as
 // circular.hpp's `arctangent2_points` and `cos_sin_points`.  Other regimes take `working_motion`
 // itself.
