@@ -11,11 +11,25 @@ option and get none; an XLA that does not know it compiles without it.
 from __future__ import annotations
 
 import functools
+import os
 
 import jax
 
 
-DEFAULT_COMPILER_OPTIONS = {"xla_cpu_use_fusion_emitters": False}
+def _cores():
+    """The cores this process may run on."""
+    try:
+        return len(os.sched_getaffinity(0))
+    except AttributeError:  # no affinity masks (macOS)
+        return os.cpu_count() or 1
+
+
+# XLA:CPU splits a program's machine code into parts compiled side by side (32 by default), each
+# paying its own fixed costs: more parts than cores only adds those.
+DEFAULT_COMPILER_OPTIONS = {
+    "xla_cpu_use_fusion_emitters": False,
+    "xla_cpu_parallel_codegen_split_count": max(1, min(_cores(), 32)),
+}
 
 
 def call_with_options(compiled, options, *args, **static):

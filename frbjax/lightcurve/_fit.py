@@ -76,7 +76,7 @@ from .._multistart import solve_each, starts_in_sequence
 from .._trace_once import traced_once
 from ._brightness import brightness as _forward, facet_brightness, LAWS
 from ._periods import momentum_from_periods, tumbler_periods
-from ._shape import ConvexShape, icosphere
+from ._shape import _icosphere_area_vectors, ConvexShape, icosphere
 
 
 __all__ = ["LightcurveFit", "fit_lightcurve"]
@@ -126,10 +126,6 @@ def _initial_state(theta, reference):
 def _body(theta, reference):
     """The FreeRigidBody of motion parameters theta (8,) with the start's reference frame."""
     return FreeRigidBody(*_initial_state(theta, reference))
-
-
-# The fitted body in one program (eagerly, each of _body's operations was compiled in turn).
-_body_program = cpu_jit(_body)
 
 
 def _ellipsoid_shape(shape_parameters, subdivisions):
@@ -316,7 +312,7 @@ def _refine_starts(parameters, references, priors, data, masks, prior_weights, c
 _refine = cpu_jit(_refine_starts, static_argnames=("config", "rtol", "atol", "max_steps"))
 
 
-@functools.partial(jax.jit, static_argnames="config")
+@cpu_jit(static_argnames="config")
 def _search_costs(parameters, references, start_areas, data, mask, config):
     """Cost of each start of a chunk on the first window with its own shape (the ellipsoid of its
     inertia)."""
@@ -355,15 +351,16 @@ _momenta_from_periods = cpu_jit(jax.vmap(momentum_from_periods))
 
 
 @cpu_jit(static_argnames="principal_axis")
-def _periods_and_jacobian(theta, reference, principal_axis):
-    """((P_psi, P_phi), LAM, their Jacobian in theta)."""
+def _fitted_motion(theta, reference, principal_axis):
+    """(the body, (P_psi, P_phi), LAM, the periods' Jacobian in theta) of the fitted theta: one
+    program (eagerly, each of the body's operations was compiled in turn)."""
 
     def periods(theta):
         values, long_axis = _periods(theta, reference, principal_axis)
         return values, (values, long_axis)
 
     jacobian, (values, long_axis) = jax.jacfwd(periods, has_aux=True)(theta)
-    return values, long_axis, jacobian
+    return _body(theta, reference), values, long_axis, jacobian
 
 
 # ------------------------------------------------------------------------------------ the result
@@ -466,10 +463,11 @@ def _gaussian_image_areas(axes, normals, solid_angles):
 
 
 def _unit_normals(subdivisions):
-    vertices, faces = icosphere(subdivisions)
-    shape = ConvexShape.from_mesh(vertices, faces)
-    normals, areas = np.asarray(shape.normals), np.asarray(shape.areas)
-    return normals, areas * 4 * np.pi / areas.sum(), faces
+    """The icosphere's outward unit normals, solid angles (summing to 4 pi) and faces (numpy)."""
+    _, faces = icosphere(subdivisions)
+    area_vectors = _icosphere_area_vectors(subdivisions)
+    areas = np.linalg.norm(area_vectors, axis=-1)
+    return area_vectors / areas[:, None], areas * 4 * np.pi / areas.sum(), faces
 
 
 def _laplacian(faces):
@@ -895,42 +893,38 @@ def fit_lightcurve(
     # The refinement's progress bar counts the windows solved (each start's continuation windows, its
     # convex stage, the leader's continued solves).
     windows = len(best) * (len(masks) + (1 if shape == "convex" else 0))
+    # Where the starts are solved one after another anyway (the CPU, ``solve_each``), each is its own
+    # call of a one-start program, which the leader's continued solves below then reuse: a program
+    # over all the starts compiled the loop over them too (the LAM benchmark: about 2.5 s of its 12 s
+    # of compilation when the convex stage had its own).
+    batches = [slice(k, k + 1) for k in range(len(best))] if starts_in_sequence() else [slice(None)]
+
+    def refine(parameters, priors, data, masks, prior_weights, config):
+        parts = [
+            _refine(
+                as_jax(parameters[rows]),
+                as_jax(tuple(r[rows] for r in refs)),
+                None if priors is None else as_jax(tuple(p[rows] for p in priors)),
+                data,
+                jnp.asarray(masks[rows], dtype),
+                None if prior_weights is None else jnp.asarray(prior_weights, dtype),
+                config,
+                **solver_settings,
+            )
+            for rows in batches
+        ]
+        return jax.tree.map(lambda *pieces: np.concatenate([np.asarray(piece) for piece in pieces]), *parts)
+
     with _progress.bar("lightcurve refinement", windows, "light-curve refinement", "window", shown=progress) as bar:
-        out = _refine(
-            as_jax(parameters0),
-            as_jax(refs),
-            as_jax(priors),
-            ellipsoid_data,
-            jnp.asarray(start_masks, dtype),
-            jnp.asarray(prior_weights, dtype),
-            ellipsoid_config,
-            **solver_settings,
-        )
+        out = refine(parameters0, priors, ellipsoid_data, start_masks, prior_weights, ellipsoid_config)
         if shape == "convex":
             fitted = np.asarray(out[0])
             fitted_axes = np.concatenate([np.ones((len(best), 1)), np.exp(fitted[:, 8:])], 1)
             log_areas = np.log(_gaussian_image_areas(fitted_axes, normals, solid_angles))
             log_areas -= log_areas.mean(-1, keepdims=True)
             parameters0 = np.concatenate([fitted[:, :8], log_areas], 1)
-            # All the data, no prior.  Where the starts are solved one after another anyway (the CPU,
-            # ``solve_each``), each is its own call of the one-start program, which the leader's
-            # continued solves below then reuse instead of compiling it for themselves (the LAM
-            # benchmark's first call: about 2.5 s of its 12 s of compilation).
-            batches = [slice(k, k + 1) for k in range(len(best))] if starts_in_sequence() else [slice(None)]
-            parts = [
-                _refine(
-                    as_jax(parameters0[rows]),
-                    as_jax(tuple(r[rows] for r in refs)),
-                    None,
-                    data,
-                    jnp.asarray(start_masks[rows, -1:], dtype),
-                    None,
-                    config,
-                    **solver_settings,
-                )
-                for rows in batches
-            ]
-            out = jax.tree.map(lambda *pieces: np.concatenate([np.asarray(piece) for piece in pieces]), *parts)
+            # All the data, no prior.
+            out = refine(parameters0, None, data, start_masks[:, -1:], None, config)
         # A leader that stopped at max_steps still moving is solved on from where it stopped (all the data,
         # no prior), alone: Levenberg-Marquardt on a convex shape's hundreds of areas can take more than
         # max_steps to meet rtol (the LAM test's leader: three more solves).
@@ -976,17 +970,15 @@ def fit_lightcurve(
     covariance = np.zeros((free.size, free.size))
     covariance[np.ix_(free > 0, free > 0)] = (right[kept].T / singular[kept] ** 2) @ right[kept] * variance
 
-    body = _body_program(jnp.asarray(p[:8], dtype), reference)
+    theta_fit = jnp.asarray(p[:8], dtype)
+    body, period_values, lam, period_jacobian = _fitted_motion(theta_fit, reference, principal_axis)
     if shape == "convex":
         fitted_shape = ConvexShape(jnp.asarray(normals, dtype), jnp.exp(jnp.asarray(p[8:], dtype)))
     else:
         fitted_shape = _ellipsoid_shape(jnp.asarray(p[8:], dtype), _SEARCH_SUBDIVISIONS)
 
     # Periods, energy and their uncertainties (first order in the covariance).
-    theta_fit = jnp.asarray(p[:8], dtype)
-    period_values, lam, period_jacobian = (
-        np.asarray(x) for x in _periods_and_jacobian(theta_fit, reference, principal_axis)
-    )
+    period_values, lam, period_jacobian = (np.asarray(x) for x in (period_values, lam, period_jacobian))
     period_jacobian = np.nan_to_num(period_jacobian, posinf=0.0, neginf=0.0)
     period_sigma = np.sqrt(np.maximum(np.diag(period_jacobian @ covariance[:8, :8] @ period_jacobian.T), 0))
     inertia_fit = np.exp(np.concatenate([p[:2], [0.0]]))

@@ -17,6 +17,8 @@ the host); optimistix's BFGS does the minimisation in log h (the origin stays in
 
 from __future__ import annotations
 
+import functools
+
 import equinox as eqx
 import jax
 import jax.numpy as jnp
@@ -121,6 +123,16 @@ def _checked_mesh(vertices, faces):
     return vertices, faces
 
 
+@functools.cache
+def _icosphere_area_vectors(subdivisions):
+    """The area vectors (F, 3) of the icosphere's triangles (e1 x e2 / 2, outward), float64 numpy."""
+    vertices, faces = icosphere(subdivisions)
+    corners = vertices[faces]
+    area_vectors = np.cross(corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0]) / 2
+    outward = np.sum(area_vectors * corners.mean(1), -1) > 0
+    return np.where(outward[:, None], area_vectors, -area_vectors)
+
+
 @cpu_jit  # one program per mesh size: eagerly, a new shape compiled each of its operations in turn
 def _facets(vertices, faces):
     """(normals, areas) of the triangles of a closed convex mesh, normals turned outward."""
@@ -213,12 +225,20 @@ class ConvexShape(eqx.Module):
         for name, value in (("a", a), ("b", b), ("c", c)):
             if checks.is_concrete(value):
                 checks.check_positive(name, checks.real_array(name, value))
-        unit_vertices, faces = icosphere(subdivisions)
+        checks.integer("subdivisions", subdivisions, minimum=0)
         axes = jnp.stack(jnp.broadcast_arrays(jnp.asarray(a), jnp.asarray(b), jnp.asarray(c)), -1)
-        # The icosphere's (V, 3) given the batch's leading axes explicitly (rank-safe broadcasting).
-        unit_vertices = jnp.expand_dims(jnp.asarray(unit_vertices), tuple(range(axes.ndim - 1)))
-        vertices = unit_vertices * axes[..., None, :].astype(jnp.result_type(axes, float))
-        return cls.from_mesh(vertices, faces)
+        axes = axes.astype(jnp.result_type(axes, float))
+        # A triangle's area vector e1 x e2 / 2 under the linear map D = diag(a, b, c) becomes
+        # (D e1) x (D e2) / 2 = det(D) D^-T (e1 x e2) / 2: the icosphere's area vectors scaled by
+        # (b c, a c, a b), the stretched mesh's Gaussian image without building the mesh (a few
+        # operations in the light-curve fit's Jacobian, where the mesh was a program of its own).
+        scale = jnp.stack([axes[..., 1] * axes[..., 2], axes[..., 0] * axes[..., 2], axes[..., 0] * axes[..., 1]], -1)
+        # The icosphere's (F, 3) given the batch's leading axes explicitly (rank-safe broadcasting).
+        unit_area_vectors = jnp.asarray(_icosphere_area_vectors(subdivisions), axes.dtype)
+        unit_area_vectors = jnp.expand_dims(unit_area_vectors, tuple(range(axes.ndim - 1)))
+        area_vectors = unit_area_vectors * scale[..., None, :]
+        areas = jnp.sqrt(jnp.sum(area_vectors**2, -1))
+        return cls(area_vectors / areas[..., None], areas)
 
     @property
     def total_area(self) -> Array:
