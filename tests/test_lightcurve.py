@@ -160,6 +160,28 @@ def test_faceted_ellipsoid_converges_to_the_smooth_one():
     assert 3.5 < worst[4] / worst[5] < 4.5, worst
 
 
+def test_ellipsoid_is_the_stretched_icosphere():
+    """``ConvexShape.ellipsoid`` (the icosphere's area vectors scaled by (b c, a c, a b)) against the
+    Gaussian image of the stretched mesh itself (``from_mesh``), values and derivatives in (a, b, c).
+    Measured (the worst of the three meshes, 1280 facets): areas 1.1e-15 relative, normals 1.4e-15,
+    the Jacobian of the areas 8.3e-16 relative to its largest entry; allowed 4e-15."""
+    for subdivisions, axes in ((0, (1.0, 0.7, 0.4)), (1, (2.0, 1.0, 0.05)), (3, (1.3, 1.0, 0.7))):
+        vertices, faces = icosphere(subdivisions)
+
+        def image(axes, subdivisions=subdivisions, vertices=vertices, faces=faces):
+            ours = ConvexShape.ellipsoid(*axes, subdivisions)
+            theirs = ConvexShape.from_mesh(jnp.asarray(vertices) * axes[None, :], faces)
+            return ours.areas, ours.normals, theirs.areas, theirs.normals
+
+        # One program (eagerly, each operation and its derivative were compiled in turn: 7 s).
+        values, jacobians = jax.jit(lambda axes: (image(axes), jax.jacfwd(image)(axes)))(jnp.asarray(axes))
+        ours_areas, ours_normals, areas, normals = values
+        assert np.max(np.abs(ours_areas / areas - 1)) < 4e-15
+        assert np.max(np.abs(ours_normals - normals)) < 4e-15
+        ours_jacobian, _, jacobian, _ = jacobians
+        assert np.max(np.abs(ours_jacobian - jacobian)) < 4e-15 * np.max(np.abs(jacobian))
+
+
 # ------------------------------------------------------------------------------------ derivatives
 
 

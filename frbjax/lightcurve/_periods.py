@@ -131,8 +131,8 @@ def momentum_from_periods(sorted_inertia, period_psi, period_phi, long_axis, pol
     margin = 1e-9
     low = jnp.where(long_axis, 1 / i2, 1 / i3) * (1 + margin)
     high = jnp.where(long_axis, 1 / i1, 1 / i2) * (1 - margin)
-    # Both ends in one evaluation, and the formulas once more in the loop: each copy of the elliptic
-    # formulas is code that XLA compiles (four copies: 0.29 s of the light-curve fit's compilation).
+    # Both ends in one evaluation, and the formulas once more in the loop (not four copies): each copy
+    # of the elliptic formulas is code that XLA compiles.
     f_low, f_high = jax.vmap(lambda d: ratio(d) - target)(jnp.stack([low, high]))
 
     def bisect(_, state):

@@ -230,8 +230,8 @@ class ConvexShape(eqx.Module):
         axes = axes.astype(jnp.result_type(axes, float))
         # A triangle's area vector e1 x e2 / 2 under the linear map D = diag(a, b, c) becomes
         # (D e1) x (D e2) / 2 = det(D) D^-T (e1 x e2) / 2: the icosphere's area vectors scaled by
-        # (b c, a c, a b), the stretched mesh's Gaussian image without building the mesh (a few
-        # operations in the light-curve fit's Jacobian, where the mesh was a program of its own).
+        # (b c, a c, a b): the stretched mesh's Gaussian image without building the mesh (its gather
+        # and cross products were most of the ellipsoid in the light-curve fit's programs).
         scale = jnp.stack([axes[..., 1] * axes[..., 2], axes[..., 0] * axes[..., 2], axes[..., 0] * axes[..., 1]], -1)
         # The icosphere's (F, 3) given the batch's leading axes explicitly (rank-safe broadcasting).
         unit_area_vectors = jnp.asarray(_icosphere_area_vectors(subdivisions), axes.dtype)
