@@ -421,10 +421,10 @@ void fill_stand_ins(R (&in)[kMotionInputs][kBlock], int count) {
 }
 
 // `working_motion` at up to kBlock points of real numbers: in[input][point] (`fill_stand_ins` after
-// `count`), regime[point], out[output][point].  The elliptic points take `elliptic_point` one by one, then each straight-line
-// stage as one loop over the block's lanes (`whole_lanes`), and the arctangents, cosine and sine as
-// circular.hpp's `arctangent2_points` and `cos_sin_points`.  Other regimes take `working_motion`
-// itself.
+// `count`), regime[point], out[output][point].  The elliptic points take `elliptic_point` one by one,
+// then each straight-line stage as one loop over the block's lanes (`whole_lanes`), and the
+// arctangents, cosine and sine as circular.hpp's `arctangent2_points` and `cos_sin_points`.  Other
+// regimes take `working_motion` itself.
 template <class R, bool Attitude>
 void working_motion_block(const R (&in)[kMotionInputs][kBlock], const int* regime, int count,
                           R (&out)[kMotionOutputs][kBlock]) {
