@@ -100,6 +100,7 @@ def invert(case, width, options):
         "held_out_rms": held_out_rms(found),
         "truth_refined_held_out_rms": held_out_rms(refined),
         "refine_costs": np.asarray(found.refine_costs).tolist(),
+        "refine_periods": np.asarray(found.refine_periods).tolist(),
         "seconds": seconds,
     }
 

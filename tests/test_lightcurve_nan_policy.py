@@ -115,6 +115,10 @@ def test_a_fit_that_does_not_converge_raises(monkeypatch):
     assert residuals.shape == (kept.sum(),) and np.isfinite(residuals).all()
     # Measured: the continued leader's period 2.3e-5 days off 0.3.
     assert abs(float(unconverged_fit.periods[0]) - 0.3) < 3e-5
+    # The last stage's starts: their costs and periods side by side, the winner's among them.
+    costs, periods = np.asarray(unconverged_fit.refine_costs), np.asarray(unconverged_fit.refine_periods)
+    assert periods.shape == (len(costs), 2) and costs.min() == unconverged_fit.cost
+    np.testing.assert_array_equal(periods[np.argmin(costs)], np.asarray(unconverged_fit.periods))
 
 
 def test_progress_bars_count_the_search_and_the_windows(monkeypatch):

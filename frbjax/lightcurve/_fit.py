@@ -40,10 +40,15 @@ polhode phase, attitude): for given moments the ratio P_psi / P_phi fixes the en
 P_psi then fixes |L|.  The shape of each start is the ellipsoid of the same inertia at uniform
 density.  All starts are evaluated on the first continuation window (the samples nearest the epoch)
 in one vmapped program (thousands of starts); the best ``n_refine`` are solved by optimistix's
-Levenberg-Marquardt (in one program: one after another on CPU, under ``vmap`` elsewhere) on growing
-windows (continuation) with the ellipsoid shape (the first windows hold fewer samples than a convex
-shape has areas); for ``shape="convex"`` the convex shape, started from the Gaussian image of each
-fitted ellipsoid, is then solved with the motion on all the data.  The lowest cost wins.  Periods,
+Levenberg-Marquardt (one after another on CPU, under ``vmap`` elsewhere) on growing windows
+(continuation) with the ellipsoid shape (the first windows hold fewer samples than a convex shape has
+areas), as a population: after each window the better half of the starts (by their cost on it) go on
+to the next, down to eight, and before each wider window each start's periods are moved to the best
+of their shifts by quarter cycles (up to a cycle) at the new window's edge, costed on it as the search
+costs its starts, so that Levenberg-Marquardt starts in the cycle count that fits the new samples
+rather than in the nearest basin of a wrong one.  For ``shape="convex"`` the convex shape, started
+from the Gaussian image of the fitted ellipsoid, is then solved with the motion on all the data for
+the best four.  The lowest cost wins.  Periods,
 moments and their standard errors come from the covariance (J^T J)^+ s^2 of the winner (s^2 the
 residual variance of the data rows).
 
@@ -87,6 +92,14 @@ _SEARCH_SUBDIVISIONS = 1
 _WINDOW_GROWTH = 1.8
 # Further solves of a leader that stopped at max_steps before it counts as not converged (FitError).
 _CONTINUATIONS = 3
+# The refinement's population: the best half of the starts go on to each next window, down to
+# _SURVIVORS; the convex stage solves the best _CONVEX_STARTS of the last window.
+_SURVIVORS = 8
+_CONVEX_STARTS = 4
+# Period shifts tried before each wider window: up to _SHIFT_CYCLES cycles at the window's edge in
+# steps of 1 / _SHIFTS_PER_CYCLE, for each period.
+_SHIFT_CYCLES = 1
+_SHIFTS_PER_CYCLE = 4
 
 
 # ------------------------------------------------------------------------------------ the model
@@ -332,7 +345,6 @@ def _search(parameters, references, start_areas, data, mask, config, chunk, prog
     """Every start's cost (``_search_costs``), ``chunk`` starts per call of one compiled program (the
     last chunk padded with the first start), each chunk a step of the search's progress bar."""
     count = len(parameters)
-    chunk = min(chunk, count)
     costs = []
     with _progress.bar("lightcurve search", count, "light-curve search", "start", shown=progress) as bar:
         for start in range(0, count, chunk):
@@ -384,8 +396,10 @@ class LightcurveFit(eqx.Module):
     - ``residuals`` (N,): log(data) - log(scale * model) per sample (input order);
     - ``cost``: half the sum of squared (weighted) residuals; ``success``: the solver converged;
     - ``search_periods`` (S, 2), ``search_costs`` (S,): the periods of every start and its cost on the
-      first window (the search's landscape); ``refine_costs`` (n_refine,): final cost of the refined
-      starts.
+      first window (the search's landscape); ``refine_costs`` (K,), ``refine_periods`` (K, 2): the
+      cost and the periods of each start solved on all the data (the refinement's last stage: the
+      best four for a convex shape), the winner's among them: runner-ups within the noise of the
+      winner's cost (about sqrt(N / 2)) at other periods are basins the data do not tell apart.
     """
 
     body: FreeRigidBody
@@ -409,6 +423,7 @@ class LightcurveFit(eqx.Module):
     search_periods: Float[Array, "S 2"]
     search_costs: Float[Array, " S"]
     refine_costs: Float[Array, " K"]
+    refine_periods: Float[Array, "K 2"]
     # The frame about which ``parameters`` are counted (the winner's start: its attitude, the inertial
     # direction of L and two unit vectors across it): for the posterior (frbjax.posterior).
     _reference: tuple = ()
@@ -498,6 +513,38 @@ def _with_omitted_rows(rows, omitted):
     full = np.full(omitted.shape + rows.shape[1:], np.nan)
     full[~omitted] = rows
     return full
+
+
+def _survivor_counts(starts, windows):
+    """How many starts are solved on each window: all on the first, then half as many on each next
+    (rounded up), never fewer than ``_SURVIVORS`` (or the starts, if fewer)."""
+    counts = [starts]
+    for _ in range(windows - 1):
+        counts.append(max(-(-counts[-1] // 2), min(_SURVIVORS, starts)))
+    return counts
+
+
+def _period_shifts(parameters, reference, radius, log_ranges, principal_axis):
+    """``parameters`` (P,) and copies of them with the periods shifted (first the unshifted).
+
+    A period error dP drifts the phase at time t from the epoch by t dP / P^2 cycles: the shifts of
+    log P are k P / (_SHIFTS_PER_CYCLE radius) for |k| <= _SHIFT_CYCLES _SHIFTS_PER_CYCLE, on both
+    periods (a grid), each realised as the least-norm change of theta that makes it to first order,
+    dtheta = (d log P / dtheta)^+ d log P.  Shifts that leave the searched ranges are not tried."""
+    _, periods, _, jacobian = _fitted_motion(jnp.asarray(parameters[:8]), reference, principal_axis)
+    periods, jacobian = np.asarray(periods, float), np.asarray(jacobian, float)
+    finite = np.isfinite(periods) & np.all(np.isfinite(jacobian), -1)
+    log_jacobian = np.where(finite[:, None], jacobian / np.where(finite, periods, 1.0)[:, None], 0.0)
+    steps = np.arange(-_SHIFT_CYCLES * _SHIFTS_PER_CYCLE, _SHIFT_CYCLES * _SHIFTS_PER_CYCLE + 1) / _SHIFTS_PER_CYCLE
+    axes = [steps * periods[k] / radius if finite[k] else np.zeros(1) for k in range(2)]
+    shifts = np.stack(np.meshgrid(*axes, indexing="ij"), -1).reshape(-1, 2)
+    shifts = shifts[np.argsort(np.sum(np.abs(shifts), -1), kind="stable")]  # the unshifted first
+    log_periods = np.log(np.where(finite, periods, 1.0)) + shifts
+    inside = np.all((log_periods >= log_ranges[:, 0]) & (log_periods <= log_ranges[:, 1]) | ~finite, -1)
+    inside[0] = True
+    trials = np.repeat(np.asarray(parameters, float)[None], int(inside.sum()), 0)
+    trials[:, :8] += shifts[inside] @ np.linalg.pinv(log_jacobian).T
+    return trials
 
 
 def _continuation_windows(distance):
@@ -681,7 +728,8 @@ def fit_lightcurve(
     a principal axis) with ``starts_per_period`` random states each (inertia ratios in
     ``inertia_range``, ``mode`` "SAM", "LAM" or "both", polhode phase, attitude); ``n_refine`` of the
     best are refined by Levenberg-Marquardt on growing windows around ``epoch`` (default: the median
-    time), each start held to its cell of the period grid by a prior until the last window (module
+    time), each start held to its cell of the period grid by a prior until the last window, the better
+    half going on to each next window with its periods moved to their best cycle count there (module
     docstring): choose the grid fine enough that a cell's phase drift over the first nights is well
     under a cycle.  Without prior periods, :func:`tumbler_periodogram` proposes ranked ranges from the
     light curves themselves (``periods=result.proposals[i]``, or ``**result.fit_options(i)``).
@@ -858,6 +906,8 @@ def fit_lightcurve(
     as_jax = lambda tree: jax.tree.map(lambda x: jnp.asarray(x, dtype), tree)  # noqa: E731
     # The search's chunks are taken in numpy (eagerly, JAX would compile each gather).
     as_numpy = lambda tree: jax.tree.map(lambda x: np.asarray(x, dtype), tree)  # noqa: E731
+    # One chunk size for the search and the period shifts below: one program.
+    chunk = min(int(search_chunk), count)
     costs = _search(
         as_numpy(theta),
         as_numpy(references),
@@ -865,7 +915,7 @@ def fit_lightcurve(
         data,
         jnp.asarray(masks[0], dtype),
         config,
-        int(search_chunk),
+        chunk,
         progress,
     )
     costs = np.where(valid, costs, np.inf)
@@ -880,86 +930,144 @@ def fit_lightcurve(
     prior_weights = np.concatenate([np.ones(len(masks) - 1), [0.0]])
     # The windows carry a random start's phase outwards from the epoch; a given motion (an earlier
     # fit) has it already and is fitted to all the data from the first window.
-    start_masks = np.repeat(masks[None], len(best), 0)
-    if initial is not None:
-        start_masks[best == 0] = 1.0
+    given = best == 0 if initial is not None else np.zeros(len(best), bool)
+    start_masks = np.where(given[:, None, None], 1.0, masks[None])
     # The continuation windows are solved with the ellipsoid (2 shape parameters): the first windows
     # hold fewer samples than a convex shape has areas.  A convex shape is then fitted on all the data
     # from the Gaussian image of the fitted ellipsoid, on its fixed normals.
     ellipsoid_data = dict(data, free=jnp.asarray(ellipsoid_free, dtype))
     ellipsoid_config = ("ellipsoid",) + config[1:]
-    parameters0 = np.concatenate([theta[best], ellipsoid_start[best]], 1)
     solver_settings = dict(rtol=float(rtol), atol=float(atol), max_steps=int(max_steps))
-    # The refinement's progress bar counts the windows solved (each start's continuation windows, its
-    # convex stage, the leader's continued solves).
-    windows = len(best) * (len(masks) + (1 if shape == "convex" else 0))
-    # Where the starts are solved one after another anyway (the CPU, ``solve_each``), each is its own
-    # call of a one-start program, which the leader's continued solves below then reuse: a program
-    # over all the starts compiled the loop over them too (the LAM benchmark: about 2.5 s of its 12 s
-    # of compilation when the convex stage had its own).
-    batches = [slice(k, k + 1) for k in range(len(best))] if starts_in_sequence() else [slice(None)]
+    survivors = _survivor_counts(len(best), len(masks))
+    convex_starts = min(_CONVEX_STARTS, survivors[-1]) if shape == "convex" else 0
+    radii = [float(np.max(np.abs(times - epoch)[mask > 0])) for mask in masks]
+    log_ranges = np.array([[-np.inf, np.inf]] * 2)
+    log_ranges[: len(period_ranges)] = np.log(period_ranges)
 
-    def refine(parameters, priors, data, masks, prior_weights, config):
+    def refine(rows, parameters, priors, data, masks, prior_weights, config):
+        """The starts ``rows`` (of ``best``) solved on ``masks`` (len(rows), W, N).  Where the starts
+        are solved one after another anyway (the CPU, ``solve_each``), each is its own call of a
+        one-start program, which the leader's continued solves below then reuse: a program over all
+        the starts compiled the loop over them too (the LAM benchmark: about 2.5 s of its 12 s of
+        compilation when the convex stage had its own)."""
+        batches = [slice(k, k + 1) for k in range(len(rows))] if starts_in_sequence() else [slice(None)]
         parts = [
             _refine(
-                as_jax(parameters[rows]),
-                as_jax(tuple(r[rows] for r in refs)),
-                None if priors is None else as_jax(tuple(p[rows] for p in priors)),
+                as_jax(parameters[part]),
+                as_jax(tuple(r[rows[part]] for r in refs)),
+                None if priors is None else as_jax(tuple(p[rows[part]] for p in priors)),
                 data,
-                jnp.asarray(masks[rows], dtype),
+                jnp.asarray(masks[part], dtype),
                 None if prior_weights is None else jnp.asarray(prior_weights, dtype),
                 config,
                 **solver_settings,
             )
-            for rows in batches
+            for part in batches
         ]
-        return jax.tree.map(lambda *pieces: np.concatenate([np.asarray(piece) for piece in pieces]), *parts)
+        return [np.concatenate([np.asarray(piece) for piece in pieces]) for pieces in zip(*parts)]
 
+    def shifted(rows, parameters, window):
+        """Each start moved to the best of its period shifts on the window (a costing, as the search's)."""
+        trials, owners = [], []
+        for row, p in zip(rows, parameters):
+            reference = as_jax(tuple(r[row] for r in refs))
+            trial = _period_shifts(p, reference, radii[window], log_ranges, principal_axis)
+            trials.append(trial)
+            owners.append(np.full(len(trial), row))
+        trials, owners = np.concatenate(trials), np.concatenate(owners)
+        trial_axes = np.concatenate([np.ones((len(trials), 1)), np.exp(trials[:, 8:])], 1)
+        trial_costs = _search(
+            trials[:, :8],
+            tuple(r[owners] for r in refs),
+            _gaussian_image_areas(trial_axes, search_normals, search_solid),
+            data,
+            jnp.asarray(masks[window], dtype),
+            config,
+            chunk,
+            False,
+        )
+        moved = parameters.copy()
+        for k, row in enumerate(rows):
+            own = np.flatnonzero(owners == row)
+            moved[k] = trials[own[np.argmin(np.where(np.isfinite(trial_costs[own]), trial_costs[own], np.inf))]]
+        return moved
+
+    # The refinement's progress bar counts the windows solved (each surviving start's continuation
+    # windows, the convex stage, the leader's continued solves).
+    windows = sum(survivors) + convex_starts
+    parameters = np.concatenate([theta[best], ellipsoid_start[best]], 1)
+    alive = np.arange(len(best))
     with _progress.bar("lightcurve refinement", windows, "light-curve refinement", "window", shown=progress) as bar:
-        out = refine(parameters0, priors, ellipsoid_data, start_masks, prior_weights, ellipsoid_config)
+        for window in range(len(masks)):
+            searching = alive[~given[alive]]
+            if window and len(searching):
+                # Before a wider window, each start's periods are moved to the best of their shifts by
+                # fractions of a cycle at the window's edge: Levenberg-Marquardt then starts in the
+                # cycle count that fits the new samples instead of the nearest basin of a wrong one.
+                parameters[searching] = shifted(searching, parameters[searching], window)
+            out = refine(
+                alive,
+                parameters[alive],
+                priors,
+                ellipsoid_data,
+                start_masks[alive, window : window + 1],
+                prior_weights[window : window + 1],
+                ellipsoid_config,
+            )
+            parameters[alive] = out[0]
+            if window + 1 < len(masks):
+                # The best half of the starts go on to the next window (a given motion always).
+                ranked = np.argsort(np.where(given[alive], -np.inf, np.nan_to_num(out[1], nan=np.inf)), kind="stable")
+                alive = alive[ranked[: survivors[window + 1]]]
         if shape == "convex":
-            fitted = np.asarray(out[0])
-            fitted_axes = np.concatenate([np.ones((len(best), 1)), np.exp(fitted[:, 8:])], 1)
+            ranked = np.argsort(np.where(given[alive], -np.inf, np.nan_to_num(out[1], nan=np.inf)), kind="stable")
+            alive = alive[ranked[:convex_starts]]
+            fitted = parameters[alive]
+            fitted_axes = np.concatenate([np.ones((len(alive), 1)), np.exp(fitted[:, 8:])], 1)
             log_areas = np.log(_gaussian_image_areas(fitted_axes, normals, solid_angles))
             log_areas -= log_areas.mean(-1, keepdims=True)
-            parameters0 = np.concatenate([fitted[:, :8], log_areas], 1)
             # All the data, no prior.
-            out = refine(parameters0, None, data, start_masks[:, -1:], None, config)
+            out = refine(
+                alive, np.concatenate([fitted[:, :8], log_areas], 1), None, data, start_masks[alive, -1:], None, config
+            )
         # A leader that stopped at max_steps still moving is solved on from where it stopped (all the data,
         # no prior), alone: Levenberg-Marquardt on a convex shape's hundreds of areas can take more than
         # max_steps to meet rtol (the LAM test's leader: three more solves).
         final_data, final_config = (data, config) if shape == "convex" else (ellipsoid_data, ellipsoid_config)
-        out = [np.array(x) for x in out]  # writable copies
         for _ in range(_CONTINUATIONS):
             leader = int(np.argmin(np.where(np.isfinite(out[1]), out[1], np.inf)))
             if out[2][leader] or not np.isfinite(out[1][leader]):
                 break
-            alone = slice(leader, leader + 1)
             if bar is not None:
                 bar.total += 1
-            continued = _refine(
-                jnp.asarray(out[0][alone], dtype),
-                tuple(jnp.asarray(r[alone], dtype) for r in refs),
+            continued = refine(
+                alive[leader : leader + 1],
+                out[0][leader : leader + 1],
                 None,
                 final_data,
-                jnp.asarray(start_masks[alone, -1:], dtype),
+                start_masks[alive[leader : leader + 1], -1:],
                 None,
                 final_config,
-                **solver_settings,
             )
             for full, part in zip(out, continued):
                 # The ellipsoid's windows end with the period prior's rows at weight 0 (zeros); the
                 # continued solve has no prior, so its residual and Jacobian rows stop before them.
-                part = np.asarray(part)[0]
+                part = part[0]
                 if part.ndim:
                     full[leader] = 0.0
                     full[leader][: len(part)] = part
                 else:
                     full[leader] = part
     fitted, refine_costs, oks, residual_rows, jacobians = out
+    refine_periods = np.stack(
+        [
+            np.asarray(_fitted_motion(as_jax(row[:8]), as_jax(tuple(r[k] for r in refs)), principal_axis)[1])
+            for row, k in zip(fitted, alive)
+        ]
+    )
     winner = int(np.argmin(np.where(np.isfinite(refine_costs), refine_costs, np.inf)))
     p = fitted[winner].astype(float)
-    reference = tuple(jnp.asarray(r[winner], dtype) for r in refs)
+    reference = tuple(jnp.asarray(r[alive[winner]], dtype) for r in refs)
     jacobian = jacobians[winner][:, free > 0]
     residual = residual_rows[winner]
     variance = float(np.sum(residual[:n] ** 2) / max(n - jacobian.shape[1], 1))
@@ -1024,6 +1132,7 @@ def fit_lightcurve(
         search_periods=jnp.asarray(np.stack([period_psi, period_phi], -1), dtype),
         search_costs=jnp.asarray(costs, dtype),
         refine_costs=jnp.asarray(refine_costs, dtype),
+        refine_periods=jnp.asarray(refine_periods, dtype),
         _reference=reference,
     )
     if throw and not (bool(oks[winner]) and np.isfinite(refine_costs[winner])):
