@@ -24,7 +24,8 @@ already in it are skipped (``--resume``), so that a long run can be continued.
 
 Usage: python benchmarks/lightcurve_family.py [--members 0,5,12] [--width 0.1] [--resume]
        [--starts-per-period 16] [--period-grid 16,16] [--refine 8] [--convex-subdivisions 1]
-       [--output-dir DIR]
+       [--output-dir DIR] [--plot-only]
+(the figure: lightcurve_family.png beside the JSON, redrawn after each run or with --plot-only)
 """
 
 from __future__ import annotations
@@ -119,6 +120,60 @@ def rates(members):
     }
 
 
+def plot(result, path):
+    """Per member: the cost's excess over the truth's refinement (noise units), the later nights' RMS
+    and the periods' largest |z|, against the issue's thresholds; the earliest run of the same
+    settings' family (``earlier_runs``, when the file has one at 320 normals) in grey."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    runs = [("now", result["members"], "C0")]
+    earlier = result.get("earlier_runs", {}).get("320_normals_2026_12_02")
+    if earlier:
+        runs.insert(0, ("before: 320 normals, no population", earlier["members"], "0.6"))
+    panels = [
+        (
+            "cost excess over the truth's refinement\n(noise units, sqrt(N/2); below 0.01 at 0.01)",
+            lambda m: max(m["cost_excess"], 1e-2),
+            1,
+        ),
+        ("later nights' RMS (1% noise)", lambda m: m["held_out_rms"], 1.5 * NOISE),
+        ("periods' largest |P - P_true| / sigma\n(below 0.01 at 0.01)", lambda m: max(max(m["period_z"]), 1e-2), 3),
+    ]
+    figure, axes = plt.subplots(3, 1, figsize=(10, 8), sharex=True)
+    for axis, (label, value, threshold) in zip(axes, panels):
+        for offset, (name, members, colour) in zip((-0.15, 0.15) if len(runs) == 2 else (0.0,), runs):
+            index = np.array([m["index"] for m in members])
+            axis.scatter(index + offset, [value(m) for m in members], color=colour, s=22, label=name, zorder=3)
+        axis.axhline(threshold, color="C3", lw=1, ls="--", label="the issue's threshold")
+        axis.set_yscale("log")
+        axis.set_ylabel(label, fontsize=8)
+        axis.grid(alpha=0.3, which="major")
+    kinds = [m["kind"] for m in result["members"]]
+    for axis in axes:
+        for k in range(1, len(kinds)):
+            if kinds[k] != kinds[k - 1]:
+                axis.axvline(k - 0.5, color="0.8", lw=0.8)
+    for k, kind in enumerate(kinds):
+        if k == 0 or kinds[k - 1] != kind:
+            axes[0].text(k - 0.4, axes[0].get_ylim()[1], kind, fontsize=7, va="bottom")
+    axes[0].legend(fontsize=7, loc="upper right")
+    axes[-1].set_xlabel("member")
+    axes[-1].set_xticks(range(len(kinds)))
+    rates_now = result["rates"]
+    figure.suptitle(
+        "fit_lightcurve on the tumbler family (+-10% period ranges): within the noise "
+        f"{rates_now['cost_within_noise']:.0%}, later nights {rates_now['held_out_within_1.5_noise']:.0%}, "
+        f"periods {rates_now['periods_within_3_sigma']:.0%}",
+        fontsize=9,
+    )
+    figure.tight_layout()
+    figure.savefig(path, dpi=110)
+    plt.close(figure)
+
+
 def main(argv=None):
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--members", default=",".join(str(k) for k in range(_tumbler_family.SIZE)))
@@ -127,10 +182,15 @@ def main(argv=None):
     parser.add_argument("--period-grid", default=None, help="e.g. 16,16 (fit_lightcurve's default)")
     parser.add_argument("--starts-per-period", type=int, default=None)
     parser.add_argument("--refine", type=int, default=None)
-    parser.add_argument("--convex-subdivisions", type=int, default=None, help="the convex model's (default 1)")
+    parser.add_argument("--convex-subdivisions", type=int, default=None, help="fit_lightcurve's default: 2")
     parser.add_argument("--resume", action="store_true")
     parser.add_argument("--output-dir", default=str(pathlib.Path(__file__).parent / "results"))
+    parser.add_argument("--plot-only", action="store_true", help="redraw lightcurve_family.png from the JSON")
     options = parser.parse_args(argv)
+    output = pathlib.Path(options.output_dir) / "lightcurve_family.json"
+    if options.plot_only:
+        plot(json.loads(output.read_text()), output.with_suffix(".png"))
+        return
     fit_options = {}
     if options.period_grid:
         fit_options["period_grid"] = tuple(int(x) for x in options.period_grid.split(","))
@@ -140,7 +200,6 @@ def main(argv=None):
         fit_options["n_refine"] = options.refine
     if options.convex_subdivisions is not None:
         fit_options["convex_subdivisions"] = options.convex_subdivisions
-    output = pathlib.Path(options.output_dir) / "lightcurve_family.json"
     output.parent.mkdir(parents=True, exist_ok=True)
     # A resumed run keeps what the file holds besides its members (e.g. a run at other settings).
     previous = json.loads(output.read_text()) if options.resume and output.exists() else {}
@@ -163,6 +222,8 @@ def main(argv=None):
             "members": members,
         }
         output.write_text(json.dumps(result, indent=1) + "\n")
+    if members:
+        plot(json.loads(output.read_text()), output.with_suffix(".png"))
     print(json.dumps(rates(members), indent=1))
 
 

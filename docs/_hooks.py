@@ -33,6 +33,7 @@ FIGURES = (
     "torqued_energy.png",
     "lightcurve.png",
     "lightcurve_periodogram.png",
+    "lightcurve_family.png",
     "torques_basilisk.png",
     "torques_energy.png",
     "torques_debris.png",

@@ -697,7 +697,7 @@ def fit_lightcurve(
     mode: str = "both",
     inertia_range=(0.3, 0.98),
     shape: str = "convex",
-    convex_subdivisions: int = 1,
+    convex_subdivisions: int = 2,
     law: str = "lommel_seeliger_lambert",
     c: float = 0.1,
     sigma: float = 0.01,
@@ -705,7 +705,7 @@ def fit_lightcurve(
     epoch: float | None = None,
     period_grid=(16, 16),
     starts_per_period: int = 16,
-    n_refine: int = 8,
+    n_refine: int = 32,
     seed: int = 0,
     rtol: float = 1e-8,
     atol: float = 1e-8,
@@ -735,7 +735,10 @@ def fit_lightcurve(
     light curves themselves (``periods=result.proposals[i]``, or ``**result.fit_options(i)``).
     ``shape``: "convex" (log-areas on the facet normals of an icosphere of
     ``convex_subdivisions``, with ``regularisation`` = (closure weight, smoothness weight)) or
-    "ellipsoid".  ``initial``: a :class:`frbjax.FreeRigidBody` (time from the epoch), e.g. an earlier
+    "ellipsoid".  The defaults (``n_refine=32``, 320 normals) are the settings measured on the
+    tumbler family of benchmarks/lightcurve_family.py (docs/lightcurves.md): fewer normals bias
+    the periods where the body is not smooth (3 to 8 sigmas with 80), fewer refined starts find
+    the truth's basin less often.  ``initial``: a :class:`frbjax.FreeRigidBody` (time from the epoch), e.g. an earlier
     fit, refined beside the search's best on all the data from the first window (its shape starts as
     the ellipsoid of its inertia).
     ``law``, ``c``: the scattering law (:func:`brightness`); ``sigma``: the relative
