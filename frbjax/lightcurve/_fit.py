@@ -531,6 +531,8 @@ def _period_shifts(parameters, reference, radius, log_ranges, principal_axis):
     log P are k P / (_SHIFTS_PER_CYCLE radius) for |k| <= _SHIFT_CYCLES _SHIFTS_PER_CYCLE, on both
     periods (a grid), each realised as the least-norm change of theta that makes it to first order,
     dtheta = (d log P / dtheta)^+ d log P.  Shifts that leave the searched ranges are not tried."""
+    # The fitted motion's program (it builds the body too, unused here): compiled for the result anyway,
+    # where a program of the periods' Jacobian alone would be one more to compile.
     _, periods, _, jacobian = _fitted_motion(jnp.asarray(parameters[:8]), reference, principal_axis)
     periods, jacobian = np.asarray(periods, float), np.asarray(jacobian, float)
     finite = np.isfinite(periods) & np.all(np.isfinite(jacobian), -1)
