@@ -122,8 +122,8 @@ def rates(members):
 
 def plot(result, path):
     """Per member: the cost's excess over the truth's refinement (noise units), the later nights' RMS
-    and the periods' largest |z|, against the issue's thresholds; the earliest run of the same
-    settings' family (``earlier_runs``, when the file has one at 320 normals) in grey."""
+    and the periods' largest |z|, against the issue's thresholds; the family's run at 320 normals
+    before the population continuation (in ``earlier_runs``, when the file has it) in grey."""
     import matplotlib
 
     matplotlib.use("Agg")
