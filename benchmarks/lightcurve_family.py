@@ -16,6 +16,8 @@ motion (``initial=`` the true body), which gives the cost the data allow.  Per m
   fitted (the data carry 1% noise: the issue's "within 1.5x the noise" is ``<= 0.015``);
 - ``period_z``: |P - P_true| / sigma for each period (the issue: within 3 reported sigmas), and
   ``truth_refined_period_z`` the same for the refinement from the truth;
+- ``competing_basins``, ``ambiguous``: the fit's runner-up basins within the noise of its cost at
+  other periods (``LightcurveFit.competing_basins``), which ``fit_lightcurve`` warns of;
 - wall time of the inversion (first call in the process includes compilation).
 
 Rates over the members run are printed and written with the members to
@@ -24,7 +26,7 @@ already in it are skipped (``--resume``), so that a long run can be continued.
 
 Usage: python benchmarks/lightcurve_family.py [--members 0,5,12] [--width 0.1] [--resume]
        [--starts-per-period 16] [--period-grid 16,16] [--refine 8] [--convex-subdivisions 1]
-       [--output-dir DIR] [--plot-only]
+       [--output-dir DIR] [--plot-only] [--basins-only]
 (the figure: lightcurve_family.png beside the JSON, redrawn after each run or with --plot-only)
 """
 
@@ -37,6 +39,8 @@ import pathlib
 import platform
 import sys
 import time
+import types
+import warnings
 
 import jax
 
@@ -46,7 +50,7 @@ jax.config.update("jax_enable_x64", True)
 import numpy as np  # noqa: E402
 
 from frbjax import FreeRigidBody  # noqa: E402
-from frbjax.lightcurve import fit_lightcurve  # noqa: E402
+from frbjax.lightcurve import AmbiguousFitWarning, fit_lightcurve, LightcurveFit  # noqa: E402
 
 
 sys.path.insert(0, str(pathlib.Path(__file__).parent))
@@ -66,20 +70,25 @@ def invert(case, width, options):
     common = dict(lightcurve=case.night, principal_axis=rotator, throw=False, progress=False)
     data = (case.times, case.flux, case.sun, case.observer)
     start = time.perf_counter()
-    found = fit_lightcurve(*data, periods=ranges, mode="both", **common, **options)
+    with warnings.catch_warnings():
+        # Recorded below (``competing_basins``) instead of printed.
+        warnings.simplefilter("ignore", AmbiguousFitWarning)
+        found = fit_lightcurve(*data, periods=ranges, mode="both", **common, **options)
     seconds = time.perf_counter() - start
     # The truth's basin: the same data refined from the true motion, its time counted from the fit's
     # epoch (fit_lightcurve's default: the median time).
     epoch = float(np.median(case.times))
     body = case.body
     truth = FreeRigidBody(case.inertia, np.asarray(body.angular_momentum(epoch)), np.asarray(body.quaternion(epoch)))
-    refined = fit_lightcurve(*data, periods=ranges, initial=truth, **common, **options)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", AmbiguousFitWarning)
+        refined = fit_lightcurve(*data, periods=ranges, initial=truth, **common, **options)
     held_out = tuple(case.held_out[key] for key in ("times", "flux", "sun", "observer", "night"))
     held_out_rms = lambda result: lightcurve.problems.held_out_rms(result, held_out)  # noqa: E731
     samples = len(case.times)
     periods, sigma = np.asarray(found.periods), np.asarray(found.period_sigma)
     z = np.abs(periods[: len(true_periods)] - true_periods) / sigma[: len(true_periods)]
-    return {
+    member = {
         "index": case.index,
         "kind": case.kind,
         "samples": samples,
@@ -104,6 +113,28 @@ def invert(case, width, options):
         "refine_periods": np.asarray(found.refine_periods).tolist(),
         "seconds": seconds,
     }
+    return with_basins(member)
+
+
+def with_basins(member):
+    """The member's record with the fit's competing basins (``LightcurveFit.competing_basins``: the
+    last stage's runner-ups within the noise of the winner's cost at periods more than 3 sigmas away)
+    and whether there are any (``ambiguous``), from the fields the record keeps (the method reads only
+    those), so that a stored run's members get them too (``--basins-only``)."""
+    fit = types.SimpleNamespace(
+        refine_costs=np.asarray(member["refine_costs"], float),
+        refine_periods=np.asarray(member["refine_periods"], float),
+        periods=np.asarray(member["periods"], float),
+        period_sigma=np.asarray(member["period_sigma"], float),
+        residuals=np.zeros(member["samples"]),
+        cost=member["cost"],
+    )
+    basins = LightcurveFit.competing_basins(fit)
+    return {
+        **member,
+        "competing_basins": {key: np.asarray(value).tolist() for key, value in basins._asdict().items()},
+        "ambiguous": bool(len(basins.cost_excess)),
+    }
 
 
 def rates(members):
@@ -115,6 +146,13 @@ def rates(members):
         "cost_within_noise": sum(m["cost_excess"] <= 1 for m in members) / count,
         "held_out_within_1.5_noise": sum(m["held_out_rms"] <= 1.5 * NOISE for m in members) / count,
         "periods_within_3_sigma": sum(max(m["period_z"]) <= 3 for m in members) / count,
+        # The fits that warn of competing basins, and among those whose periods are more than 3
+        # sigmas off, the share that warns (the issue's "says when the landscape has competing basins").
+        "ambiguous": sum(m.get("ambiguous", False) for m in members) / count,
+        "periods_off_and_warned": [
+            sum(m.get("ambiguous", False) for m in members if max(m["period_z"]) > 3),
+            sum(max(m["period_z"]) > 3 for m in members),
+        ],
         "median_seconds": float(np.median([m["seconds"] for m in members])),
         "max_seconds": float(np.max([m["seconds"] for m in members])),
     }
@@ -186,8 +224,18 @@ def main(argv=None):
     parser.add_argument("--resume", action="store_true")
     parser.add_argument("--output-dir", default=str(pathlib.Path(__file__).parent / "results"))
     parser.add_argument("--plot-only", action="store_true", help="redraw lightcurve_family.png from the JSON")
+    parser.add_argument(
+        "--basins-only", action="store_true", help="add the competing basins to the JSON's members and its rates"
+    )
     options = parser.parse_args(argv)
     output = pathlib.Path(options.output_dir) / "lightcurve_family.json"
+    if options.basins_only:
+        stored = json.loads(output.read_text())
+        stored["members"] = [with_basins(m) for m in stored["members"]]
+        stored["rates"] = rates(stored["members"])
+        output.write_text(json.dumps(stored, indent=1) + "\n")
+        print(json.dumps(stored["rates"], indent=1))
+        return
     if options.plot_only:
         plot(json.loads(output.read_text()), output.with_suffix(".png"))
         return

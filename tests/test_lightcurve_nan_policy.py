@@ -164,3 +164,40 @@ def test_progress_bars_count_the_search_and_the_windows(monkeypatch):
         assert bar.n == bar.total and bar.updates[-1] == 0 and len(bar.updates) > 1, (bar.total, bar.updates)
     with pytest.raises(ValueError, match="progress must be True, False or None"):
         fit_lightcurve(*arguments, lightcurve=night[kept], progress="yes", **OPTIONS)
+
+
+def test_aliases_the_data_do_not_tell_apart_are_reported():
+    """Eight nights over a month leave the rotator's period among aliases about a cycle apart over
+    the record (0.29995, 0.30002, 0.30024 and 0.30029 days: up to 21 of the winner's sigmas apart,
+    their costs within 0.3 noise units of the winner's, i.e. 2 Delta cost = Delta chi^2 below 2.5):
+    fit_lightcurve warns, naming them, and ``competing_basins`` lists them best first.  A runner-up
+    moved 1.5 noise units above the winner, or onto the winner's periods, is not reported."""
+    import equinox as eqx
+
+    from frbjax.lightcurve import AmbiguousFitWarning
+
+    times, flux, sun, observer, night = observations()
+    with pytest.warns(AmbiguousFitWarning, match="other basin") as record:
+        fit = fit_lightcurve(times, flux, sun, observer, lightcurve=night, **OPTIONS)
+    assert sum(issubclass(w.category, AmbiguousFitWarning) for w in record) == 1 and fit.ambiguous
+    basins = fit.competing_basins()
+    # Measured: three runner-ups at 0.05, 0.23 and 0.27 noise units, 5.5, 17 and 21 sigmas away.
+    assert len(basins.cost_excess) == 3
+    assert np.all(np.diff(basins.cost_excess) >= 0) and 0 < basins.cost_excess[-1] < 0.5
+    assert np.all(basins.distance > 3) and np.all(np.abs(basins.periods[:, 0] - 0.3) < 5e-4)
+    assert np.all(np.isinf(basins.periods[:, 1]))
+    assert len(fit.competing_basins(within=0.1).cost_excess) == 1
+
+    costs = np.asarray(fit.refine_costs)
+    winner = int(np.argmin(costs))
+    samples = len(times)
+    unit = np.sqrt(samples / 2) * 2 * fit.cost / samples
+    raised = eqx.tree_at(
+        lambda f: f.refine_costs, fit, jnp.where(jnp.arange(len(costs)) == winner, costs, costs + 1.5 * unit)
+    )
+    assert not raised.ambiguous
+    periods = np.asarray(fit.refine_periods)
+    same = eqx.tree_at(lambda f: f.refine_periods, fit, jnp.asarray(np.broadcast_to(periods[winner], periods.shape)))
+    assert not same.ambiguous
+    with pytest.raises(ValueError, match="within"):
+        fit.competing_basins(within=-1.0)

@@ -489,6 +489,8 @@ def test_every_public_callable_is_in_the_harness():
     results = {
         "AttitudeFit",
         "LightcurveFit",
+        "CompetingBasins",
+        "AmbiguousFitWarning",
         "TumblerPeriodogram",
         "FitError",
         "SPLITTING_METHODS",

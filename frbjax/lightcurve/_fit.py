@@ -65,6 +65,8 @@ from __future__ import annotations
 
 import functools
 import math
+import typing
+import warnings
 
 import equinox as eqx
 import jax
@@ -84,7 +86,7 @@ from ._periods import momentum_from_periods, tumbler_periods
 from ._shape import _icosphere_area_vectors, ConvexShape, icosphere
 
 
-__all__ = ["LightcurveFit", "fit_lightcurve"]
+__all__ = ["AmbiguousFitWarning", "CompetingBasins", "LightcurveFit", "fit_lightcurve"]
 
 _MIN_WINDOW = 24
 _PRINCIPAL_INERTIA = (0.5, 0.75, 1.0)
@@ -378,6 +380,47 @@ def _fitted_motion(theta, reference, principal_axis):
 # ------------------------------------------------------------------------------------ the result
 
 
+class CompetingBasins(typing.NamedTuple):
+    """Runner-up basins of a light-curve fit (:meth:`LightcurveFit.competing_basins`), best first.
+
+    - ``cost_excess`` (M,): each one's cost above the winner's, in noise units of a cost;
+    - ``periods`` (M, 2): its (P_psi, P_phi);
+    - ``distance`` (M,): its largest |P - P_winner| in the winner's reported sigmas.
+    """
+
+    cost_excess: np.ndarray
+    periods: np.ndarray
+    distance: np.ndarray
+
+
+class AmbiguousFitWarning(UserWarning):
+    """:func:`fit_lightcurve` found basins at other periods that fit the data within the noise of the
+    winner's (:meth:`LightcurveFit.competing_basins`): the reported sigmas are the winner's basin's."""
+
+
+def _warn_if_ambiguous(result, stacklevel=3):
+    """An :class:`AmbiguousFitWarning` naming the competing basins of ``result``, if it has any."""
+    basins = result.competing_basins()
+    if not len(basins.cost_excess):
+        return
+    winner = np.asarray(result.periods, float)
+    listed = "; ".join(
+        f"periods {_format_periods(p)} at {e:.2f} noise units of cost ({d:.0f} sigma away)"
+        for e, p, d in zip(basins.cost_excess, basins.periods, basins.distance)
+    )
+    warnings.warn(
+        f"fit_lightcurve: {len(basins.cost_excess)} other basin(s) fit the data within the noise of the winner "
+        f"(periods {_format_periods(winner)}): {listed}.  The data do not tell them apart; the reported sigmas are "
+        "the winner's basin's (LightcurveFit.competing_basins()).  More nights, or a wider spread of them, decide.",
+        AmbiguousFitWarning,
+        stacklevel=stacklevel,
+    )
+
+
+def _format_periods(periods):
+    return "(" + ", ".join(f"{p:.6g}" for p in np.asarray(periods, float) if np.isfinite(p)) + ")"
+
+
 class LightcurveFit(eqx.Module):
     """Result of :func:`fit_lightcurve`.
 
@@ -399,7 +442,8 @@ class LightcurveFit(eqx.Module):
       first window (the search's landscape); ``refine_costs`` (K,), ``refine_periods`` (K, 2): the
       cost and the periods of each start solved on all the data (the refinement's last stage: the
       best four for a convex shape), the winner's among them: runner-ups within the noise of the
-      winner's cost (about sqrt(N / 2)) at other periods are basins the data do not tell apart.
+      winner's cost (about sqrt(N / 2)) at other periods are basins the data do not tell apart
+      (:meth:`competing_basins`, :attr:`ambiguous`; :func:`fit_lightcurve` warns of them).
     """
 
     body: FreeRigidBody
@@ -427,6 +471,42 @@ class LightcurveFit(eqx.Module):
     # The frame about which ``parameters`` are counted (the winner's start: its attitude, the inertial
     # direction of L and two unit vectors across it): for the posterior (frbjax.posterior).
     _reference: tuple = ()
+
+    def competing_basins(self, within: float = 1.0) -> CompetingBasins:
+        """The runner-up solutions the data do not tell from this one: the last stage's starts
+        (``refine_costs``, ``refine_periods``) whose cost is within ``within`` noise units of the
+        winner's and whose periods differ from the winner's by more than 3 reported sigmas (another
+        basin, not the winner's own found twice).
+
+        The noise unit of a cost is its standard deviation under the fit's own noise level,
+        sqrt(N / 2) (s / sigma)^2 with N the samples fitted and (s / sigma)^2 = 2 cost / N (1 when
+        ``sigma`` is the data's noise): the cost of the truth's basin varies by that much from one
+        draw of the noise to another, so a runner-up within it is as good an answer.  Where there is
+        one, the reported ``period_sigma`` (the winner's own basin) understates the uncertainty: the
+        periods are one of these, and more data (nights that resolve the aliases) decide.
+
+        Returns a :class:`CompetingBasins` sorted by cost (empty arrays when there is none).
+        """
+        within = checks.scalar("within", within, positive=True, allow_zero=True)
+        costs = np.asarray(self.refine_costs, float)
+        periods = np.asarray(self.refine_periods, float)
+        winner_periods = np.asarray(self.periods, float)
+        sigma = np.asarray(self.period_sigma, float)
+        samples = int(np.sum(np.isfinite(np.asarray(self.residuals))))
+        unit = math.sqrt(samples / 2) * max(2 * float(self.cost) / max(samples, 1), np.finfo(float).tiny)
+        excess = (costs - float(self.cost)) / unit
+        # Distance from the winner in its sigmas; a principal-axis rotator's second period is infinite.
+        finite = np.isfinite(winner_periods) & np.isfinite(periods)
+        difference = np.abs(np.where(finite, periods, 0.0) - np.where(finite, winner_periods, 0.0))
+        distance = (difference / np.maximum(sigma, np.finfo(float).tiny)).max(-1)
+        competing = np.isfinite(excess) & (excess > 0) & (excess <= within) & (distance > 3)
+        order = np.flatnonzero(competing)[np.argsort(excess[competing], kind="stable")]
+        return CompetingBasins(cost_excess=excess[order], periods=periods[order], distance=distance[order])
+
+    @property
+    def ambiguous(self) -> bool:
+        """True when another basin fits the data within the noise of this one (:meth:`competing_basins`)."""
+        return len(self.competing_basins().cost_excess) > 0
 
     def predict(self, times, sun, observer):
         """The model brightness (unscaled: multiply by a light curve's scale) at ``times``."""
@@ -1148,4 +1228,5 @@ def fit_lightcurve(
             "max_steps, or pass throw=False for the unconverged result (FitError.result).",
             result,
         )
+    _warn_if_ambiguous(result)
     return result
