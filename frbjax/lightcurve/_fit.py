@@ -50,7 +50,9 @@ rather than in the nearest basin of a wrong one.  For ``shape="convex"`` the con
 from the Gaussian image of the fitted ellipsoid, is then solved with the motion on all the data for
 the best four.  The lowest cost wins.  Periods,
 moments and their standard errors come from the covariance (J^T J)^+ s^2 of the winner (s^2 the
-residual variance of the data rows).
+residual variance of the data rows): the winner's basin's.  The other starts of the last stage that
+fit within the noise of the winner's cost at periods more than three of those sigmas away are
+competing basins (aliases the data do not rule out): the result lists them and the fit warns.
 
 The windows hold the samples within a radius of the epoch, the first a tenth of the data, each next
 radius 1.8 times the last: a window's fit predicts the phase a factor 1.8 further out, where its
@@ -499,7 +501,7 @@ class LightcurveFit(eqx.Module):
         finite = np.isfinite(winner_periods) & np.isfinite(periods)
         difference = np.abs(np.where(finite, periods, 0.0) - np.where(finite, winner_periods, 0.0))
         distance = (difference / np.maximum(sigma, np.finfo(float).tiny)).max(-1)
-        competing = np.isfinite(excess) & (excess > 0) & (excess <= within) & (distance > 3)
+        competing = np.isfinite(excess) & (excess >= 0) & (excess <= within) & (distance > 3)
         order = np.flatnonzero(competing)[np.argsort(excess[competing], kind="stable")]
         return CompetingBasins(cost_excess=excess[order], periods=periods[order], distance=distance[order])
 
