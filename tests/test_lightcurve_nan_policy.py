@@ -168,7 +168,7 @@ def test_progress_bars_count_the_search_and_the_windows(monkeypatch):
 
 def test_aliases_the_data_do_not_tell_apart_are_reported():
     """Eight nights over a month leave the rotator's period at one of several minima (0.29995,
-    0.30002, 0.30024 and 0.30029 days: phases 2% to 7% of a cycle apart at the month's ends, up to
+    0.30002, 0.30024 and 0.30029 days: phases 1% to 5% of a cycle apart at the month's ends, up to
     21 of the winner's sigmas apart, their costs within 0.3 noise units of the winner's, i.e.
     2 Delta cost = Delta chi^2 below 2.5):
     fit_lightcurve warns, naming them, and ``competing_basins`` lists them best first.  A runner-up
