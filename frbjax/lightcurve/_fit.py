@@ -1079,6 +1079,11 @@ def fit_lightcurve(
             moved[k] = trials[own[np.argmin(np.where(np.isfinite(trial_costs[own]), trial_costs[own], np.inf))]]
         return moved
 
+    def best_of(rows, row_costs, count):
+        """The ``count`` of ``rows`` with the lowest costs (a given motion first, always kept)."""
+        ranked = np.argsort(np.where(given[rows], -np.inf, np.nan_to_num(row_costs, nan=np.inf)), kind="stable")
+        return rows[ranked[:count]]
+
     # The refinement's progress bar counts the windows solved (each surviving start's continuation
     # windows, the convex stage, the leader's continued solves).
     windows = sum(survivors) + convex_starts
@@ -1103,12 +1108,10 @@ def fit_lightcurve(
             )
             parameters[alive] = out[0]
             if window + 1 < len(masks):
-                # The best half of the starts go on to the next window (a given motion always).
-                ranked = np.argsort(np.where(given[alive], -np.inf, np.nan_to_num(out[1], nan=np.inf)), kind="stable")
-                alive = alive[ranked[: survivors[window + 1]]]
+                # The best half of the starts go on to the next window.
+                alive = best_of(alive, out[1], survivors[window + 1])
         if shape == "convex":
-            ranked = np.argsort(np.where(given[alive], -np.inf, np.nan_to_num(out[1], nan=np.inf)), kind="stable")
-            alive = alive[ranked[:convex_starts]]
+            alive = best_of(alive, out[1], convex_starts)
             fitted = parameters[alive]
             fitted_axes = np.concatenate([np.ones((len(alive), 1)), np.exp(fitted[:, 8:])], 1)
             log_areas = np.log(_gaussian_image_areas(fitted_axes, normals, solid_angles))
@@ -1146,12 +1149,13 @@ def fit_lightcurve(
                 else:
                     full[leader] = part
     fitted, refine_costs, oks, residual_rows, jacobians = out
-    refine_periods = np.stack(
-        [
-            np.asarray(_fitted_motion(as_jax(row[:8]), as_jax(tuple(r[k] for r in refs)), principal_axis)[1])
-            for row, k in zip(fitted, alive)
-        ]
-    )
+    # The motion, periods, mode and periods' Jacobian of each start of the last stage: their periods
+    # for the result's runner-ups, the winner's all four.
+    motions = [
+        _fitted_motion(as_jax(row[:8]), as_jax(tuple(r[k] for r in refs)), principal_axis)
+        for row, k in zip(fitted, alive)
+    ]
+    refine_periods = np.stack([np.asarray(motion[1]) for motion in motions])
     winner = int(np.argmin(np.where(np.isfinite(refine_costs), refine_costs, np.inf)))
     p = fitted[winner].astype(float)
     reference = tuple(jnp.asarray(r[alive[winner]], dtype) for r in refs)
@@ -1165,8 +1169,7 @@ def fit_lightcurve(
     covariance = np.zeros((free.size, free.size))
     covariance[np.ix_(free > 0, free > 0)] = (right[kept].T / singular[kept] ** 2) @ right[kept] * variance
 
-    theta_fit = jnp.asarray(p[:8], dtype)
-    body, period_values, lam, period_jacobian = _fitted_motion(theta_fit, reference, principal_axis)
+    body, period_values, lam, period_jacobian = motions[winner]
     if shape == "convex":
         fitted_shape = ConvexShape(jnp.asarray(normals, dtype), jnp.exp(jnp.asarray(p[8:], dtype)))
     else:
