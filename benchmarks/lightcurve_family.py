@@ -59,6 +59,8 @@ import lightcurve  # noqa: E402  (its `problems`: tests/test_lightcurve_fit.py's
 
 
 NOISE = _tumbler_family.NOISE
+# The fits' competing basins are recorded with each member (``with_basins``) instead of printed.
+warnings.filterwarnings("ignore", category=AmbiguousFitWarning)
 
 
 def invert(case, width, options):
@@ -70,19 +72,14 @@ def invert(case, width, options):
     common = dict(lightcurve=case.night, principal_axis=rotator, throw=False, progress=False)
     data = (case.times, case.flux, case.sun, case.observer)
     start = time.perf_counter()
-    with warnings.catch_warnings():
-        # Recorded below (``competing_basins``) instead of printed.
-        warnings.simplefilter("ignore", AmbiguousFitWarning)
-        found = fit_lightcurve(*data, periods=ranges, mode="both", **common, **options)
+    found = fit_lightcurve(*data, periods=ranges, mode="both", **common, **options)
     seconds = time.perf_counter() - start
     # The truth's basin: the same data refined from the true motion, its time counted from the fit's
     # epoch (fit_lightcurve's default: the median time).
     epoch = float(np.median(case.times))
     body = case.body
     truth = FreeRigidBody(case.inertia, np.asarray(body.angular_momentum(epoch)), np.asarray(body.quaternion(epoch)))
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore", AmbiguousFitWarning)
-        refined = fit_lightcurve(*data, periods=ranges, initial=truth, **common, **options)
+    refined = fit_lightcurve(*data, periods=ranges, initial=truth, **common, **options)
     held_out = tuple(case.held_out[key] for key in ("times", "flux", "sun", "observer", "night"))
     held_out_rms = lambda result: lightcurve.problems.held_out_rms(result, held_out)  # noqa: E731
     samples = len(case.times)
