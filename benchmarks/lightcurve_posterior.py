@@ -45,6 +45,8 @@ def main():
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--warmup", type=int, default=300)
     parser.add_argument("--draws", type=int, default=300)
+    parser.add_argument("--shape", choices=("held", "sampled"), default="held")
+    parser.add_argument("--chains", type=int, default=4)
     parser.add_argument("--output-dir", default=str(ROOT / "benchmarks" / "results"))
     args = parser.parse_args()
 
@@ -80,6 +82,8 @@ def main():
             sigma=problems.NOISE,
             num_warmup=args.warmup,
             num_samples=args.draws,
+            num_chains=args.chains,
+            shape=args.shape,
             progress=False,
         )
     posterior_seconds = time.perf_counter() - start
@@ -100,6 +104,7 @@ def main():
     moments = np.asarray(posterior.inertia)
     result = {
         "case": "SAM, tests/test_lightcurve_fit.py's tumbler",
+        "shape": args.shape,
         "samples": len(times),
         "chains": posterior.num_chains,
         "warmup": args.warmup,
@@ -117,7 +122,8 @@ def main():
     print(json.dumps(result, indent=1), flush=True)
     output = pathlib.Path(args.output_dir)
     output.mkdir(parents=True, exist_ok=True)
-    (output / "lightcurve_posterior.json").write_text(json.dumps(result, indent=1) + "\n")
+    name = "lightcurve_posterior.json" if args.shape == "held" else "lightcurve_posterior_sampled_shape.json"
+    (output / name).write_text(json.dumps(result, indent=1) + "\n")
 
 
 if __name__ == "__main__":

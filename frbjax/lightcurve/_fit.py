@@ -50,7 +50,9 @@ rather than in the nearest basin of a wrong one.  For ``shape="convex"`` the con
 from the Gaussian image of the fitted ellipsoid, is then solved with the motion on all the data for
 the best four.  The lowest cost wins.  Periods,
 moments and their standard errors come from the covariance (J^T J)^+ s^2 of the winner (s^2 the
-residual variance of the data rows): the winner's basin's.  The other starts of the last stage that
+residual variance of the data rows over N less the parameters' effective number, the data rows' part
+of the hat matrix's trace: a regularised shape's areas count for what the data determine of them):
+the winner's basin's.  The other starts of the last stage that
 fit within the noise of the winner's cost at periods more than three of those sigmas away are
 competing basins (aliases the data do not rule out): the result lists them and the fit warns.
 
@@ -220,10 +222,10 @@ def _log_periods(theta, reference, principal_axis):
     return jnp.log(jnp.where(jnp.isfinite(periods), periods, 1.0))
 
 
-@functools.partial(traced_once, static_argnums=4)
-def _residuals_and_jacobian(parameters, reference, data, window, config):
-    """(r (R,), dr/dparameters (R, P)): data rows, the shape's regularisation rows, the period prior's
-    (traced once for the primal and the JVP of ``_least_squares_fn``: ``frbjax._trace_once``).
+def _rows(parameters, reference, data, window, config):
+    """(r (R,), dr/dparameters (R, P)): data rows, the shape's regularisation rows, the period prior's;
+    the Jacobian's columns of fixed parameters (``data["free"]`` 0) zero.  Half their sum of squares
+    is the fit's cost, and the negative log posterior of :func:`frbjax.posterior.lightcurve_posterior`.
 
     ``window`` = (weights (N,) of the samples, prior (log centre (2,), inverse widths (2,)), prior
     weight): the continuation window, and the start's period cell as a Gaussian prior in log P; a
@@ -263,7 +265,14 @@ def _residuals_and_jacobian(parameters, reference, data, window, config):
         d_prior = prior_scale[:, None] * jax.jacfwd(log_periods)(parameters[:8])
         residual = jnp.concatenate([residual, prior_scale * (log_periods(parameters[:8]) - prior_centre)])
         jacobian = jnp.concatenate([jacobian, jnp.pad(d_prior, ((0, 0), (0, parameters.size - 8)))])
-    jacobian = jacobian * data["free"][None, :]
+    return residual, jacobian * data["free"][None, :]
+
+
+@functools.partial(traced_once, static_argnums=4)
+def _residuals_and_jacobian(parameters, reference, data, window, config):
+    """:func:`_rows` for the solver, a non-finite row (a motion the formulas cannot evaluate) zero
+    (traced once for the primal and the JVP of ``_least_squares_fn``: ``frbjax._trace_once``)."""
+    residual, jacobian = _rows(parameters, reference, data, window, config)
     finite = jnp.isfinite(residual)
     return jnp.where(finite, residual, 0.0), jnp.where(finite[:, None] & jnp.isfinite(jacobian), jacobian, 0.0)
 
@@ -436,7 +445,8 @@ class LightcurveFit(eqx.Module):
     - ``inertia`` (3,): fitted moments scaled to a largest of 1; ``inertia_sigma`` (3,);
     - ``momentum_direction`` (3,): the inertial direction of L;
     - ``parameters``: (theta (8), shape parameters) of the module docstring; ``covariance``: their
-      covariance (J^T J)^+ s^2;
+      covariance (J^T J)^+ s^2 (s^2: the data rows' residual variance over their effective degrees
+      of freedom);
     - ``scales`` (C,): the fitted scale of each light curve (data = scale * model);
     - ``residuals`` (N,): log(data) - log(scale * model) per sample (input order);
     - ``cost``: half the sum of squared (weighted) residuals; ``success``: the solver converged;
@@ -473,6 +483,10 @@ class LightcurveFit(eqx.Module):
     # The frame about which ``parameters`` are counted (the winner's start: its attitude, the inertial
     # direction of L and two unit vectors across it): for the posterior (frbjax.posterior).
     _reference: tuple = ()
+    # The shape model ("convex": log-areas on fixed normals; "ellipsoid": two log axis ratios) and the
+    # convex shape's regularisation weights (closure, smoothness): the posterior's shape prior.
+    shape_model: str = eqx.field(static=True, default="convex")
+    regularisation: tuple[float, float] = eqx.field(static=True, default=(10.0, 1.0))
 
     def competing_basins(self, within: float = 1.0) -> CompetingBasins:
         """The runner-up solutions the data do not tell from this one: the last stage's starts
@@ -1161,11 +1175,16 @@ def fit_lightcurve(
     reference = tuple(jnp.asarray(r[alive[winner]], dtype) for r in refs)
     jacobian = jacobians[winner][:, free > 0]
     residual = residual_rows[winner]
-    variance = float(np.sum(residual[:n] ** 2) / max(n - jacobian.shape[1], 1))
     # (J^T J)^+ from the singular values of J itself: forming J^T J first squares its condition
     # number, and the pseudo-inverse's cutoff then depends on rounding (as scipy's curve_fit).
-    _, singular, right = np.linalg.svd(jacobian, full_matrices=False)
+    left, singular, right = np.linalg.svd(jacobian, full_matrices=False)
     kept = singular > np.finfo(float).eps * max(jacobian.shape) * singular[0]
+    # The residual variance over the data rows' degrees of freedom: N less the light curves' scales
+    # and the parameters' effective number, the data rows' part of the trace of the hat matrix
+    # J (J^T J)^+ J^T = U U^T (Hastie, Tibshirani & Friedman 2009, sec. 3.4.1).  A regularised convex
+    # shape's hundreds of areas count for what the data determine of them, not one each.
+    effective_parameters = float(np.sum(left[:n, kept] ** 2))
+    variance = float(np.sum(residual[:n] ** 2) / max(n - curves.shape[1] - effective_parameters, 1.0))
     covariance = np.zeros((free.size, free.size))
     covariance[np.ix_(free > 0, free > 0)] = (right[kept].T / singular[kept] ** 2) @ right[kept] * variance
 
@@ -1224,6 +1243,8 @@ def fit_lightcurve(
         refine_costs=jnp.asarray(refine_costs, dtype),
         refine_periods=jnp.asarray(refine_periods, dtype),
         _reference=reference,
+        shape_model=shape,
+        regularisation=tuple(float(w) for w in regularisation),
     )
     if throw and not (bool(oks[winner]) and np.isfinite(refine_costs[winner])):
         raise FitError(

@@ -1,30 +1,40 @@
-r"""The posterior of a light-curve fit's spin state and inertia ratios (``lightcurve_posterior``).
+r"""The posterior of a light-curve fit's spin state, inertia ratios and shape (``lightcurve_posterior``).
 
 The parameters are those of :func:`frbjax.lightcurve.fit_lightcurve` (its module docstring): the
 motion $\theta$ = (log I1, log I2 with I3 = 1, log |L|, the attitude's rotation vector about the
 fit's reference attitude, L's inertial direction as a tangent of the sphere about its reference)
-at the epoch.  The shape is held at its fitted values (sampling its hundreds of facet areas is left
-out), so the posterior is conditional on the shape: on a full-size tumbler its periods' standard
-deviations were 0.32 and 0.40 of the fit's sigmas, which carry the shape's uncertainty too
-(benchmarks/lightcurve_posterior.py).  The light curves' unknown scales, under a flat prior on each
-log-scale, are integrated out exactly: for Gaussian noise in log flux the integral over one curve's offset leaves
-the residuals about the curve's mean, the residuals of the fit, and a constant.  The log likelihood
-is then
+at the epoch, and the shape's $s$ (a convex shape's log-areas on the fit's normals, or an
+ellipsoid's two log axis ratios).  The negative log posterior is the fit's own cost, the half sum of
+squares of its residual rows, less the log prior of $\theta$:
 
-$$\log p(\text{data} \mid \theta) = -\frac{1}{2\sigma^2} \sum_i \big(r_i - \bar r_{c(i)}\big)^2,
-\qquad r_i = \log b_i - \log m_i(\theta),$$
+$$-\log p(\theta, s \mid \text{data}) = \frac{1}{2\sigma^2} \sum_i \big(r_i - \bar r_{c(i)}\big)^2
++ \frac{1}{2} \lVert R(s) \rVert^2 - \log p(\theta) + \text{const},
+\qquad r_i = \log b_i - \log m_i(\theta, s),$$
 
-$m_i$ the model flux of the fitted shape (Kaasalainen & Torppa 2001) through the exact motion, and
-$\sigma$ the relative noise.  numpyro's NUTS samples it in whitened coordinates
-$\theta = \hat\theta + C^{1/2} z$, $C$ the fit's covariance of $\theta$ conditional on the shape
-(the inverse of the precision's motion block), in the attitude posterior's program
-(``_sampler``: the chains one after another, a call each of one compiled loop, the data and the whitening as its
-arguments, so that a second posterior of the same sizes and scattering law compiles nothing).
+$m_i$ the model flux (Kaasalainen & Torppa 2001) through the exact motion, $\sigma$ the relative
+noise, and $R(s)$ the convex shape's regularisation rows (the closure of its Gaussian image, the
+smoothness of the log-areas, their mean), which make the shape's prior a proper one.  The light
+curves' unknown scales, under a flat prior on each log-scale, are integrated out exactly: for
+Gaussian noise in log flux the integral over one curve's offset leaves the residuals about the
+curve's mean and a constant.  The gradient is the fit's Jacobian transposed times its residuals
+($J^T r$: the motion's 8 columns by forward mode, the shape's analytic, one pass), so that hundreds of
+facet areas cost no more than the motion.
+
+By default the shape is sampled with the motion (its uncertainty then widens the periods' and
+moments' intervals to what the fit's covariance says); ``shape="held"`` keeps it at the fit's values
+and samples the motion given it (on a full-size tumbler the periods' standard deviations were then
+0.32 and 0.40 of the fit's sigmas: benchmarks/lightcurve_posterior.py).  numpyro's NUTS samples
+whitened coordinates $z$, the sampled parameters $= \hat p + C^{1/2} z$ with $C$ the fit's covariance
+of them (conditional on the shape when it is held), in the attitude posterior's program
+(``_sampler``: the chains one after another, a call each of one compiled loop, the data and the
+whitening as its arguments, so that a second posterior of the same sizes and scattering law compiles
+nothing).
 """
 
 from __future__ import annotations
 
 import functools
+import math
 import warnings
 
 import jax
@@ -33,7 +43,15 @@ import numpy as np
 import numpyro
 
 from .. import _checks as checks, _progress
-from ..lightcurve._fit import _curve_mean, _facet_fluxes, _periods, _safe_log, _validate, LightcurveFit
+from ..lightcurve._fit import (
+    _laplacian,
+    _periods,
+    _rows,
+    _SEARCH_SUBDIVISIONS,
+    _unit_normals,
+    _validate,
+    LightcurveFit,
+)
 from . import _sampler as sampler
 from ._result import (
     bulk_ess,
@@ -72,19 +90,37 @@ def _log_prior(theta, prior):
     return total
 
 
+@functools.partial(jax.custom_jvp, nondiff_argnums=(2,))
+def _fit_cost(parameters, data, config):
+    """The fit's cost at ``parameters`` (motion and shape): half the sum of squares of its rows."""
+    residual, _ = _rows(parameters, data["reference"], data, (data["ones"], None, None), config)
+    return 0.5 * residual @ residual
+
+
+@_fit_cost.defjvp
+def _fit_cost_jvp(config, primals, tangents):
+    # d cost = (J^T r) . d parameters; the data are constants of the posterior (their tangent unused).
+    parameters, data = primals
+    residual, jacobian = _rows(parameters, data["reference"], data, (data["ones"], None, None), config)
+    return 0.5 * residual @ residual, (residual @ jacobian) @ tangents[0]
+
+
 @functools.cache
-def _potential_generator(law):
-    """The potential of the whitened parameters z for the scattering ``law`` (one function per law,
-    so that the sampler's program is found compiled by a later call): ``data`` holds the light
-    curves, the held shape, the whitening and the noise."""
+def _potential_generator(config):
+    """The potential of the whitened parameters z for the fit's static ``config`` (shape model,
+    scattering law, its c, principal axis): one function per config, so that the sampler's program
+    is found compiled by a later call.  ``data`` holds the light curves, the fit's parameters, which
+    of them are sampled, the whitening and the noise."""
 
     def generator(data, prior):
         def potential(z):
-            theta = data["fixed"].at[data["free"]].set(data["centre"] + data["root"] @ z)
-            fluxes = _facet_fluxes(theta, data["reference"], data["normals"], data, law, data["c"])
-            difference = data["log_brightness"] - _safe_log(fluxes @ data["areas"])
-            residual = (difference - _curve_mean(difference, data["ones"], data["curves"])) / data["sigma"]
-            value = 0.5 * jnp.sum(residual * residual) - _log_prior(theta, prior)
+            parameters = data["fixed"].at[data["sampled"]].set(data["centre"] + data["root"] @ z)
+            value = _fit_cost(parameters, data, config) - _log_prior(parameters[:8], prior)
+            if config[0] == "ellipsoid":
+                # The ellipsoid's log axis ratios, which relative photometry may leave undetermined (a
+                # rotator seen near its equator: the axis along the spin): standard normal.
+                value = value + 0.5 * jnp.sum(parameters[8:] ** 2)
+            # NaN (a motion the formulas cannot evaluate) as an infinite potential: NUTS rejects it.
             return jnp.where(jnp.isnan(value), jnp.inf, value)
 
         return potential
@@ -92,15 +128,31 @@ def _potential_generator(law):
     return generator
 
 
-def _conditional_whitening(fit_parameters, covariance, free):
-    """(centre, square root of the motion's covariance given the shape) on the free motion parameters."""
-    covariance = np.asarray(covariance, float)
-    precision = np.linalg.pinv(0.5 * (covariance + covariance.T))
-    block = precision[np.ix_(free, free)]
-    conditional = np.linalg.pinv(0.5 * (block + block.T))
-    values, vectors = np.linalg.eigh(0.5 * (conditional + conditional.T))
-    values = np.maximum(values, 1e-10 * max(float(values.max()), 1e-300))
-    return np.asarray(fit_parameters, float)[free], vectors @ np.diag(np.sqrt(values)) @ vectors.T
+@functools.partial(jax.jit, static_argnums=2)
+def _rows_at(parameters, data, config):
+    return _rows(parameters, data["reference"], data, (data["ones"], None, None), config)
+
+
+def _whitening(parameters, residual, jacobian, sampled, prior_precision):
+    """(centre, root) with the ``sampled`` parameters = centre + root @ z, z about standard normal.
+
+    The Gauss-Newton (Laplace) approximation of the posterior at the fit: from the singular value
+    decomposition of the fit's rows' Jacobian in the sampled columns, J = U S V^T, root = V S^-1 (the
+    rows' Hessian J^T J in z is then the identity; forming the covariance (J^T J)^-1 instead loses
+    the periods' well-determined directions, whose variances are 1e-10 of the shape's, to rounding),
+    and the centre one Gauss-Newton step from the fit, with the rows of a Gaussian prior of mean 0
+    and diagonal ``prior_precision`` (per sampled parameter) that the fit's rows do not hold."""
+    values = np.asarray(parameters, float)[sampled]
+    jacobian = np.asarray(jacobian, float)[:, sampled]
+    residual = np.asarray(residual, float)
+    prior_root = np.sqrt(np.asarray(prior_precision, float))
+    if np.any(prior_root):
+        jacobian = np.concatenate([jacobian, np.diag(prior_root)])
+        residual = np.concatenate([residual, prior_root * values])
+    left, singular, right = np.linalg.svd(jacobian, full_matrices=False)
+    singular = np.maximum(singular, 1e-10 * max(float(singular[0]), 1e-300))
+    centre = values - right.T @ ((left.T @ residual) / singular)
+    return centre, right.T / singular
 
 
 def lightcurve_posterior(
@@ -113,6 +165,7 @@ def lightcurve_posterior(
     sigma: float,
     lightcurve=None,
     magnitudes: bool = False,
+    shape: str = "held",
     prior: dict | None = None,
     num_warmup: int = 500,
     num_samples: int = 1000,
@@ -121,15 +174,18 @@ def lightcurve_posterior(
     progress: bool | None = None,
     nan_policy: str = "raise",
 ) -> LightcurvePosterior:
-    r"""Posterior draws of a tumbler's spin state, inertia ratios and periods from light curves.
+    r"""Posterior draws of a tumbler's spin state, inertia ratios, periods and shape from light curves.
 
     The data as for :func:`frbjax.lightcurve.fit_lightcurve` (``times``, ``brightness``, ``sun``,
     ``observer``, ``lightcurve``, ``magnitudes``, ``nan_policy``); ``initial``: the
     :class:`frbjax.lightcurve.LightcurveFit` of these data, about which the parameters are whitened
     and the chains started; ``sigma``: the relative noise (the standard deviation of the log flux).
-    The shape is held at ``initial``'s (the intervals are conditional on it: narrower than the fit's
-    on a tumbler, module docstring), the light curves' scales are integrated out; a principal-axis
-    fit keeps its fixed parameters and samples the rest.
+    ``shape``: ``"held"`` at ``initial``'s (default: the motion's posterior given the fitted shape,
+    narrower intervals on a tumbler) or ``"sampled"`` with the motion (its uncertainty then in the
+    periods' and moments' intervals; far slower: module docstring).  The prior of a convex shape is
+    the fit's regularisation (closure, smoothness, mean log-area) with ``initial``'s weights, an
+    ellipsoid's log axis ratios are standard normal.  The light curves' scales are integrated out;
+    a principal-axis fit keeps its fixed parameters and samples the rest.
 
     ``prior``: the default is flat in the parameters (log moments, log |L|, the attitude's and L's
     tangent coordinates) with the moments within the triangle inequality; a dict of numpyro
@@ -139,15 +195,18 @@ def lightcurve_posterior(
     progress bar when ``progress`` (default: in a terminal or a notebook).  Chain 0 starts at the
     fit, the others a standard normal away in the whitened parameters.
 
-    Returns :class:`LightcurvePosterior` (periods, inertia, long-axis mode per draw, diagnostics);
-    a :class:`PosteriorWarning` when split R-hat exceeds 1.01 or transitions diverged.  Refused
-    (ValueError): the data errors of ``fit_lightcurve``, an ``initial`` that is not a
-    LightcurveFit of as many light curves, ``sigma`` not > 0, counts below their minimum, unknown
-    prior blocks.
+    Returns :class:`LightcurvePosterior` (periods, inertia, long-axis mode, shape parameters per
+    draw, diagnostics); a :class:`PosteriorWarning` when split R-hat (of any sampled parameter, the
+    shape's included) exceeds 1.01 or transitions diverged.  Refused (ValueError): the data errors
+    of ``fit_lightcurve``, an ``initial`` that is not a LightcurveFit of as many light curves,
+    ``sigma`` not > 0, a ``shape`` other than the two, counts below their minimum, unknown prior
+    blocks.
     """
     if not isinstance(initial, LightcurveFit) or not initial._reference:
         raise ValueError(f"initial must be a LightcurveFit (from fit_lightcurve), got {type(initial).__name__}")
     sigma = checks.scalar("sigma", sigma, positive=True)
+    if shape not in ("sampled", "held"):
+        raise ValueError(f"shape must be 'sampled' or 'held', got {shape!r}")
     num_chains = checks.integer("num_chains", num_chains, minimum=1)
     num_samples = checks.integer("num_samples", num_samples, minimum=4)
     num_warmup = checks.integer("num_warmup", num_warmup, minimum=0)
@@ -169,11 +228,19 @@ def lightcurve_posterior(
         )
     log_brightness = -0.4 * np.log(10.0) * flux if magnitudes else np.log(flux)
     dtype = initial.parameters.dtype
-    fit_theta = np.asarray(initial.parameters, float)[:8]
-    covariance = np.asarray(initial.covariance, float)
-    free = np.flatnonzero(np.diag(covariance)[:8] > 0)
-    centre, root = _conditional_whitening(fit_theta, covariance, free)
+    fit_parameters = np.asarray(initial.parameters, float)
+    variances = np.diag(np.asarray(initial.covariance, float))
+    free = np.flatnonzero(variances[:8] > 0)
+    sampled = free if shape == "held" else np.flatnonzero(variances > 0)
     principal_axis = not np.isfinite(float(initial.periods[1]))
+    free_mask = np.zeros(fit_parameters.size)
+    free_mask[sampled] = 1.0
+    if initial.shape_model == "convex":
+        subdivisions = round(math.log(initial.shape.normals.shape[0] / 20, 4))
+        laplacian = _laplacian(_unit_normals(subdivisions)[2])
+    else:
+        laplacian = np.zeros((1, 1))
+    config = (initial.shape_model, initial.law, float(initial.c), _SEARCH_SUBDIVISIONS, principal_axis)
 
     as_array = lambda value: jnp.asarray(value, dtype)  # noqa: E731
     reference = initial._reference
@@ -184,20 +251,24 @@ def lightcurve_posterior(
         log_brightness=as_array(log_brightness),
         curves=as_array(curves),
         ones=jnp.ones(len(times), dtype),
-        normals=initial.shape.normals,
-        areas=initial.shape.areas,
+        normals=as_array(initial.shape.normals),
+        laplacian=as_array(laplacian),
+        regularisation=as_array(initial.regularisation),
+        free=as_array(free_mask),
         reference=reference,
-        c=as_array(initial.c),
         sigma=as_array(sigma),
-        fixed=as_array(fit_theta),
-        free=jnp.asarray(free),
-        centre=as_array(centre),
-        root=as_array(root),
+        fixed=as_array(fit_parameters),
+        sampled=jnp.asarray(sampled),
     )
+    residual, jacobian = _rows_at(data["fixed"], data, config)
+    # The ellipsoid's log axis ratios have a standard normal prior that the fit's rows lack.
+    prior_precision = np.where((sampled >= 8) & (initial.shape_model == "ellipsoid"), 1.0, 0.0)
+    centre, root = _whitening(fit_parameters, residual, jacobian, sampled, prior_precision)
+    data.update(centre=as_array(centre), root=as_array(root))
 
     key = jax.random.key(seed)
     start_key, chain_key = jax.random.split(key)
-    z0 = np.array(jax.random.normal(start_key, (num_chains, len(free)), dtype), float)
+    z0 = np.array(jax.random.normal(start_key, (num_chains, len(sampled)), dtype), float)
     z0[0] = 0.0
     with numpyro.validation_enabled(False):
         out = sampler.run(
@@ -209,32 +280,36 @@ def lightcurve_posterior(
             num_samples=num_samples,
             vectorized=False,
             progress=progress,
-            potential_generator=_potential_generator(initial.law),
+            potential_generator=_potential_generator(config),
+            # The gradient is J^T r from one pass (_fit_cost's rule) whatever the count of parameters.
+            forward_mode=False,
         )
-    z = np.asarray(out["draws"])  # (C, D, free)
+    z = np.asarray(out["draws"])  # (C, D, sampled)
     diverging = np.asarray(out["diverging"])
-    fixed, free_index = data["fixed"], data["free"]
-
-    def theta_of(z):
-        return fixed.at[free_index].set(data["centre"] + data["root"] @ z)
-
-    thetas = np.asarray(jax.jit(jax.vmap(theta_of))(jnp.asarray(z.reshape(-1, z.shape[-1]), dtype)))
+    draws = fit_parameters + np.zeros((z.shape[0] * z.shape[1], 1))
+    draws[:, sampled] = centre + z.reshape(-1, z.shape[-1]) @ root.T
+    thetas = draws[:, :8]
     periods, long_axis = (
         np.asarray(x)
         for x in jax.jit(jax.vmap(lambda theta: _periods(theta, reference, principal_axis)))(as_array(thetas))
     )
     logs = np.concatenate([thetas[:, :2], np.zeros((len(thetas), 1))], 1)
     inertia = np.exp(logs - logs.max(axis=1, keepdims=True))
-    chains = thetas.reshape(num_chains, -1, 8)[..., free]
+    by_chain = draws.reshape(num_chains, -1, draws.shape[-1])
+    chains = by_chain[..., free]
     with np.errstate(invalid="ignore", divide="ignore"):
         r_hat = split_r_hat(chains) if num_chains > 1 else np.full(len(free), np.nan)
         ess_bulk, ess_tail = bulk_ess(chains), tail_ess(chains)
+        shape_r_hat = (
+            split_r_hat(by_chain[..., sampled[sampled >= 8]]) if num_chains > 1 and shape == "sampled" else np.zeros(0)
+        )
     divergences = diverging.sum(axis=1)
     result = LightcurvePosterior(
         inertia=as_array(inertia),
         periods=as_array(periods),
         long_axis_mode=jnp.asarray(np.asarray(long_axis, bool) & ~principal_axis),
         parameters=as_array(thetas),
+        shape_parameters=as_array(draws[:, 8:]),
         chain=jnp.asarray(np.repeat(np.arange(num_chains), chains.shape[1])),
         diverging=jnp.asarray(diverging.reshape(-1)),
         r_hat=as_array(r_hat),
@@ -244,9 +319,13 @@ def lightcurve_posterior(
         fit=initial,
         parameter_names=tuple(LIGHTCURVE_PARAMETER_NAMES[i] for i in free),
         num_chains=num_chains,
+        shape_sampled=shape == "sampled",
     )
     problems = []
-    worst = float(np.nanmax(r_hat)) if np.any(np.isfinite(r_hat)) else (np.nan if num_chains == 1 else np.inf)
+    every_r_hat = np.concatenate([r_hat, shape_r_hat])
+    worst = (
+        float(np.nanmax(every_r_hat)) if np.any(np.isfinite(every_r_hat)) else (np.nan if num_chains == 1 else np.inf)
+    )
     if num_chains > 1 and not worst <= R_HAT_LIMIT:
         problems.append(f"largest split R-hat {worst:.4f} > {R_HAT_LIMIT}")
     if divergences.sum():

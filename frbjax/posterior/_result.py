@@ -5,11 +5,14 @@ from __future__ import annotations
 import statistics
 
 import equinox as eqx
+import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, Bool, Float, Int
 from numpyro.diagnostics import effective_sample_size, split_gelman_rubin
 
 from ..fit import AttitudeFit
+from ..lightcurve import ConvexShape
+from ..lightcurve._fit import _ellipsoid_shape, _SEARCH_SUBDIVISIONS
 
 
 __all__ = [
@@ -262,16 +265,19 @@ class LightcurvePosterior(eqx.Module):
     Draws (S = ``num_chains`` x draws per chain, chain after chain): ``periods`` (S, 2), (P_psi, P_phi)
     (principal axis: (P, inf)); ``inertia`` (S, 3), the moments (I1, I2, I3) scaled so that the largest
     is 1; ``long_axis_mode`` (S,); ``parameters`` (S, 8), the motion's parameters of
-    :func:`frbjax.lightcurve.fit_lightcurve` at the epoch (the shape held at the fit's);
-    ``chain``, ``diverging`` (S,).  Diagnostics of the sampled parameters (``parameter_names``):
-    ``r_hat``, ``ess_bulk``, ``ess_tail``; ``divergences`` (C,) per chain.  ``fit``: the
-    :class:`frbjax.lightcurve.LightcurveFit` about which the chains ran.
+    :func:`frbjax.lightcurve.fit_lightcurve` at the epoch; ``shape_parameters`` (S, K), the
+    shape's (a convex shape's log-areas on ``fit.shape.normals``, an ellipsoid's two log axis
+    ratios; the fit's in every draw when ``shape_sampled`` is False: :meth:`shape` builds a
+    draw's); ``chain``, ``diverging`` (S,).  Diagnostics of the sampled motion parameters
+    (``parameter_names``): ``r_hat``, ``ess_bulk``, ``ess_tail``; ``divergences`` (C,) per chain.
+    ``fit``: the :class:`frbjax.lightcurve.LightcurveFit` about which the chains ran.
     """
 
     inertia: Float[Array, "S 3"]
     periods: Float[Array, "S 2"]
     long_axis_mode: Bool[Array, " S"]
     parameters: Float[Array, "S 8"]
+    shape_parameters: Float[Array, "S K"]
     chain: Int[Array, " S"]
     diverging: Bool[Array, " S"]
     r_hat: Float[Array, " F"]
@@ -281,9 +287,17 @@ class LightcurvePosterior(eqx.Module):
     fit: eqx.Module
     parameter_names: tuple[str, ...] = eqx.field(static=True)
     num_chains: int = eqx.field(static=True)
+    shape_sampled: bool = eqx.field(static=True, default=True)
 
     def _by_chain(self, draws) -> np.ndarray:
         return _by_chain(draws, self.num_chains)
+
+    def shape(self, draw: int):
+        """The :class:`frbjax.lightcurve.ConvexShape` of draw ``draw`` (an index into the S draws)."""
+        values = self.shape_parameters[draw]
+        if self.fit.shape_model == "convex":
+            return ConvexShape(self.fit.shape.normals, jnp.exp(values))
+        return _ellipsoid_shape(values, _SEARCH_SUBDIVISIONS)
 
     def quantities(self) -> dict[str, np.ndarray]:
         """Every scalar quantity's draws (S,): ``P_psi``, ``P_phi`` (finite ones), ``I_1..3`` and the

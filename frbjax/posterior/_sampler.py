@@ -85,7 +85,9 @@ def _kernels(num_warmup, potential_generator):
     return hmc(potential_fn_gen=potential_generator, algo="NUTS")
 
 
-def _chain_loop(z0, key, data, prior, num_warmup, num_samples, progress_every, vectorized, potential_generator):
+def _chain_loop(
+    z0, key, data, prior, num_warmup, num_samples, progress_every, vectorized, potential_generator, forward_mode
+):
     """Warmup and draws of one chain, or of a batch of chains (``vectorized``: leading axis)."""
     init_kernel, sample_kernel = _kernels(num_warmup, potential_generator)
 
@@ -95,7 +97,7 @@ def _chain_loop(z0, key, data, prior, num_warmup, num_samples, progress_every, v
             num_warmup,
             target_accept_prob=TARGET_ACCEPT_PROB,
             max_tree_depth=MAX_TREE_DEPTH,
-            forward_mode_differentiation=FORWARD_MODE,
+            forward_mode_differentiation=forward_mode,
             model_args=(data, prior),
             rng_key=key,
         )
@@ -142,21 +144,24 @@ def _chain_loop(z0, key, data, prior, num_warmup, num_samples, progress_every, v
     )
 
 
-def _chains(z0, keys, data, prior, num_warmup, num_samples, progress_every, vectorized, potential_generator):
+def _chains(
+    z0, keys, data, prior, num_warmup, num_samples, progress_every, vectorized, potential_generator, forward_mode
+):
     """Every chain's (draws, diverging, num_steps, step size, acceptance), leading axis the chain."""
+    options = (num_warmup, num_samples, progress_every)
     if vectorized:
-        return _chain_loop(z0, keys, data, prior, num_warmup, num_samples, progress_every, True, potential_generator)
+        return _chain_loop(z0, keys, data, prior, *options, True, potential_generator, forward_mode)
     return jax.lax.map(
-        lambda start: _chain_loop(
-            *start, data, prior, num_warmup, num_samples, progress_every, False, potential_generator
-        ),
+        lambda start: _chain_loop(*start, data, prior, *options, False, potential_generator, forward_mode),
         (z0, keys),
     )
 
 
 @functools.partial(jax.jit, static_argnames=("num_warmup", "num_samples", "progress_every", "vectorized"))
 def _run(z0, keys, data, prior, *, num_warmup, num_samples, progress_every, vectorized):
-    out = _chains(z0, keys, data, prior, num_warmup, num_samples, progress_every, vectorized, _potential_generator)
+    out = _chains(
+        z0, keys, data, prior, num_warmup, num_samples, progress_every, vectorized, _potential_generator, FORWARD_MODE
+    )
     draws = out[0]
     thetas = parameters_of(draws, data)
     # The motion of each draw at t = 0 (the data's times are relative to the reference time).
@@ -175,23 +180,47 @@ def _run(z0, keys, data, prior, *, num_warmup, num_samples, progress_every, vect
 
 
 @functools.partial(
-    jax.jit, static_argnames=("num_warmup", "num_samples", "progress_every", "vectorized", "potential_generator")
+    jax.jit,
+    static_argnames=(
+        "num_warmup",
+        "num_samples",
+        "progress_every",
+        "vectorized",
+        "potential_generator",
+        "forward_mode",
+    ),
 )
-def _run_chains(z0, keys, data, prior, *, num_warmup, num_samples, progress_every, vectorized, potential_generator):
+def _run_chains(
+    z0, keys, data, prior, *, num_warmup, num_samples, progress_every, vectorized, potential_generator, forward_mode
+):
     draws, diverging, num_steps, step_size, acceptance = _chains(
-        z0, keys, data, prior, num_warmup, num_samples, progress_every, vectorized, potential_generator
+        z0, keys, data, prior, num_warmup, num_samples, progress_every, vectorized, potential_generator, forward_mode
     )
     return dict(draws=draws, diverging=diverging, num_steps=num_steps, step_size=step_size, acceptance=acceptance)
 
 
-def run(z0, keys, data, prior, *, num_warmup, num_samples, vectorized, progress, potential_generator=None):
+def run(
+    z0,
+    keys,
+    data,
+    prior,
+    *,
+    num_warmup,
+    num_samples,
+    vectorized,
+    progress,
+    potential_generator=None,
+    forward_mode=FORWARD_MODE,
+):
     """The chains' draws (dict of arrays, leading axes (chains, draws)), with a tqdm bar if ``progress``.
 
     Without ``potential_generator``: the attitude posterior's program (``_run``: the potential of
     this module, the draws' motion at t = 0).  With it (a module-level function, or one cached per
     static setting, so that a second call finds the program compiled): NUTS on
     ``potential_generator(data, prior)``, the draws in whitened coordinates (``draws``); sequential
-    chains then run one program call each, so that one program serves every number of chains."""
+    chains then run one program call each, so that one program serves every number of chains.
+    ``forward_mode`` (with ``potential_generator``): the potential's gradient by forward mode (one
+    tangent per sampled parameter: for a few) or by reverse mode (for many, as a sampled shape's)."""
     total = num_warmup + num_samples
     # The bar's callbacks are in the program whether it is shown or not: showing it compiles nothing.
     progress_every = max(total // 50, 1)
@@ -202,15 +231,12 @@ def run(z0, keys, data, prior, *, num_warmup, num_samples, vectorized, progress,
         vectorized=vectorized,
     )
     chains = z0.shape[0]
+    custom = dict(potential_generator=potential_generator, forward_mode=forward_mode)
     with _progress.bar("posterior", total * (1 if vectorized else chains), "NUTS", "it", shown=progress):
         if potential_generator is None:
             return jax.device_get(jax.block_until_ready(_run(z0, keys, data, prior, **arguments)))
         if vectorized:
-            return jax.device_get(
-                jax.block_until_ready(
-                    _run_chains(z0, keys, data, prior, potential_generator=potential_generator, **arguments)
-                )
-            )
+            return jax.device_get(jax.block_until_ready(_run_chains(z0, keys, data, prior, **custom, **arguments)))
         # Sequential chains one program call each (a batch of one): the program is compiled once
         # whatever the number of chains, so that runs of other chain counts find it compiled.
         each = [
@@ -221,7 +247,7 @@ def run(z0, keys, data, prior, *, num_warmup, num_samples, vectorized, progress,
                         keys[chain : chain + 1],
                         data,
                         prior,
-                        potential_generator=potential_generator,
+                        **custom,
                         **arguments,
                     )
                 )
