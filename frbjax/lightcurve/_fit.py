@@ -455,7 +455,9 @@ class LightcurveFit(eqx.Module):
       cost and the periods of each start solved on all the data (the refinement's last stage: the
       best four for a convex shape), the winner's among them: runner-ups within the noise of the
       winner's cost (about sqrt(N / 2)) at other periods are basins the data do not tell apart
-      (:meth:`competing_basins`, :attr:`ambiguous`; :func:`fit_lightcurve` warns of them).
+      (:meth:`competing_basins`, :attr:`ambiguous`; :func:`fit_lightcurve` warns of them);
+    - ``shape_model`` (``"convex"`` or ``"ellipsoid"``) and ``regularisation`` (the convex shape's
+      closure and smoothness weights): the fit's settings, which the posterior's shape prior reuses.
     """
 
     body: FreeRigidBody

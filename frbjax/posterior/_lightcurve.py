@@ -20,15 +20,20 @@ curve's mean and a constant.  The gradient is the fit's Jacobian transposed time
 ($J^T r$: the motion's 8 columns by forward mode, the shape's analytic, one pass), so that hundreds of
 facet areas cost no more than the motion.
 
-By default the shape is sampled with the motion (its uncertainty then widens the periods' and
-moments' intervals to what the fit's covariance says); ``shape="held"`` keeps it at the fit's values
-and samples the motion given it (on a full-size tumbler the periods' standard deviations were then
-0.32 and 0.40 of the fit's sigmas: benchmarks/lightcurve_posterior.py).  numpyro's NUTS samples
-whitened coordinates $z$, the sampled parameters $= \hat p + C^{1/2} z$ with $C$ the fit's covariance
-of them (conditional on the shape when it is held), in the attitude posterior's program
-(``_sampler``: the chains one after another, a call each of one compiled loop, the data and the
-whitening as its arguments, so that a second posterior of the same sizes and scattering law compiles
-nothing).
+By default the shape is held at the fit's values and the motion sampled given it; ``shape="sampled"``
+draws the shape with the motion.  On the light-curve benchmark's tumbler (384 samples, 320 facets:
+benchmarks/lightcurve_posterior.py) the held shape's periods have posterior standard deviations 0.73
+and 0.94 of the fit's sigmas, its moments 0.59 and 0.54, in 170 s (4 chains of 300 + 300, one core);
+with the shape sampled they are 1.12 and 1.08, the moments 1.36 and 1.05, but 2 chains of 100 + 100
+took 1047 s and had not converged (split R-hat 1.24): the log-areas' posterior is far from Gaussian
+(its curvature along the whitened directions ranges from 0.002 to 600 half a standard deviation
+from the centre), so that NUTS takes steps of about 0.01 and 700 of them a draw.  numpyro's NUTS
+samples whitened coordinates $z$: the sampled parameters are $\hat p + V S^{-1} z$ with
+$J = U S V^T$ the singular value decomposition of the fit's rows' Jacobian in the sampled columns
+(given the shape when it is held) and $\hat p$ one Gauss-Newton step from the fit (the prior of an
+ellipsoid's axes included), in the attitude posterior's program (``_sampler``: the chains one after
+another, a call each of one compiled loop, the data and the whitening as its arguments, so that a
+second posterior of the same sizes and scattering law compiles nothing).
 """
 
 from __future__ import annotations
