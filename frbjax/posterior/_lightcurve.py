@@ -135,6 +135,7 @@ def _potential_generator(config):
 
 @functools.partial(jax.jit, static_argnums=2)
 def _rows_at(parameters, data, config):
+    """The fit's rows and their Jacobian at ``parameters`` (one compiled program)."""
     return _rows(parameters, data["reference"], data, (data["ones"], None, None), config)
 
 
@@ -198,7 +199,8 @@ def lightcurve_posterior(
     ``"attitude"`` (3,), ``"momentum_direction"`` (2,)) multiplies it.  numpyro's NUTS
     (``num_warmup``, ``num_samples`` per chain, ``num_chains`` one after another, ``seed``), its
     progress bar when ``progress`` (default: in a terminal or a notebook).  Chain 0 starts at the
-    fit, the others a standard normal away in the whitened parameters.
+    whitening's centre (the fit, one Gauss-Newton step on), the others a standard normal away in the
+    whitened parameters.
 
     Returns :class:`LightcurvePosterior` (periods, inertia, long-axis mode, shape parameters per
     draw, diagnostics); a :class:`PosteriorWarning` when split R-hat (of any sampled parameter, the
@@ -211,7 +213,7 @@ def lightcurve_posterior(
         raise ValueError(f"initial must be a LightcurveFit (from fit_lightcurve), got {type(initial).__name__}")
     sigma = checks.scalar("sigma", sigma, positive=True)
     if shape not in ("sampled", "held"):
-        raise ValueError(f"shape must be 'sampled' or 'held', got {shape!r}")
+        raise ValueError(f"shape must be 'held' or 'sampled', got {shape!r}")
     num_chains = checks.integer("num_chains", num_chains, minimum=1)
     num_samples = checks.integer("num_samples", num_samples, minimum=4)
     num_warmup = checks.integer("num_warmup", num_warmup, minimum=0)

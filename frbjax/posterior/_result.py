@@ -287,12 +287,12 @@ class LightcurvePosterior(eqx.Module):
     fit: eqx.Module
     parameter_names: tuple[str, ...] = eqx.field(static=True)
     num_chains: int = eqx.field(static=True)
-    shape_sampled: bool = eqx.field(static=True, default=True)
+    shape_sampled: bool = eqx.field(static=True)
 
     def _by_chain(self, draws) -> np.ndarray:
         return _by_chain(draws, self.num_chains)
 
-    def shape(self, draw: int):
+    def shape(self, draw: int) -> ConvexShape:
         """The :class:`frbjax.lightcurve.ConvexShape` of draw ``draw`` (an index into the S draws)."""
         values = self.shape_parameters[draw]
         if self.fit.shape_model == "convex":
