@@ -48,13 +48,20 @@ value_and_grad 89 us against 256 us): NUTS 911, NUTS vectorized 765, AIES 1224, 
 ensembles' code unchanged and faster too: this machine's speed varies between runs), NUTS / AIES
 0.74 and NUTS / ESS 0.13; attitude_posterior for 200 attitudes 24.5 s first call, 15.8 s second.
 
+3. ``--lightcurve`` (run on its own: about a quarter of an hour): effective samples per second on a
+   light-curve posterior, the short-axis tumbler of benchmarks/lightcurve_posterior.py (384 samples,
+   320 facets, the shape held: 8 motion parameters), NUTS through ``lightcurve_posterior`` (4 chains
+   of 300 + 300) and AIES and ESS (32 walkers) on its own whitened potential, each called once with
+   its compilation (seconds against minutes); writes posterior_samplers_lightcurve.json.
+
 Writes benchmarks/results/posterior_samplers.json and posterior_samplers.png (ESS/s per sampler,
 log scale).  ``--quick``: tiny sizes (a smoke test of a few seconds of sampling, plus compilation).
 
-    OPENBLAS_NUM_THREADS=1 .venv/bin/python benchmarks/posterior_samplers.py [--quick] [--output-dir DIR]
+    OPENBLAS_NUM_THREADS=1 .venv/bin/python benchmarks/posterior_samplers.py [--quick] [--lightcurve]
+        [--output-dir DIR]
 
-(the script starts ``taskset -c 0`` for part 1 itself; ``--part samplers`` or ``--part wall`` runs one
-part in the current process and prints its JSON).
+(the script starts ``taskset -c 0`` for parts 1 and 3 itself; ``--part samplers``, ``wall`` or
+``lightcurve`` runs one part in the current process and prints its JSON).
 """
 
 from __future__ import annotations
@@ -79,6 +86,9 @@ FULL = dict(
     ess=(32, 2000, 2000),
     wall_attitudes=200,
     wall_steps=(500, 1000),
+    lightcurve_nuts=(4, 300, 300),
+    lightcurve_aies=(32, 3000, 3000),
+    lightcurve_ess=(32, 1000, 1000),
 )
 QUICK = dict(
     nuts=(4, 50, 50),
@@ -86,6 +96,9 @@ QUICK = dict(
     ess=(16, 50, 50),
     wall_attitudes=200,
     wall_steps=(50, 50),
+    lightcurve_nuts=(2, 20, 20),
+    lightcurve_aies=(16, 50, 50),
+    lightcurve_ess=(16, 20, 20),
 )
 MOMENTS = (0.6, 0.8, 1.0)
 CONVERGED_R_HAT = 1.05
@@ -187,6 +200,52 @@ def _timed(function):
     return out, time.perf_counter() - start
 
 
+def _ensemble_row(kernel_class, potential, walkers, warmup, draws, starts, thetas_of, names, twice):
+    """Run numpyro's ensemble kernel ``kernel_class`` (AIES or ESS) on ``potential`` and return its
+    diagnostics row and draws z (walkers, draws, P).  ``twice``: run it twice with the same sizes and
+    time the second call (the first compiles); otherwise one call, compilation included."""
+    import jax
+    import jax.numpy as jnp
+    import numpy as np
+
+    kernel = kernel_class(potential_fn=potential)
+    total = warmup + draws
+
+    @jax.jit
+    def chains_of(state):
+        # numpyro's kernel step (both halves of the ensemble) in one compiled loop, as MCMC's
+        # fori_collect does; MCMC.run itself recompiles on every call with a potential_fn.
+        def body(i, carry):
+            state, collection = carry
+            state = kernel.sample(state, (), {})
+            index = jnp.maximum(i - warmup, 0)
+            collection = collection.at[index].set(jnp.where(i >= warmup, state.z, collection[index]))
+            return state, collection
+
+        collection = jnp.zeros((draws,) + state.z.shape, state.z.dtype)
+        _, collection = jax.lax.fori_loop(0, total, body, (state, collection))
+        return jnp.swapaxes(collection, 0, 1)  # (walkers, draws, P)
+
+    def ensemble(seed):
+        keys = jax.random.split(jax.random.PRNGKey(seed), walkers)
+        state = kernel.init(keys, warmup, init_params=starts(walkers, seed), model_args=(), model_kwargs={})
+        return np.asarray(jax.block_until_ready(chains_of(state)))
+
+    if twice:
+        _, first = _timed(lambda: ensemble(1))
+    z, second = _timed(lambda: ensemble(2))
+    row = _diagnostics(thetas_of(z), second, names)
+    row.update(
+        walkers=walkers,
+        warmup=warmup,
+        draws_per_walker=draws,
+        chain_method="vectorized",
+        first_call_seconds=first if twice else second,
+        compile_seconds=first - second if twice else None,
+    )
+    return row, z
+
+
 def samplers_part(sizes):
     """Part 1 (run pinned to one core): ESS/s of NUTS, AIES and ESS on one whitened potential."""
     import jax
@@ -256,43 +315,11 @@ def samplers_part(sizes):
 
     for name, kernel_class in (("AIES", AIES), ("ESS", ESS)):
         walkers, warmup, draws = sizes[name.lower()]
-        kernel = kernel_class(potential_fn=potential)
-        total = warmup + draws
-
-        @jax.jit
-        def chains_of(state):
-            # numpyro's kernel step (both halves of the ensemble) in one compiled loop, as MCMC's
-            # fori_collect does; MCMC.run itself recompiles on every call with a potential_fn.
-            def body(i, carry):
-                state, collection = carry
-                state = kernel.sample(state, (), {})
-                index = jnp.maximum(i - warmup, 0)
-                collection = collection.at[index].set(jnp.where(i >= warmup, state.z, collection[index]))
-                return state, collection
-
-            collection = jnp.zeros((draws,) + state.z.shape, state.z.dtype)
-            _, collection = jax.lax.fori_loop(0, total, body, (state, collection))
-            return jnp.swapaxes(collection, 0, 1)  # (walkers, draws, P)
-
-        def ensemble(seed):
-            keys = jax.random.split(jax.random.PRNGKey(seed), walkers)
-            state = kernel.init(keys, warmup, init_params=starts(walkers, seed), model_args=(), model_kwargs={})
-            return np.asarray(jax.block_until_ready(chains_of(state)))
-
-        _, first = _timed(lambda: ensemble(1))
-        z, second = _timed(lambda: ensemble(2))
-        row = _diagnostics(thetas_of(z), second, names)
-        row.update(
-            walkers=walkers,
-            warmup=warmup,
-            draws_per_walker=draws,
-            chain_method="vectorized",
-            first_call_seconds=first,
-            compile_seconds=first - second,
-        )
+        row, z = _ensemble_row(kernel_class, potential, walkers, warmup, draws, starts, thetas_of, names, twice=True)
         results[name] = row
         print(
-            f"{name}: {second:.2f} s (first {first:.2f} s), max R-hat {row['max_split_r_hat']:.4f}",
+            f"{name}: {row['seconds']:.2f} s (first {row['first_call_seconds']:.2f} s), "
+            f"max R-hat {row['max_split_r_hat']:.4f}",
             file=sys.stderr,
         )
 
@@ -378,6 +405,114 @@ def wall_part(sizes):
     }
 
 
+def lightcurve_part(sizes):
+    """Part 3 (run pinned to one core): ESS/s of NUTS, AIES and ESS on a light-curve posterior.
+
+    The short-axis tumbler of benchmarks/lightcurve_posterior.py (384 samples, 320 facets, 1% noise),
+    its fit as there, the shape held (8 motion parameters); every sampler on lightcurve_posterior's
+    own whitened potential (captured from its call), one call each with compilation included (a
+    second call would double the run; the compilation is seconds against minutes of sampling)."""
+    import importlib.util
+    import warnings
+
+    import jax
+
+    jax.config.update("jax_enable_x64", True)
+    import jax.numpy as jnp
+    import numpy as np
+    from numpyro.infer import AIES, ESS
+
+    from frbjax.lightcurve import fit_lightcurve
+    from frbjax.posterior import _lightcurve, lightcurve_posterior
+
+    spec = importlib.util.spec_from_file_location("_lightcurve_benchmark", ROOT / "benchmarks" / "lightcurve.py")
+    benchmark = importlib.util.module_from_spec(spec)
+    sys.path.insert(0, str(ROOT / "benchmarks"))
+    spec.loader.exec_module(benchmark)
+    problems = benchmark.problems
+    body, periods = benchmark.tumbler("SAM")
+    (times, flux, sun, observer, night), _ = problems.observe(body, seed=3, per_night=problems.SAMPLES_PER_NIGHT)
+    size = problems.SIZES["SAM"]
+    ranges = tuple((p * (1 + problems.RANGE_OFFSET - 0.005), p * (1 + problems.RANGE_OFFSET + 0.005)) for p in periods)
+    options = dict(problems.FIT_OPTIONS, lightcurve=night, mode="SAM", periods=ranges)
+    options.update(starts_per_period=size["starts_per_period"], n_refine=size["n_refine"])
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        fit = fit_lightcurve(times, flux, sun, observer, **options)
+
+    # NUTS: lightcurve_posterior itself, its sampler's call timed and its data and potential kept.
+    captured = {}
+    original = _lightcurve.sampler.run
+
+    def timed_run(z0, keys, data, prior, **options):
+        out, seconds = _timed(lambda: original(z0, keys, data, prior, **options))
+        captured.update(data=data, prior=prior, generator=options["potential_generator"], seconds=seconds)
+        return out
+
+    chains, warmup, draws = sizes["lightcurve_nuts"]
+    _lightcurve.sampler.run = timed_run
+    try:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            posterior = lightcurve_posterior(
+                times,
+                flux,
+                sun,
+                observer,
+                lightcurve=night,
+                initial=fit,
+                sigma=problems.NOISE,
+                num_chains=chains,
+                num_warmup=warmup,
+                num_samples=draws,
+                progress=False,
+            )
+    finally:
+        _lightcurve.sampler.run = original
+    data = captured["data"]
+    sampled = np.asarray(data["sampled"])
+    names = list(posterior.parameter_names)
+    thetas = np.asarray(posterior.parameters).reshape(chains, draws, -1)[..., sampled]
+    results = {"NUTS": _diagnostics(thetas, captured["seconds"], names)}
+    results["NUTS"].update(chains=chains, warmup=warmup, draws_per_chain=draws, chain_method="sequential")
+    print(f"NUTS: {captured['seconds']:.1f} s", file=sys.stderr)
+
+    potential = captured["generator"](data, captured["prior"])
+    centre, root = np.asarray(data["centre"]), np.asarray(data["root"])
+
+    def starts(count, seed):
+        return jnp.asarray(np.random.default_rng(seed).normal(size=(count, len(sampled))))
+
+    def thetas_of(z):
+        return centre + np.asarray(z, float) @ root.T
+
+    for name, kernel_class in (("AIES", AIES), ("ESS", ESS)):
+        walkers, warmup, draws = sizes[f"lightcurve_{name.lower()}"]
+        row, _ = _ensemble_row(kernel_class, potential, walkers, warmup, draws, starts, thetas_of, names, twice=False)
+        results[name] = row
+        print(f"{name}: {row['seconds']:.1f} s, max R-hat {row['max_split_r_hat']:.4f}", file=sys.stderr)
+
+    ratios = {}
+    for name in ("AIES", "ESS"):
+        nuts, other = results["NUTS"]["ess_per_second"], results[name]["ess_per_second"]
+        ratio = {key: nuts[key] / other[key] for key in names[:2]}
+        ratio["min_log_ratios"] = (
+            results["NUTS"]["ess_per_second_min_log_ratios"] / results[name]["ess_per_second_min_log_ratios"]
+        )
+        ratio["min_all"] = results["NUTS"]["ess_per_second_min_all"] / results[name]["ess_per_second_min_all"]
+        ratio["target_20x_met"] = bool(ratio["min_log_ratios"] >= 20)
+        ratios[f"NUTS/{name}"] = ratio
+    return {
+        "machine": _machine(),
+        "case": "SAM tumbler of benchmarks/lightcurve_posterior.py, shape held",
+        "samples": len(times),
+        "facets": int(fit.shape.normals.shape[0]),
+        "parameters": names,
+        "samplers": results,
+        "ratios": ratios,
+    }
+
+
 def _child(part, quick, pin):
     """Run one part in a fresh process (pinned to core 0 if ``pin``) and return its JSON."""
     command = [sys.executable, __file__, "--part", part] + (["--quick"] if quick else [])
@@ -426,7 +561,14 @@ def main():
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--quick", action="store_true", help="tiny sizes (smoke test)")
     parser.add_argument("--output-dir", type=pathlib.Path, default=ROOT / "benchmarks" / "results")
-    parser.add_argument("--part", choices=("samplers", "wall"), help="run one part here and print its JSON")
+    parser.add_argument(
+        "--part", choices=("samplers", "wall", "lightcurve"), help="run one part here and print its JSON"
+    )
+    parser.add_argument(
+        "--lightcurve",
+        action="store_true",
+        help="run part 3 only (a light-curve posterior) and write posterior_samplers_lightcurve.json",
+    )
     arguments = parser.parse_args()
     sizes = QUICK if arguments.quick else FULL
     if arguments.part == "samplers":
@@ -434,6 +576,16 @@ def main():
         return
     if arguments.part == "wall":
         print(json.dumps(wall_part(sizes)), flush=True)
+        return
+    if arguments.part == "lightcurve":
+        print(json.dumps(lightcurve_part(sizes)), flush=True)
+        return
+    if arguments.lightcurve:
+        samplers = _child("lightcurve", arguments.quick, pin=True)
+        output = {"quick": arguments.quick, "sizes": sizes, "ess_per_second": samplers}
+        print(json.dumps(output, indent=1), flush=True)
+        arguments.output_dir.mkdir(parents=True, exist_ok=True)
+        (arguments.output_dir / "posterior_samplers_lightcurve.json").write_text(json.dumps(output, indent=1) + "\n")
         return
     start = time.perf_counter()
     samplers = _child("samplers", arguments.quick, pin=True)
