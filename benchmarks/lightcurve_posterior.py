@@ -45,15 +45,8 @@ _spec.loader.exec_module(lightcurve_benchmark)
 problems = lightcurve_benchmark.problems
 
 
-def main():
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--warmup", type=int, default=300)
-    parser.add_argument("--draws", type=int, default=300)
-    parser.add_argument("--shape", choices=("held", "sampled"), default="held")
-    parser.add_argument("--chains", type=int, default=4)
-    parser.add_argument("--output-dir", default=str(ROOT / "benchmarks" / "results"))
-    args = parser.parse_args()
-
+def data_and_fit():
+    """The tumbler's data (times, flux, sun, observer, night), true periods, its fit and the fit's seconds."""
     body, periods = lightcurve_benchmark.tumbler("SAM")
     data, _ = problems.observe(body, seed=3, per_night=problems.SAMPLES_PER_NIGHT)
     times, flux, sun, observer, night = data
@@ -70,25 +63,35 @@ def main():
     )
     start = time.perf_counter()
     fit = fit_lightcurve(times, flux, sun, observer, **options)
-    fit_seconds = time.perf_counter() - start
+    return data, periods, fit, time.perf_counter() - start
+
+
+def posterior_of(data, fit, **options):
+    """lightcurve_posterior of the tumbler's data about ``fit`` at the data's noise (no progress bar)."""
+    times, flux, sun, observer, night = data
+    return lightcurve_posterior(
+        times, flux, sun, observer, lightcurve=night, initial=fit, sigma=problems.NOISE, progress=False, **options
+    )
+
+
+def main():
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--warmup", type=int, default=300)
+    parser.add_argument("--draws", type=int, default=300)
+    parser.add_argument("--shape", choices=("held", "sampled"), default="held")
+    parser.add_argument("--chains", type=int, default=4)
+    parser.add_argument("--output-dir", default=str(ROOT / "benchmarks" / "results"))
+    args = parser.parse_args()
+
+    data, periods, fit, fit_seconds = data_and_fit()
+    times = data[0]
     print(f"fit: {fit_seconds:.1f} s, periods {np.asarray(fit.periods)} (truth {periods})", flush=True)
 
     start = time.perf_counter()
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always", PosteriorWarning)
-        posterior = lightcurve_posterior(
-            times,
-            flux,
-            sun,
-            observer,
-            lightcurve=night,
-            initial=fit,
-            sigma=problems.NOISE,
-            num_warmup=args.warmup,
-            num_samples=args.draws,
-            num_chains=args.chains,
-            shape=args.shape,
-            progress=False,
+        posterior = posterior_of(
+            data, fit, num_warmup=args.warmup, num_samples=args.draws, num_chains=args.chains, shape=args.shape
         )
     posterior_seconds = time.perf_counter() - start
     drawn = np.asarray(posterior.periods)

@@ -422,23 +422,16 @@ def lightcurve_part(sizes):
     import numpy as np
     from numpyro.infer import AIES, ESS
 
-    from frbjax.lightcurve import fit_lightcurve
-    from frbjax.posterior import _lightcurve, lightcurve_posterior
+    from frbjax.posterior import _lightcurve
 
-    spec = importlib.util.spec_from_file_location("_lightcurve_benchmark", ROOT / "benchmarks" / "lightcurve.py")
+    spec = importlib.util.spec_from_file_location(
+        "_posterior_benchmark", ROOT / "benchmarks" / "lightcurve_posterior.py"
+    )
     benchmark = importlib.util.module_from_spec(spec)
-    sys.path.insert(0, str(ROOT / "benchmarks"))
     spec.loader.exec_module(benchmark)
-    problems = benchmark.problems
-    body, periods = benchmark.tumbler("SAM")
-    (times, flux, sun, observer, night), _ = problems.observe(body, seed=3, per_night=problems.SAMPLES_PER_NIGHT)
-    size = problems.SIZES["SAM"]
-    ranges = tuple((p * (1 + problems.RANGE_OFFSET - 0.005), p * (1 + problems.RANGE_OFFSET + 0.005)) for p in periods)
-    options = dict(problems.FIT_OPTIONS, lightcurve=night, mode="SAM", periods=ranges)
-    options.update(starts_per_period=size["starts_per_period"], n_refine=size["n_refine"])
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
-        fit = fit_lightcurve(times, flux, sun, observer, **options)
+        observed, _, fit, _ = benchmark.data_and_fit()
 
     # NUTS: lightcurve_posterior itself, its sampler's call timed and its data and potential kept.
     captured = {}
@@ -454,19 +447,7 @@ def lightcurve_part(sizes):
     try:
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")
-            posterior = lightcurve_posterior(
-                times,
-                flux,
-                sun,
-                observer,
-                lightcurve=night,
-                initial=fit,
-                sigma=problems.NOISE,
-                num_chains=chains,
-                num_warmup=warmup,
-                num_samples=draws,
-                progress=False,
-            )
+            posterior = benchmark.posterior_of(observed, fit, num_chains=chains, num_warmup=warmup, num_samples=draws)
     finally:
         _lightcurve.sampler.run = original
     data = captured["data"]
@@ -505,7 +486,7 @@ def lightcurve_part(sizes):
     return {
         "machine": _machine(),
         "case": "SAM tumbler of benchmarks/lightcurve_posterior.py, shape held",
-        "samples": len(times),
+        "samples": len(observed[0]),
         "facets": int(fit.shape.normals.shape[0]),
         "parameters": names,
         "samplers": results,
