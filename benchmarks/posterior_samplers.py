@@ -439,7 +439,7 @@ def lightcurve_part(sizes):
 
     def timed_run(z0, keys, data, prior, **options):
         out, seconds = _timed(lambda: original(z0, keys, data, prior, **options))
-        captured.update(data=data, prior=prior, generator=options["potential_generator"], seconds=seconds)
+        captured.update(data=data, prior=prior, generator=options["potential_generator"], seconds=seconds, out=out)
         return out
 
     chains, warmup, draws = sizes["lightcurve_nuts"]
@@ -455,7 +455,17 @@ def lightcurve_part(sizes):
     names = list(posterior.parameter_names)
     thetas = np.asarray(posterior.parameters).reshape(chains, draws, -1)[..., sampled]
     results = {"NUTS": _diagnostics(thetas, captured["seconds"], names)}
-    results["NUTS"].update(chains=chains, warmup=warmup, draws_per_chain=draws, chain_method="sequential")
+    out = captured["out"]
+    results["NUTS"].update(
+        chains=chains,
+        warmup=warmup,
+        draws_per_chain=draws,
+        chain_method="sequential",
+        mean_leapfrog_steps=float(np.mean(out["num_steps"])),
+        gradient_evaluations=int(np.sum(out["num_steps"])),
+        divergences=int(np.sum(out["diverging"])),
+        step_size=np.asarray(out["step_size"]).reshape(-1).tolist(),
+    )
     print(f"NUTS: {captured['seconds']:.1f} s", file=sys.stderr)
 
     potential = captured["generator"](data, captured["prior"])
