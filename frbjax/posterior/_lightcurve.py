@@ -26,14 +26,15 @@ benchmarks/lightcurve_posterior.py) the held shape's periods have posterior stan
 and 0.94 of the fit's sigmas, its moments 0.59 and 0.54, in 170 s (4 chains of 300 + 300, one core);
 with the shape sampled they are 1.12 and 1.08, the moments 1.36 and 1.05, but 2 chains of 100 + 100
 took 1047 s and had not converged (split R-hat 1.24): the log-areas' posterior is far from Gaussian
-(its curvature along the whitened directions ranges from 0.002 to 600 half a standard deviation
-from the centre), so that NUTS takes steps of about 0.01 and 700 of them a draw.  numpyro's NUTS
-samples whitened coordinates $z$: the sampled parameters are $\hat p + V S^{-1} z$ with
-$J = U S V^T$ the singular value decomposition of the fit's rows' Jacobian in the sampled columns
-(given the shape when it is held) and $\hat p$ one Gauss-Newton step from the fit (the prior of an
-ellipsoid's axes included), in the attitude posterior's program (``_sampler``: the chains one after
-another, a call each of one compiled loop, the data and the whitening as its arguments, so that a
-second posterior of the same sizes and scattering law compiles nothing).
+(its curvature along the whitened directions ranges from 0.002 to 600 a third of a standard
+deviation from the centre in every coordinate), so that NUTS takes steps of about 0.01 and 700 of
+them a draw.  numpyro's NUTS samples whitened coordinates $z$: the sampled parameters are
+$\hat p + V S^{-1} z$ with $J = U S V^T$ the singular value decomposition of the fit's rows'
+Jacobian in the sampled columns (given the shape when it is held) and $\hat p$ one Gauss-Newton
+step from the fit (the prior of an ellipsoid's axes included), in the attitude posterior's program
+(``_sampler``: the chains one after another, a call each of one compiled loop, the data and the
+whitening as its arguments, so that a second posterior of the same sizes and scattering law
+compiles nothing).
 """
 
 from __future__ import annotations
@@ -144,8 +145,8 @@ def _whitening(parameters, residual, jacobian, sampled, prior_precision):
 
     The Gauss-Newton (Laplace) approximation of the posterior at the fit: from the singular value
     decomposition of the fit's rows' Jacobian in the sampled columns, J = U S V^T, root = V S^-1 (the
-    rows' Hessian J^T J in z is then the identity; forming the covariance (J^T J)^-1 instead loses
-    the periods' well-determined directions, whose variances are 1e-10 of the shape's, to rounding),
+    rows' Hessian J^T J in z is then the identity; the square root of the fit's covariance matrix had
+    lost two of the periods' well-determined directions to rounding, curvatures 8866 and 30412),
     and the centre one Gauss-Newton step from the fit, with the rows of a Gaussian prior of mean 0
     and diagonal ``prior_precision`` (per sampled parameter) that the fit's rows do not hold."""
     values = np.asarray(parameters, float)[sampled]
