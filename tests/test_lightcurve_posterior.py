@@ -92,6 +92,12 @@ def test_one_chain(data_and_fit):
         )
     assert result.periods.shape == (200, 2) and np.all(np.isfinite(np.asarray(result.periods[:, 0])))
     assert np.all(np.isnan(np.asarray(result.r_hat))) and np.all(np.asarray(result.ess_bulk) > 0)
+    # The shape held (the default): every draw's shape is the fit's, and shape() builds it.
+    assert not result.shape_sampled and result.shape_parameters.shape == (200, 2)
+    assert np.all(np.asarray(result.shape_parameters) == np.asarray(fit.parameters[8:]))
+    drawn = result.shape(17)
+    np.testing.assert_allclose(np.asarray(drawn.areas), np.asarray(fit.shape.areas), rtol=1e-14)
+    np.testing.assert_allclose(np.asarray(drawn.normals), np.asarray(fit.shape.normals), atol=1e-15)
 
 
 def test_the_potential_is_the_fits_cost(data_and_fit):
