@@ -113,21 +113,9 @@ def test_the_potential_is_the_fits_cost(data_and_fit):
     from frbjax.posterior import _lightcurve
 
     arguments, night, fit = data_and_fit
-    captured = {}
-
-    def capture(z0, keys, data, prior, **options):
-        captured.update(data=data, config=options["potential_generator"])
-        raise StopIteration
-
-    original = _lightcurve.sampler.run
-    _lightcurve.sampler.run = capture
-    try:
-        with pytest.raises(StopIteration):
-            lightcurve_posterior(*arguments, lightcurve=night, initial=fit, sigma=0.01, shape="sampled")
-    finally:
-        _lightcurve.sampler.run = original
-    data = captured["data"]
-    config = ("ellipsoid", fit.law, fit.c, 1, True)
+    # The sampler's data for the shape sampled (lightcurve_posterior's own preparation).
+    data, config, _ = _lightcurve._problem(*arguments, night, False, "raise", fit, 0.01, "sampled")
+    assert config[0] == "ellipsoid" and config[4]
     cost = jax.jit(_lightcurve._fit_cost, static_argnums=2)
     assert abs(float(cost(jnp.asarray(fit.parameters), data, config)) / fit.cost - 1) < 1e-9
     rng = np.random.default_rng(0)

@@ -70,6 +70,8 @@ from ._result import (
 )
 
 
+# The precision of the Gaussian prior (mean 0) of an ellipsoid's two log axis ratios when sampled.
+ELLIPSOID_PRIOR_PRECISION = 1.0
 # The blocks of theta that a user's prior may give distributions for.
 LIGHTCURVE_BLOCKS = {
     "log_moments": slice(0, 2),
@@ -124,8 +126,8 @@ def _potential_generator(config):
             value = _fit_cost(parameters, data, config) - _log_prior(parameters[:8], prior)
             if config[0] == "ellipsoid":
                 # The ellipsoid's log axis ratios, which relative photometry may leave undetermined (a
-                # rotator seen near its equator: the axis along the spin): standard normal.
-                value = value + 0.5 * jnp.sum(parameters[8:] ** 2)
+                # rotator seen near its equator: the axis along the spin): a Gaussian prior.
+                value = value + 0.5 * ELLIPSOID_PRIOR_PRECISION * jnp.sum(parameters[8:] ** 2)
             # NaN (a motion the formulas cannot evaluate) as an infinite potential: NUTS rejects it.
             return jnp.where(jnp.isnan(value), jnp.inf, value)
 
@@ -160,6 +162,62 @@ def _whitening(parameters, residual, jacobian, sampled, prior_precision):
     singular = np.maximum(singular, 1e-10 * max(float(singular[0]), 1e-300))
     centre = values - right.T @ ((left.T @ residual) / singular)
     return centre, right.T / singular
+
+
+def _problem(times, brightness, sun, observer, lightcurve, magnitudes, nan_policy, initial, sigma, shape):
+    """(data, config, free): what the sampler needs of these light curves about the fit ``initial``
+    (the data, the fit's parameters, which of them are sampled, the whitening and the noise), the
+    fit's static config (shape model, law, c, principal axis), and the free motion parameters."""
+    times, flux, sun, observer, labels, _ = _validate(
+        times, brightness, sun, observer, lightcurve, magnitudes, nan_policy
+    )
+    _, curve_index = np.unique(labels, return_inverse=True)
+    curves = np.eye(curve_index.max() + 1)[curve_index]
+    if curves.shape[1] != initial.scales.shape[0]:
+        raise ValueError(
+            f"initial must be a fit of these data: it has {initial.scales.shape[0]} light curves, the data "
+            f"{curves.shape[1]}"
+        )
+    log_brightness = -0.4 * np.log(10.0) * flux if magnitudes else np.log(flux)
+    dtype = initial.parameters.dtype
+    fit_parameters = np.asarray(initial.parameters, float)
+    variances = np.diag(np.asarray(initial.covariance, float))
+    free = np.flatnonzero(variances[:8] > 0)
+    sampled = free if shape == "held" else np.flatnonzero(variances > 0)
+    principal_axis = not np.isfinite(float(initial.periods[1]))
+    free_mask = np.zeros(fit_parameters.size)
+    free_mask[sampled] = 1.0
+    if initial.shape_model == "convex":
+        subdivisions = round(math.log(initial.shape.normals.shape[0] / 20, 4))
+        laplacian = _laplacian(_unit_normals(subdivisions)[2])
+    else:
+        laplacian = np.zeros((1, 1))
+    config = (initial.shape_model, initial.law, float(initial.c), _SEARCH_SUBDIVISIONS, principal_axis)
+
+    as_array = lambda value: jnp.asarray(value, dtype)  # noqa: E731
+    reference = initial._reference
+    data = dict(
+        times=as_array(times - initial.epoch),
+        sun=as_array(sun),
+        observer=as_array(observer),
+        log_brightness=as_array(log_brightness),
+        curves=as_array(curves),
+        ones=jnp.ones(len(times), dtype),
+        normals=as_array(initial.shape.normals),
+        laplacian=as_array(laplacian),
+        regularisation=as_array(initial.regularisation),
+        free=as_array(free_mask),
+        reference=reference,
+        sigma=as_array(sigma),
+        fixed=as_array(fit_parameters),
+        sampled=jnp.asarray(sampled),
+    )
+    residual, jacobian = _rows_at(data["fixed"], data, config)
+    # The ellipsoid's log axis ratios have a Gaussian prior that the fit's rows lack.
+    prior_precision = np.where((sampled >= 8) & (initial.shape_model == "ellipsoid"), ELLIPSOID_PRIOR_PRECISION, 0.0)
+    centre, root = _whitening(fit_parameters, residual, jacobian, sampled, prior_precision)
+    data.update(centre=as_array(centre), root=as_array(root))
+    return data, config, free
 
 
 def lightcurve_posterior(
@@ -224,55 +282,14 @@ def lightcurve_posterior(
     unknown = sorted(set(prior) - set(LIGHTCURVE_BLOCKS))
     if unknown:
         raise ValueError(f"prior has unknown blocks {unknown}; known: {sorted(LIGHTCURVE_BLOCKS)}")
-    times, flux, sun, observer, labels, _ = _validate(
-        times, brightness, sun, observer, lightcurve, magnitudes, nan_policy
+    data, config, free = _problem(
+        times, brightness, sun, observer, lightcurve, magnitudes, nan_policy, initial, sigma, shape
     )
-    _, curve_index = np.unique(labels, return_inverse=True)
-    curves = np.eye(curve_index.max() + 1)[curve_index]
-    if curves.shape[1] != initial.scales.shape[0]:
-        raise ValueError(
-            f"initial must be a fit of these data: it has {initial.scales.shape[0]} light curves, the data "
-            f"{curves.shape[1]}"
-        )
-    log_brightness = -0.4 * np.log(10.0) * flux if magnitudes else np.log(flux)
     dtype = initial.parameters.dtype
     fit_parameters = np.asarray(initial.parameters, float)
-    variances = np.diag(np.asarray(initial.covariance, float))
-    free = np.flatnonzero(variances[:8] > 0)
-    sampled = free if shape == "held" else np.flatnonzero(variances > 0)
-    principal_axis = not np.isfinite(float(initial.periods[1]))
-    free_mask = np.zeros(fit_parameters.size)
-    free_mask[sampled] = 1.0
-    if initial.shape_model == "convex":
-        subdivisions = round(math.log(initial.shape.normals.shape[0] / 20, 4))
-        laplacian = _laplacian(_unit_normals(subdivisions)[2])
-    else:
-        laplacian = np.zeros((1, 1))
-    config = (initial.shape_model, initial.law, float(initial.c), _SEARCH_SUBDIVISIONS, principal_axis)
-
+    centre, root, sampled = (np.asarray(data[name]) for name in ("centre", "root", "sampled"))
+    reference, principal_axis = data["reference"], config[4]
     as_array = lambda value: jnp.asarray(value, dtype)  # noqa: E731
-    reference = initial._reference
-    data = dict(
-        times=as_array(times - initial.epoch),
-        sun=as_array(sun),
-        observer=as_array(observer),
-        log_brightness=as_array(log_brightness),
-        curves=as_array(curves),
-        ones=jnp.ones(len(times), dtype),
-        normals=as_array(initial.shape.normals),
-        laplacian=as_array(laplacian),
-        regularisation=as_array(initial.regularisation),
-        free=as_array(free_mask),
-        reference=reference,
-        sigma=as_array(sigma),
-        fixed=as_array(fit_parameters),
-        sampled=jnp.asarray(sampled),
-    )
-    residual, jacobian = _rows_at(data["fixed"], data, config)
-    # The ellipsoid's log axis ratios have a standard normal prior that the fit's rows lack.
-    prior_precision = np.where((sampled >= 8) & (initial.shape_model == "ellipsoid"), 1.0, 0.0)
-    centre, root = _whitening(fit_parameters, residual, jacobian, sampled, prior_precision)
-    data.update(centre=as_array(centre), root=as_array(root))
 
     key = jax.random.key(seed)
     start_key, chain_key = jax.random.split(key)
