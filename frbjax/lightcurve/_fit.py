@@ -195,6 +195,27 @@ def _log_flux_and_jacobian(parameters, reference, data, config):
     return value, jacobian
 
 
+def _log_model(parameters, reference, data, config):
+    """log m (N,) of parameters = (theta (8), shape parameters), its value alone (the posterior's)."""
+    kind, law, c, subdivisions, _ = config
+    if kind == "convex":
+        normals, areas = data["normals"], jnp.exp(parameters[8:])
+    else:
+        shape = _ellipsoid_shape(parameters[8:], subdivisions)
+        normals, areas = shape.normals, shape.areas
+    return _safe_log(_facet_fluxes(parameters[:8], reference, normals, data, law, c) @ areas)
+
+
+def _regularisation(shape_parameters, data):
+    """A convex shape's regularisation rows: the closure of its Gaussian image (3), the smoothness of
+    its log-areas (F), their mean (1), the first two weighted by ``data["regularisation"]``."""
+    areas = jnp.exp(shape_parameters)
+    closure = areas @ data["normals"] / jnp.sum(areas)
+    weights = data["regularisation"]
+    smooth = data["laplacian"] @ shape_parameters
+    return jnp.concatenate([weights[0] * closure, weights[1] * smooth, jnp.mean(shape_parameters, keepdims=True)])
+
+
 def _curve_mean(values, weights, curves):
     """Weighted mean over each sample's light curve, at every sample: (N,) or (N, P)."""
     expand = (lambda w: w) if values.ndim == 1 else (lambda w: w[:, None])
@@ -244,10 +265,8 @@ def _rows(parameters, reference, data, window, config):
         normals, total = data["normals"], jnp.sum(jnp.exp(shape_parameters))
         closure = areas @ normals / total
         d_closure = (areas[:, None] * (normals - closure[None, :]) / total).T  # (3, F)
-        smooth = data["laplacian"] @ shape_parameters
-        gauge = jnp.mean(shape_parameters, keepdims=True)
         weights_reg = data["regularisation"]
-        reg = jnp.concatenate([weights_reg[0] * closure, weights_reg[1] * smooth, gauge])
+        reg = _regularisation(shape_parameters, data)
         d_reg = jnp.concatenate(
             [
                 weights_reg[0] * d_closure,

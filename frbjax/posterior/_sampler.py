@@ -220,8 +220,8 @@ def run(
     ``potential_generator(data, prior)``, the draws in whitened coordinates (``draws``); sequential
     chains then run one program call each, so that one program serves every number of chains.
     ``forward_mode`` (with ``potential_generator``): the potential's gradient by forward mode (one
-    tangent per sampled parameter: for a few) or by reverse mode (for many, or for a potential whose
-    gradient has its own rule, as the light-curve posterior's J^T r)."""
+    tangent per sampled parameter: for a few) or by reverse mode (for many, or where the potential's
+    reverse pass is the cheaper, as the light-curve posterior's)."""
     total = num_warmup + num_samples
     # The bar's callbacks are in the program whether it is shown or not: showing it compiles nothing.
     progress_every = max(total // 50, 1)
