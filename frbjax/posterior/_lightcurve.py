@@ -22,12 +22,14 @@ sampled parameters, hundreds of facet areas included).
 By default the shape is held at the fit's values and the motion sampled given it; ``shape="sampled"``
 draws the shape with the motion.  On the light-curve benchmark's tumbler (384 samples, 320 facets:
 benchmarks/lightcurve_posterior.py) the held shape's periods have posterior standard deviations 0.73
-and 0.94 of the fit's sigmas, its moments 0.59 and 0.54, in 170 s (4 chains of 300 + 300, one core);
+and 0.94 of the fit's sigmas, its moments 0.59 and 0.54 (4 chains of 300 + 300: 170 s on one core, 47 s with
+today's gradient);
 with the shape sampled they are 1.12 and 1.08, the moments 1.36 and 1.05, but 2 chains of 100 + 100
-took 1047 s and had not converged (split R-hat 1.24): the log-areas' posterior is far from Gaussian
-(its curvature along the whitened directions ranges from 0.002 to 600 a third of a standard
-deviation from the centre in every coordinate), so that NUTS takes steps of about 0.01 and 700 of
-them a draw.  numpyro's NUTS samples whitened coordinates $z$: the sampled parameters are
+took 1047 s (with a gradient three times as costly as today's) and had not converged (split R-hat
+1.24): the log-areas' posterior is far from Gaussian (its curvature along the whitened directions
+ranges from 0.002 to 600 a third of a standard deviation from the centre in every coordinate), so
+that NUTS takes steps of about 0.01 and 700 of them a draw.  numpyro's NUTS samples whitened
+coordinates $z$: the sampled parameters are
 $\hat p + V S^{-1} z$ with $J = U S V^T$ the singular value decomposition of the fit's rows'
 Jacobian in the sampled columns (given the shape when it is held) and $\hat p$ one Gauss-Newton
 step from the fit (the prior of an ellipsoid's axes included), in the attitude posterior's program
