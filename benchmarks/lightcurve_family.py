@@ -18,13 +18,21 @@ motion (``initial=`` the true body), which gives the cost the data allow.  Per m
   ``truth_refined_period_z`` the same for the refinement from the truth;
 - ``competing_basins``, ``ambiguous``: the fit's runner-up basins within the noise of its cost at
   other periods (``LightcurveFit.competing_basins``), which ``fit_lightcurve`` warns of;
+- ``noise_ratio``, ``search_rounds``, ``misfit_warned``: the fit's residual level over the noise
+  (``LightcurveFit.noise_ratio``), the search's rounds (more while it is above its chi-square
+  bound) and whether the fit warned that it still is (``MisfitWarning``);
 - wall time of the inversion (first call in the process includes compilation).
+
+The refinement from the truth runs one round of the search (``search_rounds=1``): it is the reference
+the data allow, not a search.  ``--truth-from PATH`` takes its figures from an earlier run's members
+(a JSON of this script) instead of computing them again: the same computation, for a rerun of the
+fits alone.
 
 Rates over the members run are printed and written with the members to
 ``benchmarks/results/lightcurve_family.json``; the file is updated after every member, and members
 already in it are skipped (``--resume``), so that a long run can be continued.
 
-Usage: python benchmarks/lightcurve_family.py [--members 0,5,12] [--width 0.1] [--resume]
+Usage: python benchmarks/lightcurve_family.py [--members 0,5,12] [--width 0.1] [--resume] [--truth-from PATH]
        [--starts-per-period 16] [--period-grid 16,16] [--refine 8] [--convex-subdivisions 1]
        [--output-dir DIR] [--plot-only] [--basins-only]
 (the figure: lightcurve_family.png beside the JSON, redrawn after each run or with --plot-only)
@@ -50,7 +58,7 @@ jax.config.update("jax_enable_x64", True)
 import numpy as np  # noqa: E402
 
 from frbjax import FreeRigidBody  # noqa: E402
-from frbjax.lightcurve import AmbiguousFitWarning, fit_lightcurve, LightcurveFit  # noqa: E402
+from frbjax.lightcurve import AmbiguousFitWarning, fit_lightcurve, LightcurveFit, MisfitWarning  # noqa: E402
 
 
 sys.path.insert(0, str(pathlib.Path(__file__).parent))
@@ -63,8 +71,11 @@ NOISE = _tumbler_family.NOISE
 warnings.filterwarnings("ignore", category=AmbiguousFitWarning)
 
 
-def invert(case, width, options):
-    """The member's search and its refinement from the truth: the figures of the module docstring."""
+def invert(case, width, options, stored=None):
+    """The member's search and its refinement from the truth: the figures of the module docstring.
+    The refinement from the truth is one round (``search_rounds=1``: a reference, not a search); with
+    ``stored`` (the member's record of an earlier run, ``--truth-from``) its figures are taken from
+    there instead of computed again."""
     rotator = case.kind == "PA"
     true_periods = np.asarray(case.periods[:1] if rotator else case.periods)
     ranges = tuple((p * (1 - width), p * (1 + width)) for p in true_periods)
@@ -72,16 +83,32 @@ def invert(case, width, options):
     common = dict(lightcurve=case.night, principal_axis=rotator, throw=False, progress=False)
     data = (case.times, case.flux, case.sun, case.observer)
     start = time.perf_counter()
-    found = fit_lightcurve(*data, periods=ranges, mode="both", **common, **options)
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always", MisfitWarning)
+        found = fit_lightcurve(*data, periods=ranges, mode="both", **common, **options)
     seconds = time.perf_counter() - start
-    # The truth's basin: the same data refined from the true motion, its time counted from the fit's
-    # epoch (fit_lightcurve's default: the median time).
-    epoch = float(np.median(case.times))
-    body = case.body
-    truth = FreeRigidBody(case.inertia, np.asarray(body.angular_momentum(epoch)), np.asarray(body.quaternion(epoch)))
-    refined = fit_lightcurve(*data, periods=ranges, initial=truth, **common, **options)
     held_out = tuple(case.held_out[key] for key in ("times", "flux", "sun", "observer", "night"))
     held_out_rms = lambda result: lightcurve.problems.held_out_rms(result, held_out)  # noqa: E731
+    if stored is None:
+        # The truth's basin: the same data refined from the true motion, its time counted from the
+        # fit's epoch (fit_lightcurve's default: the median time).
+        epoch = float(np.median(case.times))
+        body = case.body
+        truth = FreeRigidBody(
+            case.inertia, np.asarray(body.angular_momentum(epoch)), np.asarray(body.quaternion(epoch))
+        )
+        refined = fit_lightcurve(*data, periods=ranges, initial=truth, **common, **{**options, "search_rounds": 1})
+        truth_refined = {
+            "truth_refined_period_z": (
+                np.abs(np.asarray(refined.periods)[: len(true_periods)] - true_periods)
+                / np.asarray(refined.period_sigma)[: len(true_periods)]
+            ).tolist(),
+            "truth_refined_cost": float(refined.cost),
+            "truth_refined_held_out_rms": held_out_rms(refined),
+            "truth_refined_noise_ratio": float(refined.noise_ratio),
+        }
+    else:
+        truth_refined = {key: value for key, value in stored.items() if key.startswith("truth_refined")}
     samples = len(case.times)
     periods, sigma = np.asarray(found.periods), np.asarray(found.period_sigma)
     z = np.abs(periods[: len(true_periods)] - true_periods) / sigma[: len(true_periods)]
@@ -96,16 +123,14 @@ def invert(case, width, options):
         "period_sigma": sigma.tolist(),
         "period_z": z.tolist(),
         # The same for the refinement from the truth: what the model allows in the truth's basin.
-        "truth_refined_period_z": (
-            np.abs(np.asarray(refined.periods)[: len(true_periods)] - true_periods)
-            / np.asarray(refined.period_sigma)[: len(true_periods)]
-        ).tolist(),
+        **truth_refined,
         "long_axis_mode": bool(found.long_axis_mode),
         "cost": float(found.cost),
-        "truth_refined_cost": float(refined.cost),
-        "cost_excess": (float(found.cost) - float(refined.cost)) / math.sqrt(samples / 2),
+        "cost_excess": (float(found.cost) - truth_refined["truth_refined_cost"]) / math.sqrt(samples / 2),
         "held_out_rms": held_out_rms(found),
-        "truth_refined_held_out_rms": held_out_rms(refined),
+        "noise_ratio": float(found.noise_ratio),
+        "search_rounds": int(found.search_rounds),
+        "misfit_warned": any(issubclass(w.category, MisfitWarning) for w in caught),
         "refine_costs": np.asarray(found.refine_costs).tolist(),
         "refine_periods": np.asarray(found.refine_periods).tolist(),
         "seconds": seconds,
@@ -150,6 +175,8 @@ def rates(members):
             sum(m.get("ambiguous", False) for m in members if max(m["period_z"]) > 3),
             sum(max(m["period_z"]) > 3 for m in members),
         ],
+        # The fits that warn that their residuals still exceed the noise after their last round.
+        "misfit_warned": sum(m.get("misfit_warned", False) for m in members) / count,
         "median_seconds": float(np.median([m["seconds"] for m in members])),
         "max_seconds": float(np.max([m["seconds"] for m in members])),
     }
@@ -219,6 +246,7 @@ def main(argv=None):
     parser.add_argument("--refine", type=int, default=None)
     parser.add_argument("--convex-subdivisions", type=int, default=None, help="fit_lightcurve's default: 2")
     parser.add_argument("--resume", action="store_true")
+    parser.add_argument("--truth-from", help="an earlier run's JSON: its members' truth-refined figures")
     parser.add_argument("--output-dir", default=str(pathlib.Path(__file__).parent / "results"))
     parser.add_argument("--plot-only", action="store_true", help="redraw lightcurve_family.png from the JSON")
     parser.add_argument(
@@ -250,11 +278,14 @@ def main(argv=None):
     previous = json.loads(output.read_text()) if options.resume and output.exists() else {}
     members = previous.get("members", [])
     done = {m["index"] for m in members}
+    stored = {}
+    if options.truth_from:
+        stored = {m["index"]: m for m in json.loads(pathlib.Path(options.truth_from).read_text())["members"]}
     for index in (int(x) for x in options.members.split(",")):
         if index in done:
             continue
         case = _tumbler_family.tumbler(index, options.seed)
-        member = invert(case, options.width, fit_options)
+        member = invert(case, options.width, fit_options, stored.get(index))
         members.append(member)
         print(json.dumps(member), flush=True)
         result = {

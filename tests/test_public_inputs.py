@@ -491,6 +491,7 @@ def test_every_public_callable_is_in_the_harness():
         "LightcurveFit",
         "CompetingBasins",
         "AmbiguousFitWarning",
+        "MisfitWarning",
         "TumblerPeriodogram",
         "FitError",
         "SPLITTING_METHODS",

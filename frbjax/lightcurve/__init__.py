@@ -13,7 +13,7 @@ Imported on first use (``frbjax.lightcurve``); it needs optimistix and scipy.
 """
 
 from ._brightness import brightness, facet_brightness, LAWS
-from ._fit import AmbiguousFitWarning, CompetingBasins, fit_lightcurve, LightcurveFit
+from ._fit import AmbiguousFitWarning, CompetingBasins, fit_lightcurve, LightcurveFit, MisfitWarning
 from ._periodogram import tumbler_periodogram, TumblerPeriodogram
 from ._periods import tumbler_periods
 from ._shape import ConvexShape, icosphere, mesh_inertia
@@ -25,6 +25,7 @@ __all__ = [
     "CompetingBasins",
     "ConvexShape",
     "LightcurveFit",
+    "MisfitWarning",
     "TumblerPeriodogram",
     "brightness",
     "facet_brightness",

@@ -90,7 +90,7 @@ from ._periods import momentum_from_periods, tumbler_periods
 from ._shape import _icosphere_area_vectors, ConvexShape, icosphere
 
 
-__all__ = ["AmbiguousFitWarning", "CompetingBasins", "LightcurveFit", "fit_lightcurve"]
+__all__ = ["AmbiguousFitWarning", "CompetingBasins", "LightcurveFit", "MisfitWarning", "fit_lightcurve"]
 
 _MIN_WINDOW = 24
 _PRINCIPAL_INERTIA = (0.5, 0.75, 1.0)
@@ -447,6 +447,24 @@ def _warn_if_ambiguous(result, stacklevel=3):
     )
 
 
+class MisfitWarning(UserWarning):
+    """:func:`fit_lightcurve`'s best fit after its last search round leaves residuals larger than the
+    stated noise (``LightcurveFit.noise_ratio`` above its chi-square bound): the search missed the
+    data's basin, or ``sigma`` understates the noise, or the model does not describe the body."""
+
+
+def _warn_of_misfit(result, bound, sigma, stacklevel=3):
+    """A :class:`MisfitWarning` for ``result``, whose ``noise_ratio`` exceeds ``bound``."""
+    warnings.warn(
+        f"fit_lightcurve: the best fit's residuals are {result.noise_ratio:.3g} times the stated noise "
+        f"sigma={sigma:g} (bound {bound:.3g}) after {result.search_rounds} search round(s): the search may have "
+        "missed the data's basin (more search_rounds, a finer period_grid or narrower period ranges), or sigma "
+        "understates the noise.  The reported sigmas assume the residuals' own level.",
+        MisfitWarning,
+        stacklevel=stacklevel,
+    )
+
+
 def _format_periods(periods):
     return "(" + ", ".join(f"{p:.6g}" for p in np.asarray(periods, float) if np.isfinite(p)) + ")"
 
@@ -470,11 +488,16 @@ class LightcurveFit(eqx.Module):
     - ``residuals`` (N,): log(data) - log(scale * model) per sample (input order);
     - ``cost``: half the sum of squared (weighted) residuals; ``success``: the solver converged;
     - ``search_periods`` (S, 2), ``search_costs`` (S,): the periods of every start and its cost on the
-      first window (the search's landscape); ``refine_costs`` (K,), ``refine_periods`` (K, 2): the
-      cost and the periods of each start solved on all the data (the refinement's last stage: the
-      best four for a convex shape), the winner's among them: runner-ups within the noise of the
-      winner's cost (about sqrt(N / 2)) at other periods are basins the data do not tell apart
-      (:meth:`competing_basins`, :attr:`ambiguous`; :func:`fit_lightcurve` warns of them);
+      first window (the search's landscape; every round's starts, in turn); ``refine_costs`` (K,),
+      ``refine_periods`` (K, 2): the cost and the periods of each start solved on all the data (the
+      refinement's last stage of every round: the best four for a convex shape), the winner's among
+      them: runner-ups within the noise of the winner's cost (about sqrt(N / 2)) at other periods are
+      basins the data do not tell apart (:meth:`competing_basins`, :attr:`ambiguous`;
+      :func:`fit_lightcurve` warns of them);
+    - ``noise_ratio``: s / sigma, the residuals' level over the stated noise (1 where the model and
+      ``sigma`` hold; where (s / sigma)^2 exceeds 1 + 3 sqrt(2 / dof), :func:`fit_lightcurve` searches
+      again, and after its last round warns: :class:`MisfitWarning`); ``search_rounds``: the rounds
+      it ran;
     - ``shape_model`` (``"convex"`` or ``"ellipsoid"``) and ``regularisation`` (the convex shape's
       closure and smoothness weights): the fit's settings, which the posterior's shape prior reuses.
     """
@@ -501,6 +524,8 @@ class LightcurveFit(eqx.Module):
     search_costs: Float[Array, " S"]
     refine_costs: Float[Array, " K"]
     refine_periods: Float[Array, "K 2"]
+    noise_ratio: float
+    search_rounds: int
     # The frame about which ``parameters`` are counted (the winner's start: its attitude, the inertial
     # direction of L and two unit vectors across it): for the posterior (frbjax.posterior).
     _reference: tuple = ()
@@ -666,6 +691,32 @@ def _period_shifts(parameters, reference, radius, log_ranges, principal_axis):
     return trials
 
 
+class _Misfit(typing.NamedTuple):
+    variance: float  # s^2 / sigma^2: the data rows' residual variance over their degrees of freedom
+    threshold: float  # its chi-square bound, 1 + 3 sqrt(2 / dof)
+    inverse_normal: np.ndarray  # (J^T J)^+ over the free parameters
+
+
+def _misfit(residual, jacobian, samples, curve_count):
+    """The residual variance of a fit in units of sigma^2 (rows already over sigma) and (J^T J)^+.
+
+    The variance is over the data rows' degrees of freedom: N less the light curves' scales and the
+    parameters' effective number, the data rows' part of the trace of the hat matrix
+    J (J^T J)^+ J^T = U U^T (Hastie, Tibshirani & Friedman 2009, sec. 3.4.1): a regularised convex
+    shape's hundreds of areas count for what the data determine of them, not one each.  Where sigma is
+    the noise and the model holds, the sum of squares is chi-square with dof degrees of freedom, so the
+    variance exceeds 1 + 3 sqrt(2 / dof) (three standard deviations) by chance about once in a thousand
+    fits: above it, the fit has missed the data's basin (or sigma understates the noise).
+    (J^T J)^+ comes from the singular values of J itself: forming J^T J first squares its condition
+    number, and the pseudo-inverse's cutoff then depends on rounding (as scipy's curve_fit)."""
+    left, singular, right = np.linalg.svd(jacobian, full_matrices=False)
+    kept = singular > np.finfo(float).eps * max(jacobian.shape) * singular[0]
+    dof = max(samples - curve_count - float(np.sum(left[:samples, kept] ** 2)), 1.0)
+    variance = float(np.sum(residual[:samples] ** 2) / dof)
+    inverse_normal = (right[kept].T / singular[kept] ** 2) @ right[kept]
+    return _Misfit(variance, 1.0 + 3.0 * math.sqrt(2.0 / dof), inverse_normal)
+
+
 def _continuation_windows(distance):
     """Masks (W, N) of the continuation windows: the samples within a radius of the epoch, the first
     radius holding a tenth of them (at least ``_MIN_WINDOW``), each next ``_WINDOW_GROWTH`` times the
@@ -741,6 +792,7 @@ def _check_options(
     epoch,
     starts_per_period,
     n_refine,
+    search_rounds,
     seed,
     rtol,
     atol,
@@ -788,6 +840,7 @@ def _check_options(
         checks.scalar("epoch", epoch)
     checks.integer("starts_per_period", starts_per_period, minimum=1)
     checks.integer("n_refine", n_refine, minimum=1)
+    checks.integer("search_rounds", search_rounds, minimum=1)
     checks.integer("seed", seed, minimum=0)
     checks.scalar("rtol", rtol, positive=True)
     checks.scalar("atol", atol, positive=True)
@@ -825,6 +878,7 @@ def fit_lightcurve(
     period_grid=(16, 16),
     starts_per_period: int = 16,
     n_refine: int = 32,
+    search_rounds: int = 3,
     seed: int = 0,
     rtol: float = 1e-8,
     atol: float = 1e-8,
@@ -852,6 +906,11 @@ def fit_lightcurve(
     docstring): choose the grid fine enough that a cell's phase drift over the first nights is well
     under a cycle.  Without prior periods, :func:`tumbler_periodogram` proposes ranked ranges from the
     light curves themselves (``periods=result.proposals[i]``, or ``**result.fit_options(i)``).
+    ``search_rounds``: while the best fit's residuals exceed the stated noise (s^2 / sigma^2 above
+    1 + 3 sqrt(2 / dof), three standard deviations of a chi-square: :attr:`LightcurveFit.noise_ratio`),
+    the search runs again with new random states, on odd rounds on the middles of the grid's cells,
+    up to this many rounds; the lowest cost over all rounds wins, and a fit still above the bound
+    warns (:class:`MisfitWarning`).
     ``shape``: "convex" (log-areas on the facet normals of an icosphere of
     ``convex_subdivisions``, with ``regularisation`` = (closure weight, smoothness weight)) or
     "ellipsoid".  The defaults (``n_refine=32``, 320 normals) are the settings measured on the
@@ -898,6 +957,7 @@ def fit_lightcurve(
         epoch=epoch,
         starts_per_period=starts_per_period,
         n_refine=n_refine,
+        search_rounds=search_rounds,
         seed=seed,
         rtol=rtol,
         atol=atol,
@@ -912,97 +972,20 @@ def fit_lightcurve(
     log_brightness = -0.4 * np.log(10.0) * flux if magnitudes else np.log(flux)
     n = len(times)
     dtype = jnp.result_type(float)
-    rng = np.random.default_rng(seed)
     epoch = float(np.median(times)) if epoch is None else float(epoch)
     labels, curve_index = np.unique(lightcurve, return_inverse=True)
     curves = np.eye(len(labels))[curve_index]
 
     masks = _continuation_windows(np.abs(times - epoch))
 
-    # ---- starts: a grid of the periods times random states
-    if principal_axis:
-        low, high = (float(p) for p in periods)
-        grid = np.exp(np.linspace(np.log(low), np.log(high), int(np.atleast_1d(period_grid)[0])))
-        period_psi = np.repeat(grid, starts_per_period)
-        count = len(period_psi)
-        period_phi = np.full(count, np.inf)
-        inertia = np.broadcast_to(np.asarray(_PRINCIPAL_INERTIA), (count, 3))
-        momentum = np.zeros((count, 3))
-        momentum[:, 2] = 2 * np.pi * inertia[:, 2] / period_psi
-        valid = np.ones(count, bool)
-    else:
-        (psi_low, psi_high), (phi_low, phi_high) = periods
-        n_psi, n_phi = period_grid
-        psi_grid = np.exp(np.linspace(np.log(psi_low), np.log(psi_high), n_psi))
-        phi_grid = np.exp(np.linspace(np.log(phi_low), np.log(phi_high), n_phi))
-        period_psi, period_phi = (
-            np.repeat(g.reshape(-1), starts_per_period) for g in np.meshgrid(psi_grid, phi_grid, indexing="ij")
-        )
-        count = len(period_psi)
-        ratios = np.sort(rng.uniform(*inertia_range, size=(count, 2)), -1)
-        inertia = np.concatenate([ratios, np.ones((count, 1))], -1)
-        if mode == "both":
-            long_axis = rng.random(count) < 0.5
-        else:
-            long_axis = np.full(count, mode == "LAM")
-        phase = rng.uniform(0, 2 * np.pi, count)
-        momentum, valid = (
-            np.array(x)
-            for x in _momenta_from_periods(
-                jnp.asarray(inertia, dtype),
-                jnp.asarray(period_psi, dtype),
-                jnp.asarray(period_phi, dtype),
-                jnp.asarray(long_axis),
-                jnp.asarray(phase, dtype),
-            )
-        )
-        valid &= np.all(np.isfinite(momentum), -1)
-        momentum = np.where(valid[:, None], momentum, np.array([0.0, 0.0, 1.0]))
-    attitudes = _random_rotations(rng, count)
-    # The period prior of each start: its grid cell, log P ~ N(log P_start, (cell / 2)^2).
-    grid_sizes = np.atleast_1d(period_grid).astype(int)
-    period_ranges = np.atleast_2d(np.asarray(periods, float))
-    cell = np.log(period_ranges[:, 1] / period_ranges[:, 0]) / np.maximum(grid_sizes[: len(period_ranges)] - 1, 1)
-    prior_inverse_width = np.zeros(2)
-    prior_inverse_width[: len(cell)] = 2 / np.maximum(cell, 1e-6)
-    if initial is not None:
-        # The given motion as one more start, placed first; its cost is not searched but refined.
-        scale = float(np.max(np.asarray(initial.inertia)))
-        inertia = np.concatenate([np.asarray(initial.inertia)[None] / scale, inertia])
-        given = np.asarray(initial.initial_angular_momentum)[None] / scale
-        momentum = np.concatenate([given, momentum])
-        attitudes = np.concatenate([np.asarray(initial.initial_attitude)[None], attitudes])
-        if principal_axis:
-            initial_periods = np.array([2 * np.pi / np.linalg.norm(given), np.inf])
-        else:
-            initial_periods = np.asarray(tumbler_periods(initial.inertia, initial.initial_angular_momentum)[:2], float)
-        period_psi = np.concatenate([initial_periods[:1], period_psi])
-        period_phi = np.concatenate([initial_periods[1:], period_phi])
-        valid = np.concatenate([[True], valid])
-        count += 1
-    momentum_norm = np.linalg.norm(momentum, axis=-1)
-    direction = momentum / momentum_norm[:, None]
-    if principal_axis:
-        direction = np.broadcast_to(np.array([0.0, 0.0, 1.0]), (count, 3)).copy()
-        if initial is not None:
-            direction[0] = momentum[0] / momentum_norm[0]
-    theta = np.zeros((count, 8))
-    theta[:, 0] = np.log(inertia[:, 0])
-    theta[:, 1] = np.log(inertia[:, 1])
-    theta[:, 2] = np.log(momentum_norm)
-    references = (attitudes, direction, _tangent_basis(direction))
-    axes = _ellipsoid_axes(inertia)
-
-    # ---- shapes
+    # ---- shapes, data and settings (the same for every round of the search)
     search_normals, search_solid, _ = _unit_normals(_SEARCH_SUBDIVISIONS)
-    start_areas = _gaussian_image_areas(axes, search_normals, search_solid)
     if shape == "convex":
         normals, solid_angles, faces = _unit_normals(convex_subdivisions)
         laplacian = _laplacian(faces)
     else:
         normals = search_normals
         laplacian = np.zeros((1, 1))
-    ellipsoid_start = np.log(axes[:, 1:] / axes[:, :1])
     free = np.ones(8 + (len(normals) if shape == "convex" else 2))
     ellipsoid_free = np.ones(10)
     if principal_axis:
@@ -1023,191 +1006,297 @@ def fit_lightcurve(
     )
     data = {key: jnp.asarray(value, dtype) for key, value in data.items()}
     config = (shape, law, float(c), _SEARCH_SUBDIVISIONS, bool(principal_axis))
-
-    # ---- the search: every start's cost on the first window
-    as_jax = lambda tree: jax.tree.map(lambda x: jnp.asarray(x, dtype), tree)  # noqa: E731
-    # The search's chunks are taken in numpy (eagerly, JAX would compile each gather).
-    as_numpy = lambda tree: jax.tree.map(lambda x: np.asarray(x, dtype), tree)  # noqa: E731
-    # One chunk size for the search and the period shifts below: one program.
-    chunk = min(int(search_chunk), count)
-    costs = _search(
-        as_numpy(theta),
-        as_numpy(references),
-        as_numpy(start_areas),
-        data,
-        jnp.asarray(masks[0], dtype),
-        config,
-        chunk,
-        progress,
-    )
-    costs = np.where(valid, costs, np.inf)
-    best = np.argsort(costs, kind="stable")[:n_refine]
-    if initial is not None and 0 not in best:
-        best = np.concatenate([[0], best[:-1]])
-
-    refs = tuple(r[best] for r in references)
-    centres = np.log(np.stack([period_psi[best], period_phi[best]], -1))
-    centres = np.where(np.isfinite(centres), centres, 0.0)
-    priors = (centres, np.broadcast_to(prior_inverse_width, centres.shape))
-    prior_weights = np.concatenate([np.ones(len(masks) - 1), [0.0]])
-    # The windows carry a random start's phase outwards from the epoch; a given motion (an earlier
-    # fit) has it already and is fitted to all the data from the first window.
-    given = best == 0 if initial is not None else np.zeros(len(best), bool)
-    start_masks = np.where(given[:, None, None], 1.0, masks[None])
     # The continuation windows are solved with the ellipsoid (2 shape parameters): the first windows
     # hold fewer samples than a convex shape has areas.  A convex shape is then fitted on all the data
     # from the Gaussian image of the fitted ellipsoid, on its fixed normals.
     ellipsoid_data = dict(data, free=jnp.asarray(ellipsoid_free, dtype))
     ellipsoid_config = ("ellipsoid",) + config[1:]
     solver_settings = dict(rtol=float(rtol), atol=float(atol), max_steps=int(max_steps))
-    survivors = _survivor_counts(len(best), len(masks))
-    convex_starts = min(_CONVEX_STARTS, survivors[-1]) if shape == "convex" else 0
     radii = [float(np.max(np.abs(times - epoch)[mask > 0])) for mask in masks]
+    period_ranges = np.atleast_2d(np.asarray(periods, float))
     log_ranges = np.array([[-np.inf, np.inf]] * 2)
     log_ranges[: len(period_ranges)] = np.log(period_ranges)
+    # The period prior of each start: its grid cell, log P ~ N(log P_start, (cell / 2)^2).
+    grid_sizes = np.atleast_1d(period_grid).astype(int)
+    cell = np.log(period_ranges[:, 1] / period_ranges[:, 0]) / np.maximum(grid_sizes[: len(period_ranges)] - 1, 1)
+    prior_inverse_width = np.zeros(2)
+    prior_inverse_width[: len(cell)] = 2 / np.maximum(cell, 1e-6)
+    prior_weights = np.concatenate([np.ones(len(masks) - 1), [0.0]])
+    as_jax = lambda tree: jax.tree.map(lambda x: jnp.asarray(x, dtype), tree)  # noqa: E731
+    # The search's chunks are taken in numpy (eagerly, JAX would compile each gather).
+    as_numpy = lambda tree: jax.tree.map(lambda x: np.asarray(x, dtype), tree)  # noqa: E731
+    chunk = None  # the first round's: one chunk size for every search and period shift, one program
 
-    def refine(rows, parameters, priors, data, masks, prior_weights, config):
-        """The starts ``rows`` (of ``best``) solved on ``masks`` (len(rows), W, N).  Where the starts
-        are solved one after another anyway (the CPU, ``solve_each``), each is its own call of a
-        one-start program, which the leader's continued solves below then reuse: a program over all
-        the starts compiled the loop over them too (the LAM benchmark: about 2.5 s of its 12 s of
-        compilation when the convex stage had its own)."""
-        batches = [slice(k, k + 1) for k in range(len(rows))] if starts_in_sequence() else [slice(None)]
-        parts = [
-            _refine(
-                as_jax(parameters[part]),
-                as_jax(tuple(r[rows[part]] for r in refs)),
-                None if priors is None else as_jax(tuple(p[rows[part]] for p in priors)),
-                data,
-                jnp.asarray(masks[part], dtype),
-                None if prior_weights is None else jnp.asarray(prior_weights, dtype),
-                config,
-                **solver_settings,
+    def period_axis(low, high, size, round_index):
+        """A log-uniform grid of ``size`` points over [low, high]; on odd rounds the middles of its cells
+        instead, so that a second round's starts lie between the first's."""
+        points = np.linspace(np.log(low), np.log(high), size)
+        if round_index % 2 and size > 1:
+            points = 0.5 * (points[1:] + points[:-1])
+        return np.exp(points)
+
+    def starts(round_index):
+        """The round's starts: a grid of the periods times random states, and the given motion first in
+        the first round.  Each draw of the states is tried on both grids (rounds 2k and 2k + 1 draw
+        from ``seed + k``): member 6 of the tumbler family is found on the middles with the first
+        round's draw, member 13 on the grid with the second draw (docs/lightcurves.md).  Returns
+        (theta (S, 8), references, the periods (S, 2) of each, valid (S,), the ellipsoid's axes of each
+        start's inertia (S, 3), whether it is the given motion (S,))."""
+        rng = np.random.default_rng(seed + round_index // 2)
+        if principal_axis:
+            grid = period_axis(*(float(p) for p in periods), int(np.atleast_1d(period_grid)[0]), round_index)
+            period_psi = np.repeat(grid, starts_per_period)
+            count = len(period_psi)
+            period_phi = np.full(count, np.inf)
+            inertia = np.broadcast_to(np.asarray(_PRINCIPAL_INERTIA), (count, 3))
+            momentum = np.zeros((count, 3))
+            momentum[:, 2] = 2 * np.pi * inertia[:, 2] / period_psi
+            valid = np.ones(count, bool)
+        else:
+            (psi_low, psi_high), (phi_low, phi_high) = periods
+            n_psi, n_phi = period_grid
+            psi_grid = period_axis(psi_low, psi_high, n_psi, round_index)
+            phi_grid = period_axis(phi_low, phi_high, n_phi, round_index)
+            period_psi, period_phi = (
+                np.repeat(g.reshape(-1), starts_per_period) for g in np.meshgrid(psi_grid, phi_grid, indexing="ij")
             )
-            for part in batches
-        ]
-        return [np.concatenate([np.asarray(piece) for piece in pieces]) for pieces in zip(*parts)]
+            count = len(period_psi)
+            ratios = np.sort(rng.uniform(*inertia_range, size=(count, 2)), -1)
+            inertia = np.concatenate([ratios, np.ones((count, 1))], -1)
+            if mode == "both":
+                long_axis = rng.random(count) < 0.5
+            else:
+                long_axis = np.full(count, mode == "LAM")
+            phase = rng.uniform(0, 2 * np.pi, count)
+            momentum, valid = (
+                np.array(x)
+                for x in _momenta_from_periods(
+                    jnp.asarray(inertia, dtype),
+                    jnp.asarray(period_psi, dtype),
+                    jnp.asarray(period_phi, dtype),
+                    jnp.asarray(long_axis),
+                    jnp.asarray(phase, dtype),
+                )
+            )
+            valid &= np.all(np.isfinite(momentum), -1)
+            momentum = np.where(valid[:, None], momentum, np.array([0.0, 0.0, 1.0]))
+        attitudes = _random_rotations(rng, count)
+        given = np.zeros(count, bool)
+        if initial is not None and round_index == 0:
+            # The given motion as one more start, placed first; its cost is not searched but refined.
+            scale = float(np.max(np.asarray(initial.inertia)))
+            inertia = np.concatenate([np.asarray(initial.inertia)[None] / scale, inertia])
+            given_momentum = np.asarray(initial.initial_angular_momentum)[None] / scale
+            momentum = np.concatenate([given_momentum, momentum])
+            attitudes = np.concatenate([np.asarray(initial.initial_attitude)[None], attitudes])
+            if principal_axis:
+                initial_periods = np.array([2 * np.pi / np.linalg.norm(given_momentum), np.inf])
+            else:
+                initial_periods = np.asarray(
+                    tumbler_periods(initial.inertia, initial.initial_angular_momentum)[:2], float
+                )
+            period_psi = np.concatenate([initial_periods[:1], period_psi])
+            period_phi = np.concatenate([initial_periods[1:], period_phi])
+            valid = np.concatenate([[True], valid])
+            given = np.concatenate([[True], given])
+            count += 1
+        momentum_norm = np.linalg.norm(momentum, axis=-1)
+        direction = momentum / momentum_norm[:, None]
+        if principal_axis:
+            direction = np.broadcast_to(np.array([0.0, 0.0, 1.0]), (count, 3)).copy()
+            direction[given] = momentum[given] / momentum_norm[given, None]
+        theta = np.zeros((count, 8))
+        theta[:, 0] = np.log(inertia[:, 0])
+        theta[:, 1] = np.log(inertia[:, 1])
+        theta[:, 2] = np.log(momentum_norm)
+        references = (attitudes, direction, _tangent_basis(direction))
+        return theta, references, np.stack([period_psi, period_phi], -1), valid, _ellipsoid_axes(inertia), given
 
-    def shifted(rows, parameters, window):
-        """Each start moved to the best of its period shifts on the window (a costing, as the search's)."""
-        trials, owners = [], []
-        for row, p in zip(rows, parameters):
-            reference = as_jax(tuple(r[row] for r in refs))
-            trial = _period_shifts(p, reference, radii[window], log_ranges, principal_axis)
-            trials.append(trial)
-            owners.append(np.full(len(trial), row))
-        trials, owners = np.concatenate(trials), np.concatenate(owners)
-        trial_axes = np.concatenate([np.ones((len(trials), 1)), np.exp(trials[:, 8:])], 1)
-        trial_costs = _search(
-            trials[:, :8],
-            tuple(r[owners] for r in refs),
-            _gaussian_image_areas(trial_axes, search_normals, search_solid),
+    def search_round(round_index):
+        """One round: every start's cost on the first window, the best ``n_refine`` refined through the
+        windows as a population (module docstring).  Returns the last stage's starts (the refinement's
+        (parameters, costs, converged, residuals, Jacobians) and their references) and the search's
+        periods and costs."""
+        nonlocal chunk
+        theta, references, start_periods, valid, axes, given_start = starts(round_index)
+        if chunk is None:
+            chunk = min(int(search_chunk), len(theta))
+        costs = _search(
+            as_numpy(theta),
+            as_numpy(references),
+            as_numpy(_gaussian_image_areas(axes, search_normals, search_solid)),
             data,
-            jnp.asarray(masks[window], dtype),
+            jnp.asarray(masks[0], dtype),
             config,
             chunk,
-            False,
+            progress,
         )
-        moved = parameters.copy()
-        for k, row in enumerate(rows):
-            own = np.flatnonzero(owners == row)
-            moved[k] = trials[own[np.argmin(np.where(np.isfinite(trial_costs[own]), trial_costs[own], np.inf))]]
-        return moved
+        costs = np.where(valid, costs, np.inf)
+        best = np.argsort(costs, kind="stable")[:n_refine]
+        if given_start.any() and not given_start[best].any():
+            best = np.concatenate([np.flatnonzero(given_start), best[:-1]])
 
-    def best_of(rows, row_costs, count):
-        """The ``count`` of ``rows`` with the lowest costs (a given motion first, always kept)."""
-        ranked = np.argsort(np.where(given[rows], -np.inf, np.nan_to_num(row_costs, nan=np.inf)), kind="stable")
-        return rows[ranked[:count]]
+        refs = tuple(r[best] for r in references)
+        centres = np.log(start_periods[best])
+        centres = np.where(np.isfinite(centres), centres, 0.0)
+        priors = (centres, np.broadcast_to(prior_inverse_width, centres.shape))
+        # The windows carry a random start's phase outwards from the epoch; a given motion (an earlier
+        # fit) has it already and is fitted to all the data from the first window.
+        given = given_start[best]
+        start_masks = np.where(given[:, None, None], 1.0, masks[None])
+        survivors = _survivor_counts(len(best), len(masks))
+        convex_starts = min(_CONVEX_STARTS, survivors[-1]) if shape == "convex" else 0
 
-    # The refinement's progress bar counts the windows solved (each surviving start's continuation
-    # windows, the convex stage, the leader's continued solves).
-    windows = sum(survivors) + convex_starts
-    parameters = np.concatenate([theta[best], ellipsoid_start[best]], 1)
-    alive = np.arange(len(best))
-    with _progress.bar("lightcurve refinement", windows, "light-curve refinement", "window", shown=progress) as bar:
-        for window in range(len(masks)):
-            searching = alive[~given[alive]]
-            if window and len(searching):
-                # Before a wider window, each start's periods are moved to the best of their shifts by
-                # fractions of a cycle at the window's edge: Levenberg-Marquardt then starts in the
-                # cycle count that fits the new samples instead of the nearest basin of a wrong one.
-                parameters[searching] = shifted(searching, parameters[searching], window)
-            out = refine(
-                alive,
-                parameters[alive],
-                priors,
-                ellipsoid_data,
-                start_masks[alive, window : window + 1],
-                prior_weights[window : window + 1],
-                ellipsoid_config,
+        def refine(rows, parameters, priors, data, masks, prior_weights, config):
+            """The starts ``rows`` (of ``best``) solved on ``masks`` (len(rows), W, N).  Where the starts
+            are solved one after another anyway (the CPU, ``solve_each``), each is its own call of a
+            one-start program, which the leader's continued solves below then reuse: a program over all
+            the starts compiled the loop over them too (the LAM benchmark: about 2.5 s of its 12 s of
+            compilation when the convex stage had its own)."""
+            batches = [slice(k, k + 1) for k in range(len(rows))] if starts_in_sequence() else [slice(None)]
+            parts = [
+                _refine(
+                    as_jax(parameters[part]),
+                    as_jax(tuple(r[rows[part]] for r in refs)),
+                    None if priors is None else as_jax(tuple(p[rows[part]] for p in priors)),
+                    data,
+                    jnp.asarray(masks[part], dtype),
+                    None if prior_weights is None else jnp.asarray(prior_weights, dtype),
+                    config,
+                    **solver_settings,
+                )
+                for part in batches
+            ]
+            return [np.concatenate([np.asarray(piece) for piece in pieces]) for pieces in zip(*parts)]
+
+        def shifted(rows, parameters, window):
+            """Each start moved to the best of its period shifts on the window (a costing, as the search's)."""
+            trials, owners = [], []
+            for row, p in zip(rows, parameters):
+                reference = as_jax(tuple(r[row] for r in refs))
+                trial = _period_shifts(p, reference, radii[window], log_ranges, principal_axis)
+                trials.append(trial)
+                owners.append(np.full(len(trial), row))
+            trials, owners = np.concatenate(trials), np.concatenate(owners)
+            trial_axes = np.concatenate([np.ones((len(trials), 1)), np.exp(trials[:, 8:])], 1)
+            trial_costs = _search(
+                trials[:, :8],
+                tuple(r[owners] for r in refs),
+                _gaussian_image_areas(trial_axes, search_normals, search_solid),
+                data,
+                jnp.asarray(masks[window], dtype),
+                config,
+                chunk,
+                False,
             )
-            parameters[alive] = out[0]
-            if window + 1 < len(masks):
-                # The best half of the starts go on to the next window.
-                alive = best_of(alive, out[1], survivors[window + 1])
-        if shape == "convex":
-            alive = best_of(alive, out[1], convex_starts)
-            fitted = parameters[alive]
-            fitted_axes = np.concatenate([np.ones((len(alive), 1)), np.exp(fitted[:, 8:])], 1)
-            log_areas = np.log(_gaussian_image_areas(fitted_axes, normals, solid_angles))
-            log_areas -= log_areas.mean(-1, keepdims=True)
-            # All the data, no prior.
-            out = refine(
-                alive, np.concatenate([fitted[:, :8], log_areas], 1), None, data, start_masks[alive, -1:], None, config
-            )
-        # A leader that stopped at max_steps still moving is solved on from where it stopped (all the data,
-        # no prior), alone: Levenberg-Marquardt on a convex shape's hundreds of areas can take more than
-        # max_steps to meet rtol (the LAM test's leader: three more solves).
-        final_data, final_config = (data, config) if shape == "convex" else (ellipsoid_data, ellipsoid_config)
-        for _ in range(_CONTINUATIONS):
-            leader = int(np.argmin(np.where(np.isfinite(out[1]), out[1], np.inf)))
-            if out[2][leader] or not np.isfinite(out[1][leader]):
-                break
-            if bar is not None:
-                bar.total += 1
-            continued = refine(
-                alive[leader : leader + 1],
-                out[0][leader : leader + 1],
-                None,
-                final_data,
-                start_masks[alive[leader : leader + 1], -1:],
-                None,
-                final_config,
-            )
-            for full, part in zip(out, continued):
-                # The ellipsoid's windows end with the period prior's rows at weight 0 (zeros); the
-                # continued solve has no prior, so its residual and Jacobian rows stop before them.
-                part = part[0]
-                if part.ndim:
-                    full[leader] = 0.0
-                    full[leader][: len(part)] = part
-                else:
-                    full[leader] = part
-    fitted, refine_costs, oks, residual_rows, jacobians = out
+            moved = parameters.copy()
+            for k, row in enumerate(rows):
+                own = np.flatnonzero(owners == row)
+                moved[k] = trials[own[np.argmin(np.where(np.isfinite(trial_costs[own]), trial_costs[own], np.inf))]]
+            return moved
+
+        def best_of(rows, row_costs, count):
+            """The ``count`` of ``rows`` with the lowest costs (a given motion first, always kept)."""
+            ranked = np.argsort(np.where(given[rows], -np.inf, np.nan_to_num(row_costs, nan=np.inf)), kind="stable")
+            return rows[ranked[:count]]
+
+        # The refinement's progress bar counts the windows solved (each surviving start's continuation
+        # windows, the convex stage, the leader's continued solves).
+        windows = sum(survivors) + convex_starts
+        ellipsoid_start = np.log(axes[best, 1:] / axes[best, :1])
+        parameters = np.concatenate([theta[best], ellipsoid_start], 1)
+        alive = np.arange(len(best))
+        with _progress.bar("lightcurve refinement", windows, "light-curve refinement", "window", shown=progress) as bar:
+            for window in range(len(masks)):
+                searching = alive[~given[alive]]
+                if window and len(searching):
+                    # Before a wider window, each start's periods are moved to the best of their shifts by
+                    # fractions of a cycle at the window's edge: Levenberg-Marquardt then starts in the
+                    # cycle count that fits the new samples instead of the nearest basin of a wrong one.
+                    parameters[searching] = shifted(searching, parameters[searching], window)
+                out = refine(
+                    alive,
+                    parameters[alive],
+                    priors,
+                    ellipsoid_data,
+                    start_masks[alive, window : window + 1],
+                    prior_weights[window : window + 1],
+                    ellipsoid_config,
+                )
+                parameters[alive] = out[0]
+                if window + 1 < len(masks):
+                    # The best half of the starts go on to the next window.
+                    alive = best_of(alive, out[1], survivors[window + 1])
+            if shape == "convex":
+                alive = best_of(alive, out[1], convex_starts)
+                fitted = parameters[alive]
+                fitted_axes = np.concatenate([np.ones((len(alive), 1)), np.exp(fitted[:, 8:])], 1)
+                log_areas = np.log(_gaussian_image_areas(fitted_axes, normals, solid_angles))
+                log_areas -= log_areas.mean(-1, keepdims=True)
+                # All the data, no prior.
+                out = refine(
+                    alive,
+                    np.concatenate([fitted[:, :8], log_areas], 1),
+                    None,
+                    data,
+                    start_masks[alive, -1:],
+                    None,
+                    config,
+                )
+            # A leader that stopped at max_steps still moving is solved on from where it stopped (all the
+            # data, no prior), alone: Levenberg-Marquardt on a convex shape's hundreds of areas can take
+            # more than max_steps to meet rtol (the LAM test's leader: three more solves).
+            final_data, final_config = (data, config) if shape == "convex" else (ellipsoid_data, ellipsoid_config)
+            for _ in range(_CONTINUATIONS):
+                leader = int(np.argmin(np.where(np.isfinite(out[1]), out[1], np.inf)))
+                if out[2][leader] or not np.isfinite(out[1][leader]):
+                    break
+                if bar is not None:
+                    bar.total += 1
+                continued = refine(
+                    alive[leader : leader + 1],
+                    out[0][leader : leader + 1],
+                    None,
+                    final_data,
+                    start_masks[alive[leader : leader + 1], -1:],
+                    None,
+                    final_config,
+                )
+                for full, part in zip(out, continued):
+                    # The ellipsoid's windows end with the period prior's rows at weight 0 (zeros); the
+                    # continued solve has no prior, so its residual and Jacobian rows stop before them.
+                    part = part[0]
+                    if part.ndim:
+                        full[leader] = 0.0
+                        full[leader][: len(part)] = part
+                    else:
+                        full[leader] = part
+        return out, tuple(r[alive] for r in refs), start_periods, costs
+
+    # ---- the search's rounds: more while the winner's residuals exceed the noise
+    rounds = []
+    for round_index in range(search_rounds):
+        rounds.append(search_round(round_index))
+        outs = [np.concatenate(parts) for parts in zip(*(r[0] for r in rounds))]
+        winner = int(np.argmin(np.where(np.isfinite(outs[1]), outs[1], np.inf)))
+        misfit = _misfit(outs[3][winner], outs[4][winner][:, free > 0], n, curves.shape[1])
+        if misfit.variance <= misfit.threshold:
+            break
+    fitted, refine_costs, oks, residual_rows, jacobians = outs
+    candidate_references = tuple(np.concatenate(parts) for parts in zip(*(r[1] for r in rounds)))
+    search_periods = np.concatenate([r[2] for r in rounds])
+    search_costs = np.concatenate([r[3] for r in rounds])
     # The motion, periods, mode and periods' Jacobian of each start of the last stage: their periods
     # for the result's runner-ups, the winner's all four.
     motions = [
-        _fitted_motion(as_jax(row[:8]), as_jax(tuple(r[k] for r in refs)), principal_axis)
-        for row, k in zip(fitted, alive)
+        _fitted_motion(as_jax(row[:8]), as_jax(tuple(r[k] for r in candidate_references)), principal_axis)
+        for k, row in enumerate(fitted)
     ]
     refine_periods = np.stack([np.asarray(motion[1]) for motion in motions])
-    winner = int(np.argmin(np.where(np.isfinite(refine_costs), refine_costs, np.inf)))
     p = fitted[winner].astype(float)
-    reference = tuple(jnp.asarray(r[alive[winner]], dtype) for r in refs)
-    jacobian = jacobians[winner][:, free > 0]
-    residual = residual_rows[winner]
-    # (J^T J)^+ from the singular values of J itself: forming J^T J first squares its condition
-    # number, and the pseudo-inverse's cutoff then depends on rounding (as scipy's curve_fit).
-    left, singular, right = np.linalg.svd(jacobian, full_matrices=False)
-    kept = singular > np.finfo(float).eps * max(jacobian.shape) * singular[0]
-    # The residual variance over the data rows' degrees of freedom: N less the light curves' scales
-    # and the parameters' effective number, the data rows' part of the trace of the hat matrix
-    # J (J^T J)^+ J^T = U U^T (Hastie, Tibshirani & Friedman 2009, sec. 3.4.1).  A regularised convex
-    # shape's hundreds of areas count for what the data determine of them, not one each.
-    effective_parameters = float(np.sum(left[:n, kept] ** 2))
-    variance = float(np.sum(residual[:n] ** 2) / max(n - curves.shape[1] - effective_parameters, 1.0))
+    reference = tuple(jnp.asarray(r[winner], dtype) for r in candidate_references)
     covariance = np.zeros((free.size, free.size))
-    covariance[np.ix_(free > 0, free > 0)] = (right[kept].T / singular[kept] ** 2) @ right[kept] * variance
+    covariance[np.ix_(free > 0, free > 0)] = misfit.inverse_normal * misfit.variance
 
     body, period_values, lam, period_jacobian = motions[winner]
     if shape == "convex":
@@ -1259,21 +1348,25 @@ def fit_lightcurve(
         residuals=jnp.asarray(_with_omitted_rows(residuals, omitted), dtype),
         cost=float(refine_costs[winner]),
         success=bool(oks[winner]),
-        search_periods=jnp.asarray(np.stack([period_psi, period_phi], -1), dtype),
-        search_costs=jnp.asarray(costs, dtype),
+        search_periods=jnp.asarray(search_periods, dtype),
+        search_costs=jnp.asarray(search_costs, dtype),
         refine_costs=jnp.asarray(refine_costs, dtype),
         refine_periods=jnp.asarray(refine_periods, dtype),
+        noise_ratio=math.sqrt(misfit.variance),
+        search_rounds=len(rounds),
         _reference=reference,
         shape_model=shape,
         regularisation=tuple(float(w) for w in regularisation),
     )
     if throw and not (bool(oks[winner]) and np.isfinite(refine_costs[winner])):
         raise FitError(
-            f"fit_lightcurve did not converge: the best of {len(best)} refined starts stopped at cost "
-            f"{refine_costs[winner]:.6g} without meeting rtol={rtol}, atol={atol} within max_steps={max_steps} "
-            f"({int(np.sum(oks))} converged).  Check the data, widen or refine the period search, raise "
-            "max_steps, or pass throw=False for the unconverged result (FitError.result).",
+            f"fit_lightcurve did not converge: the best of the {len(refine_costs)} starts solved on all the "
+            f"data stopped at cost {refine_costs[winner]:.6g} without meeting rtol={rtol}, atol={atol} within "
+            f"max_steps={max_steps} ({int(np.sum(oks))} converged).  Check the data, widen or refine the period "
+            "search, raise max_steps, or pass throw=False for the unconverged result (FitError.result).",
             result,
         )
+    if misfit.variance > misfit.threshold:
+        _warn_of_misfit(result, math.sqrt(misfit.threshold), sigma)
     _warn_if_ambiguous(result)
     return result
