@@ -56,6 +56,14 @@ the winner's basin's.  The other starts of the last stage that
 fit within the noise of the winner's cost at periods more than three of those sigmas away are
 competing basins (aliases the data do not rule out): the result lists them and the fit warns.
 
+Where the winner's residuals exceed the stated noise, s^2 / sigma^2 above 1 + 3 sqrt(2 / dof) (the
+sum of squares of a fit in the data's basin is chi-square with dof degrees of freedom: three of its
+standard deviations), the search has missed the data's basin (or sigma understates the noise), and
+it runs again (``search_rounds``, default 3): new random states, drawn afresh every other round,
+and on odd rounds the middles of the period grid's cells, so that each draw is tried on both grids.
+The lowest cost of all the rounds' refined starts wins; a fit still above the bound warns
+(docs/lightcurves.md: the rounds on the tumbler family of benchmarks/lightcurve_family.py).
+
 The windows hold the samples within a radius of the epoch, the first a tenth of the data, each next
 radius 1.8 times the last: a window's fit predicts the phase a factor 1.8 further out, where its
 period error has not yet grown to a cycle.  On every window but the last each start keeps its grid
