@@ -10,6 +10,7 @@ input is refused naming the argument.
 from __future__ import annotations
 
 import importlib.util
+import inspect
 import pathlib
 import sys
 
@@ -17,7 +18,7 @@ import jax
 import numpy as np
 import pytest
 
-from frbjax.lightcurve import tumbler_periodogram, TumblerPeriodogram
+from frbjax.lightcurve import fit_lightcurve, tumbler_periodogram, TumblerPeriodogram
 from frbjax.lightcurve._fit import _check_options
 
 
@@ -29,27 +30,13 @@ family = importlib.util.module_from_spec(_spec)
 sys.modules["_tumbler_family"] = family  # dataclasses look their module up
 _spec.loader.exec_module(family)
 
-FIT_DEFAULTS = dict(
-    principal_axis=False,
-    period_grid=(16, 16),
-    inertia_range=(0.3, 0.98),
-    shape="convex",
-    convex_subdivisions=1,
-    law="lommel_seeliger_lambert",
-    c=0.1,
-    sigma=0.01,
-    regularisation=(10.0, 1.0),
-    epoch=None,
-    starts_per_period=16,
-    n_refine=8,
-    seed=0,
-    rtol=1e-8,
-    atol=1e-8,
-    max_steps=100,
-    search_chunk=256,
-    mode="both",
-    initial=None,
-)
+# fit_lightcurve's defaults of the options its check takes (read from its signature, so that a new
+# option or a changed default is checked as the fit gets it).
+FIT_DEFAULTS = {
+    name: parameter.default
+    for name, parameter in inspect.signature(fit_lightcurve).parameters.items()
+    if name in inspect.signature(_check_options).parameters and name != "periods"
+}
 
 
 def nights(count, per_night, span, seed):
