@@ -282,9 +282,10 @@ def test_the_misfit_bound_is_a_chi_square_tail():
     """fit_lightcurve searches again where the residual variance over the data's degrees of freedom
     (``_misfit``: N less the curves' scales and the hat matrix's trace) exceeds 1 + 3 sqrt(2 / dof).
     For least squares with unit noise (the fit's rows are over sigma) that variance is chi-square over
-    its dof: its mean is 1 and the bound is passed at the chi-square's tail probability (about 0.5%
-    at 110 degrees of freedom).  Checked on 4000 noise draws, each of 120 samples in 4 curves (their
-    means eliminated, as the fit eliminates the scales) fitted by 6 parameters."""
+    its dof: its mean is 1 and the bound is passed at the chi-square's tail probability (0.33% at 110
+    degrees of freedom; measured 0.37%, mean 1.0023).  Checked on 4000 noise draws, each of 120
+    samples in 4 curves (their means eliminated, as the fit eliminates the scales) fitted by 6
+    parameters."""
     from scipy import stats
 
     from frbjax.lightcurve._fit import _misfit

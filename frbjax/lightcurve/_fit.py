@@ -713,8 +713,9 @@ def _misfit(residual, jacobian, samples, curve_count):
     J (J^T J)^+ J^T = U U^T (Hastie, Tibshirani & Friedman 2009, sec. 3.4.1): a regularised convex
     shape's hundreds of areas count for what the data determine of them, not one each.  Where sigma is
     the noise and the model holds, the sum of squares is chi-square with dof degrees of freedom, so the
-    variance exceeds 1 + 3 sqrt(2 / dof) (three standard deviations) by chance about once in a thousand
-    fits: above it, the fit has missed the data's basin (or sigma understates the noise).
+    variance exceeds 1 + 3 sqrt(2 / dof) (three standard deviations) by chance in a few fits in a
+    thousand (the chi-square's tail: 0.33% at 110 degrees of freedom, 0.2% at the family's 850):
+    above it, the fit has missed the data's basin (or sigma understates the noise).
     (J^T J)^+ comes from the singular values of J itself: forming J^T J first squares its condition
     number, and the pseudo-inverse's cutoff then depends on rounding (as scipy's curve_fit)."""
     left, singular, right = np.linalg.svd(jacobian, full_matrices=False)
