@@ -726,6 +726,17 @@ def _misfit(residual, jacobian, samples, curve_count):
     return _Misfit(variance, 1.0 + 3.0 * math.sqrt(2.0 / dof), inverse_normal)
 
 
+def _round_plan(round_index, n_refine):
+    """The search's rounds, three to each draw k of the random states (``seed + k``): the draw on the
+    period grid, its best ``n_refine`` refined; the draw on the middles of the grid's cells, its best
+    ``n_refine``; the first search again, its next best ``3 n_refine`` refined (the starts that a
+    fourfold ``n_refine`` would have refined besides).  Measured on the tumbler family
+    (docs/lightcurves.md): member 6 is found on the middles, members 11 and 12 among the next best
+    starts, member 13 by the second draw.  Returns (draw, middles, how many starts to refine)."""
+    draw, step = divmod(round_index, 3)
+    return draw, step == 1, 3 * n_refine if step == 2 else n_refine
+
+
 def _continuation_windows(distance):
     """Masks (W, N) of the continuation windows: the samples within a radius of the epoch, the first
     radius holding a tenth of them (at least ``_MIN_WINDOW``), each next ``_WINDOW_GROWTH`` times the
@@ -887,7 +898,7 @@ def fit_lightcurve(
     period_grid=(16, 16),
     starts_per_period: int = 16,
     n_refine: int = 32,
-    search_rounds: int = 3,
+    search_rounds: int = 4,
     seed: int = 0,
     rtol: float = 1e-8,
     atol: float = 1e-8,
@@ -1036,24 +1047,22 @@ def fit_lightcurve(
     as_numpy = lambda tree: jax.tree.map(lambda x: np.asarray(x, dtype), tree)  # noqa: E731
     chunk = None  # the first round's: one chunk size for every search and period shift, one program
 
-    def period_axis(low, high, size, round_index):
-        """A log-uniform grid of ``size`` points over [low, high]; on odd rounds the middles of its cells
-        instead, so that a second round's starts lie between the first's."""
+    def period_axis(low, high, size, middles):
+        """A log-uniform grid of ``size`` points over [low, high], or the middles of its cells, so that
+        a round's starts lie between the first's."""
         points = np.linspace(np.log(low), np.log(high), size)
-        if round_index % 2 and size > 1:
+        if middles and size > 1:
             points = 0.5 * (points[1:] + points[:-1])
         return np.exp(points)
 
-    def starts(round_index):
-        """The round's starts: a grid of the periods times random states, and the given motion first in
-        the first round.  Each draw of the states is tried on both grids (rounds 2k and 2k + 1 draw
-        from ``seed + k``): member 6 of the tumbler family is found on the middles with the first
-        round's draw, member 13 on the grid with the second draw (docs/lightcurves.md).  Returns
-        (theta (S, 8), references, the periods (S, 2) of each, valid (S,), the ellipsoid's axes of each
-        start's inertia (S, 3), whether it is the given motion (S,))."""
-        rng = np.random.default_rng(seed + round_index // 2)
+    def starts(draw, middles):
+        """A draw's starts: a grid of the periods (or its cells' middles) times random states drawn from
+        ``seed + draw``, and the given motion first in the first draw on the grid.  Returns (theta
+        (S, 8), references, the periods (S, 2) of each, valid (S,), the ellipsoid's axes of each start's
+        inertia (S, 3), whether it is the given motion (S,))."""
+        rng = np.random.default_rng(seed + draw)
         if principal_axis:
-            grid = period_axis(*(float(p) for p in periods), int(np.atleast_1d(period_grid)[0]), round_index)
+            grid = period_axis(*(float(p) for p in periods), int(np.atleast_1d(period_grid)[0]), middles)
             period_psi = np.repeat(grid, starts_per_period)
             count = len(period_psi)
             period_phi = np.full(count, np.inf)
@@ -1064,8 +1073,8 @@ def fit_lightcurve(
         else:
             (psi_low, psi_high), (phi_low, phi_high) = periods
             n_psi, n_phi = period_grid
-            psi_grid = period_axis(psi_low, psi_high, n_psi, round_index)
-            phi_grid = period_axis(phi_low, phi_high, n_phi, round_index)
+            psi_grid = period_axis(psi_low, psi_high, n_psi, middles)
+            phi_grid = period_axis(phi_low, phi_high, n_phi, middles)
             period_psi, period_phi = (
                 np.repeat(g.reshape(-1), starts_per_period) for g in np.meshgrid(psi_grid, phi_grid, indexing="ij")
             )
@@ -1091,7 +1100,7 @@ def fit_lightcurve(
             momentum = np.where(valid[:, None], momentum, np.array([0.0, 0.0, 1.0]))
         attitudes = _random_rotations(rng, count)
         given = np.zeros(count, bool)
-        if initial is not None and round_index == 0:
+        if initial is not None and draw == 0 and not middles:
             # The given motion as one more start, placed first; its cost is not searched but refined.
             scale = float(np.max(np.asarray(initial.inertia)))
             inertia = np.concatenate([np.asarray(initial.inertia)[None] / scale, inertia])
@@ -1121,29 +1130,39 @@ def fit_lightcurve(
         references = (attitudes, direction, _tangent_basis(direction))
         return theta, references, np.stack([period_psi, period_phi], -1), valid, _ellipsoid_axes(inertia), given
 
+    searched = {}  # (draw, middles) -> the starts, their search costs and which have been refined
+
     def search_round(round_index):
-        """One round: every start's cost on the first window, the best ``n_refine`` refined through the
-        windows as a population (module docstring).  Returns the last stage's starts (the refinement's
-        (parameters, costs, converged, residuals, Jacobians) and their references) and the search's
-        periods and costs."""
+        """One round (:func:`_round_plan`): its draw's starts costed on the first window (once a draw),
+        the best ``count`` not yet refined then refined through the windows as a population (module
+        docstring).  Returns the last stage's starts (the refinement's (parameters, costs, converged,
+        residuals, Jacobians) and their references) and the search's periods and costs (empty where
+        the round reuses an earlier round's search)."""
         nonlocal chunk
-        theta, references, start_periods, valid, axes, given_start = starts(round_index)
-        if chunk is None:
-            chunk = min(int(search_chunk), len(theta))
-        costs = _search(
-            as_numpy(theta),
-            as_numpy(references),
-            as_numpy(_gaussian_image_areas(axes, search_normals, search_solid)),
-            data,
-            jnp.asarray(masks[0], dtype),
-            config,
-            chunk,
-            progress,
-        )
-        costs = np.where(valid, costs, np.inf)
-        best = np.argsort(costs, kind="stable")[:n_refine]
-        if given_start.any() and not given_start[best].any():
+        draw, middles, count = _round_plan(round_index, n_refine)
+        new_search = (draw, middles) not in searched
+        if new_search:
+            theta, references, start_periods, valid, axes, given_start = starts(draw, middles)
+            if chunk is None:
+                chunk = min(int(search_chunk), len(theta))
+            costs = _search(
+                as_numpy(theta),
+                as_numpy(references),
+                as_numpy(_gaussian_image_areas(axes, search_normals, search_solid)),
+                data,
+                jnp.asarray(masks[0], dtype),
+                config,
+                chunk,
+                progress,
+            )
+            costs = np.where(valid, costs, np.inf)
+            searched[draw, middles] = (theta, references, start_periods, axes, given_start, costs, set())
+        theta, references, start_periods, axes, given_start, costs, refined = searched[draw, middles]
+        ranking = np.argsort(costs, kind="stable")
+        best = ranking[~np.isin(ranking, list(refined))][:count]
+        if given_start.any() and not refined and not given_start[best].any():
             best = np.concatenate([np.flatnonzero(given_start), best[:-1]])
+        refined.update(best.tolist())
 
         refs = tuple(r[best] for r in references)
         centres = np.log(start_periods[best])
@@ -1280,7 +1299,8 @@ def fit_lightcurve(
                         full[leader][: len(part)] = part
                     else:
                         full[leader] = part
-        return out, tuple(r[alive] for r in refs), start_periods, costs
+        searched_here = slice(None) if new_search else slice(0)
+        return out, tuple(r[alive] for r in refs), start_periods[searched_here], costs[searched_here]
 
     # ---- the search's rounds: more while the winner's residuals exceed the noise
     rounds = []
