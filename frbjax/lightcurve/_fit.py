@@ -59,10 +59,12 @@ competing basins (aliases the data do not rule out): the result lists them and t
 Where the winner's residuals exceed the stated noise, s^2 / sigma^2 above 1 + 3 sqrt(2 / dof) (the
 sum of squares of a fit in the data's basin is chi-square with dof degrees of freedom: three of its
 standard deviations), the search has missed the data's basin (or sigma understates the noise), and
-it runs again (``search_rounds``, default 3): new random states, drawn afresh every other round,
-and on odd rounds the middles of the period grid's cells, so that each draw is tried on both grids.
-The lowest cost of all the rounds' refined starts wins; a fit still above the bound warns
-(docs/lightcurves.md: the rounds on the tumbler family of benchmarks/lightcurve_family.py).
+it runs again (``search_rounds``, default 4): the first round's random states on the middles of the
+period grid's cells, a new draw on the grid, then the first search's next ``3 n_refine`` best starts
+refined (what a fourfold ``n_refine`` would add, at no cost where the first round suffices), and so on
+with further draws (:func:`_round_plan`).  The lowest cost of
+all the rounds' refined starts wins; a fit still above the bound warns (docs/lightcurves.md: the
+rounds on the tumbler family of benchmarks/lightcurve_family.py).
 
 The windows hold the samples within a radius of the epoch, the first a tenth of the data, each next
 radius 1.8 times the last: a window's fit predicts the phase a factor 1.8 further out, where its
@@ -727,14 +729,17 @@ def _misfit(residual, jacobian, samples, curve_count):
 
 
 def _round_plan(round_index, n_refine):
-    """The search's rounds, three to each draw k of the random states (``seed + k``): the draw on the
-    period grid, its best ``n_refine`` refined; the draw on the middles of the grid's cells, its best
-    ``n_refine``; the first search again, its next best ``3 n_refine`` refined (the starts that a
-    fourfold ``n_refine`` would have refined besides).  Measured on the tumbler family
-    (docs/lightcurves.md): member 6 is found on the middles, members 11 and 12 among the next best
-    starts, member 13 by the second draw.  Returns (draw, middles, how many starts to refine)."""
-    draw, step = divmod(round_index, 3)
-    return draw, step == 1, 3 * n_refine if step == 2 else n_refine
+    """The search's rounds, four to each two draws of the random states (draws 2c and 2c + 1 of cycle
+    c, from ``seed + draw``): the first draw on the period grid, its best ``n_refine`` refined; the same
+    draw on the middles of the grid's cells; the second draw on the grid; then the first search
+    again, its next ``3 n_refine`` best starts refined (the starts a fourfold ``n_refine`` would have
+    refined besides).  Measured on the tumbler family (docs/lightcurves.md): member 6 is found on the
+    middles, member 13 by the second draw, members 11 and 12 among the first search's next best
+    starts (with that round third, member 13 stopped there in a wrong basin whose residuals pass the
+    misfit bound).  Returns (draw, middles, how many starts to refine)."""
+    cycle, step = divmod(round_index, 4)
+    draw = 2 * cycle + (step == 2)
+    return draw, step == 1, 3 * n_refine if step == 3 else n_refine
 
 
 def _continuation_windows(distance):
@@ -928,9 +933,10 @@ def fit_lightcurve(
     light curves themselves (``periods=result.proposals[i]``, or ``**result.fit_options(i)``).
     ``search_rounds``: while the best fit's residuals exceed the stated noise (s^2 / sigma^2 above
     1 + 3 sqrt(2 / dof), three standard deviations of a chi-square: :attr:`LightcurveFit.noise_ratio`),
-    the search runs again with new random states, on odd rounds on the middles of the grid's cells,
-    up to this many rounds; the lowest cost over all rounds wins, and a fit still above the bound
-    warns (:class:`MisfitWarning`).
+    the search runs again, up to this many rounds: the same random states on the middles of the
+    grid's cells, new random states on the grid, the first search's next ``3 n_refine`` starts
+    refined (and so on: four rounds to two draws); the lowest cost over all rounds wins, and a fit
+    still above the bound warns (:class:`MisfitWarning`).
     ``shape``: "convex" (log-areas on the facet normals of an icosphere of
     ``convex_subdivisions``, with ``regularisation`` = (closure weight, smoothness weight)) or
     "ellipsoid".  The defaults (``n_refine=32``, 320 normals) are the settings measured on the
