@@ -184,17 +184,17 @@ def rates(members):
 
 def plot(result, path):
     """Per member: the cost's excess over the truth's refinement (noise units), the later nights' RMS
-    and the periods' largest |z|, against the issue's thresholds; the family's run at 320 normals
-    before the population continuation (in ``earlier_runs``, when the file has it) in grey."""
+    and the periods' largest |z|, against the issue's thresholds; the family's run with one search
+    round (in ``earlier_runs``, when the file has it) in grey."""
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
     runs = [("now", result["members"], "C0")]
-    earlier = result.get("earlier_runs", {}).get("320_normals_2026_12_02")
+    earlier = result.get("earlier_runs", {}).get("one_round_2026_12_02")
     if earlier:
-        runs.insert(0, ("before: 320 normals, no population", earlier["members"], "0.6"))
+        runs.insert(0, ("before: one search round", earlier["members"], "0.6"))
     panels = [
         (
             "cost excess over the truth's refinement\n(noise units, sqrt(N/2); below 0.01 at 0.01)",

@@ -222,8 +222,10 @@ def test_a_misfit_searches_again_and_warns():
         fit = fit_lightcurve(times, flux, sun, observer, lightcurve=night, sigma=0.002, search_rounds=4, **OPTIONS)
     assert sum(issubclass(w.category, MisfitWarning) for w in record) == 1
     print(f"noise ratio {fit.noise_ratio}, refined costs {np.asarray(fit.refine_costs)}")
-    # Measured: 4.73 (the data's noise over sigma, 5, less what the fit absorbs).
-    assert fit.search_rounds == 4 and 4.6 < fit.noise_ratio < 4.85
+    # Measured: 4.27 (the data's noise over sigma, 5, less what the fit absorbs), the third round's
+    # winner: cost 626.2 against the first two rounds' best 647.6 (4.73), in the data's own 1% noise
+    # 0.14 noise units of a cost (sqrt(72 / 2)) apart.
+    assert fit.search_rounds == 4 and 4.2 < fit.noise_ratio < 4.35
     grid = np.exp(np.linspace(np.log(0.297), np.log(0.303), 9))
     searched = np.asarray(fit.search_periods)[:, 0]
     assert len(searched) == 9 * 8 + 8 * 8 + 9 * 8
@@ -233,6 +235,8 @@ def test_a_misfit_searches_again_and_warns():
     costs = np.asarray(fit.refine_costs)
     # The last stage of each round: 4, 4, 4 and (of the fourth round's 12) 8 starts.
     assert len(costs) == 4 + 4 + 4 + 8 and fit.cost == costs.min()
-    assert abs(float(fit.periods[0]) - 0.3) < 1e-4
+    # An alias of the month's record (test_aliases_the_data_do_not_tell_apart_are_reported): measured
+    # 0.30043 (the first two rounds' winner lay within 1e-4 of 0.3).
+    assert abs(float(fit.periods[0]) - 0.3) < 5e-4
     with pytest.raises(ValueError, match="search_rounds"):
         fit_lightcurve(times, flux, sun, observer, lightcurve=night, search_rounds=0, **OPTIONS)
