@@ -213,8 +213,8 @@ def test_a_misfit_searches_again_and_warns():
     fit_lightcurve runs its second round, on the middles of the first grid's cells, its third, new
     random states on the grid, and its fourth, the first search's next 3 n_refine = 12 starts
     refined (no new search), keeps the lowest cost of all rounds' refined starts and warns
-    (MisfitWarning).  At the data's own sigma the first
-    round is within the bound and the only one (``test_aliases_the_data_do_not_tell_apart_are_reported``)."""
+    (MisfitWarning).  At the data's own sigma the first round is within the bound and the only one
+    (``test_aliases_the_data_do_not_tell_apart_are_reported``)."""
     from frbjax.lightcurve import MisfitWarning
 
     times, flux, sun, observer, night = observations()

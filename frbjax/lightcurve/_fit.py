@@ -62,9 +62,9 @@ standard deviations), the search has missed the data's basin (or sigma understat
 it runs again (``search_rounds``, default 4): the first round's random states on the middles of the
 period grid's cells, a new draw on the grid, then the first search's next ``3 n_refine`` best starts
 refined (what a fourfold ``n_refine`` would add, at no cost where the first round suffices), and so on
-with further draws (:func:`_round_plan`).  The lowest cost of
-all the rounds' refined starts wins; a fit still above the bound warns (docs/lightcurves.md: the
-rounds on the tumbler family of benchmarks/lightcurve_family.py).
+with further draws (:func:`_round_plan`).  The lowest cost of all the rounds' refined starts wins; a
+fit still above the bound warns (docs/lightcurves.md: the rounds on the tumbler family of
+benchmarks/lightcurve_family.py).
 
 The windows hold the samples within a radius of the epoch, the first a tenth of the data, each next
 radius 1.8 times the last: a window's fit predicts the phase a factor 1.8 further out, where its
