@@ -1136,7 +1136,7 @@ def fit_lightcurve(
         references = (attitudes, direction, _tangent_basis(direction))
         return theta, references, np.stack([period_psi, period_phi], -1), valid, _ellipsoid_axes(inertia), given
 
-    searched = {}  # (draw, middles) -> the starts, their search costs and which have been refined
+    searched = {}  # (draw, middles) -> the starts, their search costs and which have been refined (mask)
 
     def search_round(round_index):
         """One round (:func:`_round_plan`): its draw's starts costed on the first window (once a draw),
@@ -1162,13 +1162,14 @@ def fit_lightcurve(
                 progress,
             )
             costs = np.where(valid, costs, np.inf)
-            searched[draw, middles] = (theta, references, start_periods, axes, given_start, costs, set())
+            refined = np.zeros(len(costs), bool)
+            searched[draw, middles] = (theta, references, start_periods, axes, given_start, costs, refined)
         theta, references, start_periods, axes, given_start, costs, refined = searched[draw, middles]
         ranking = np.argsort(costs, kind="stable")
-        best = ranking[~np.isin(ranking, list(refined))][:count]
-        if given_start.any() and not refined and not given_start[best].any():
+        best = ranking[~refined[ranking]][:count]
+        if new_search and given_start.any() and not given_start[best].any():
             best = np.concatenate([np.flatnonzero(given_start), best[:-1]])
-        refined.update(best.tolist())
+        refined[best] = True
 
         refs = tuple(r[best] for r in references)
         centres = np.log(start_periods[best])
@@ -1305,8 +1306,9 @@ def fit_lightcurve(
                         full[leader][: len(part)] = part
                     else:
                         full[leader] = part
-        searched_here = slice(None) if new_search else slice(0)
-        return out, tuple(r[alive] for r in refs), start_periods[searched_here], costs[searched_here]
+        if not new_search:
+            start_periods, costs = start_periods[:0], costs[:0]
+        return out, tuple(r[alive] for r in refs), start_periods, costs
 
     # ---- the search's rounds: more while the winner's residuals exceed the noise
     rounds = []
