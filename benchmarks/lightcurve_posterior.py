@@ -96,15 +96,18 @@ def main():
     posterior_seconds = time.perf_counter() - start
     drawn = np.asarray(posterior.periods)
     rows = {}
+    # The posterior samples the winner's basin under the model's likelihood: its spread is compared
+    # with the model covariance's sigmas (before 2026-12-03 these were ``fit.period_sigma``).
+    period_sigma, inertia_sigma = fit.standard_errors(fit.covariance)
     for k, name in enumerate(("P_psi", "P_phi")):
         low90, high90, low99, high99 = np.quantile(drawn[:, k], [0.05, 0.95, 0.005, 0.995])
         rows[name] = {
             "truth": float(periods[k]),
             "fit": float(fit.periods[k]),
-            "fit_sigma": float(fit.period_sigma[k]),
+            "fit_sigma": float(period_sigma[k]),
             "posterior_mean": float(drawn[:, k].mean()),
             "posterior_sd": float(drawn[:, k].std(ddof=1)),
-            "sd_over_fit_sigma": float(drawn[:, k].std(ddof=1) / fit.period_sigma[k]),
+            "sd_over_fit_sigma": float(drawn[:, k].std(ddof=1) / period_sigma[k]),
             "truth_in_90": bool(low90 <= periods[k] <= high90),
             "truth_in_99": bool(low99 <= periods[k] <= high99),
         }
@@ -120,7 +123,7 @@ def main():
         "posterior_seconds": posterior_seconds,
         "periods": rows,
         "inertia_posterior_sd": moments.std(axis=0, ddof=1).tolist(),
-        "inertia_fit_sigma": np.asarray(fit.inertia_sigma).tolist(),
+        "inertia_fit_sigma": np.asarray(inertia_sigma).tolist(),
         "max_r_hat": float(np.nanmax(np.asarray(posterior.r_hat))),
         "divergences": np.asarray(posterior.divergences).tolist(),
         "long_axis_fraction": float(np.mean(np.asarray(posterior.long_axis_mode))),

@@ -48,13 +48,28 @@ of their shifts by quarter cycles (up to a cycle) at the new window's edge, cost
 costs its starts, so that Levenberg-Marquardt starts in the cycle count that fits the new samples
 rather than in the nearest basin of a wrong one.  For ``shape="convex"`` the convex shape, started
 from the Gaussian image of the fitted ellipsoid, is then solved with the motion on all the data for
-the best four.  The lowest cost wins.  Periods,
-moments and their standard errors come from the covariance (J^T J)^+ s^2 of the winner (s^2 the
-residual variance of the data rows over N less the parameters' effective number, the data rows' part
-of the hat matrix's trace: a regularised shape's areas count for what the data determine of them):
-the winner's basin's.  The other starts of the last stage that
-fit within the noise of the winner's cost at periods more than three of those sigmas away are
-competing basins (aliases the data do not rule out): the result lists them and the fit warns.
+the best four.  The lowest cost wins.
+
+Uncertainty
+-----------
+Periods and moments come with standard errors from two covariances of the winner's parameters: the
+model's, (J^T J)^+ s^2 (s^2 the residual variance of the data rows over N less the parameters'
+effective number, the data rows' part of the hat matrix's trace: a regularised shape's areas count
+for what the data determine of them), right where the model describes the body and the noise is
+independent; and the cluster-robust sandwich (J^T J)^+ M (J^T J)^+, M = (G - 1) / G sum_c u_c u_c^T
+over the light curves' scores u_c = J_c^T (I - H_cc)^-1 r_c (centred; H_cc the hat matrix's block of
+light curve c: the jackknife over the light curves, CR3), which stays right where the residuals of a
+light curve are correlated: a shape outside the model's family leaves residuals that repeat with the
+rotation through each night (Liang & Zeger 1986; Bell & McCaffrey 2002; MacKinnon, Nielsen & Webb
+2023).  Each sigma is the larger of the two (the sandwich needs at least
+``_MIN_CLUSTERS`` light curves).  That is the winner's basin's uncertainty (``basin_period_sigma``).
+The other starts of the last stage that fit within the noise of the winner's cost at periods more
+than three of those sigmas away are competing basins (aliases the data do not rule out): the result
+lists them, the fit warns, and the reported ``period_sigma`` and ``inertia_sigma`` are those of the
+equal-weight mixture of the winner's and their basins (each with the winner's basin's spread): the
+data cannot rank them, so the answer is any of them.  On the tumbler family
+(benchmarks/lightcurve_family.py, docs/lightcurves.md) the model's covariance alone put the truth
+within three sigmas for 17 of 24 members.
 
 Where the winner's residuals exceed the stated noise, s^2 / sigma^2 above 1 + 3 sqrt(2 / dof) (the
 sum of squares of a fit in the data's basin is chi-square with dof degrees of freedom: three of its
@@ -108,6 +123,15 @@ _SEARCH_SUBDIVISIONS = 1
 _WINDOW_GROWTH = 1.8
 # Further solves of a leader that stopped at max_steps before it counts as not converged (FitError).
 _CONTINUATIONS = 3
+# The cluster-robust covariance estimates each variance from G light curves' scores (G - 1 degrees
+# of freedom): below this many it is too noisy to use (Cameron & Miller 2015, sec. VI, on few
+# clusters), and the larger of it and the model's would mostly be the noise of the estimate; the
+# model's covariance alone then gives the sigmas.  The family of benchmarks/lightcurve_family.py fits
+# 20 nights.
+_MIN_CLUSTERS = 12
+# A light curve whose rows alone determine a direction of the parameters (leverage 1) has no
+# jackknife there; (1 - h)^-1 is capped at 100.
+_MAX_LEVERAGE = 0.99
 # The refinement's population: the best half of the starts go on to each next window, down to
 # _SURVIVORS; the convex stage solves the best _CONVEX_STARTS of the last window.
 _SURVIVORS = 8
@@ -425,7 +449,8 @@ class CompetingBasins(typing.NamedTuple):
 
     - ``cost_excess`` (M,): each one's cost above the winner's, in noise units of a cost;
     - ``periods`` (M, 2): its (P_psi, P_phi);
-    - ``distance`` (M,): its largest |P - P_winner| in the winner's reported sigmas.
+    - ``distance`` (M,): its largest |P - P_winner| in the winner's basin's sigmas
+      (``LightcurveFit.basin_period_sigma``).
     """
 
     cost_excess: np.ndarray
@@ -435,7 +460,7 @@ class CompetingBasins(typing.NamedTuple):
 
 class AmbiguousFitWarning(UserWarning):
     """:func:`fit_lightcurve` found basins at other periods that fit the data within the noise of the
-    winner's (:meth:`LightcurveFit.competing_basins`): the reported sigmas are the winner's basin's."""
+    winner's (:meth:`LightcurveFit.competing_basins`): the reported sigmas span them all."""
 
 
 def _warn_if_ambiguous(result, stacklevel=3):
@@ -450,8 +475,9 @@ def _warn_if_ambiguous(result, stacklevel=3):
     )
     warnings.warn(
         f"fit_lightcurve: {len(basins.cost_excess)} other basin(s) fit the data within the noise of the winner "
-        f"(periods {_format_periods(winner)}): {listed}.  The data do not tell them apart; the reported sigmas are "
-        "the winner's basin's (LightcurveFit.competing_basins()).  More nights, or a wider spread of them, decide.",
+        f"(periods {_format_periods(winner)}): {listed}.  The data do not tell them apart: the reported sigmas are "
+        "those of the equal-weight mixture of these basins and the winner's (the winner's own: basin_period_sigma; "
+        "LightcurveFit.competing_basins()).  More nights, or a wider spread of them, decide.",
         AmbiguousFitWarning,
         stacklevel=stacklevel,
     )
@@ -486,14 +512,18 @@ class LightcurveFit(eqx.Module):
     - ``shape``: the fitted :class:`ConvexShape` (principal frame; relative size);
     - ``epoch``: the reference time (model time t - epoch);
     - ``periods`` (2,): (P_psi, P_phi), precession and rotation periods (principal axis: (P, inf));
-      ``period_sigma`` (2,): their standard errors from ``covariance``;
+      ``period_sigma`` (2,): their standard errors: the winner's basin's (``basin_period_sigma``, the
+      larger of ``covariance``'s and ``robust_covariance``'s), widened to span the competing basins
+      where there are any (:meth:`competing_basins`; the module docstring's "Uncertainty");
     - ``long_axis_mode``: LAM (True) or SAM; ``energy_ratio``: E / E0 = 2 E I3 / |L|^2 (1 for a
       principal-axis rotation about the largest moment);
-    - ``inertia`` (3,): fitted moments scaled to a largest of 1; ``inertia_sigma`` (3,);
+    - ``inertia`` (3,): fitted moments scaled to a largest of 1; ``inertia_sigma`` (3,), as
+      ``period_sigma``;
     - ``momentum_direction`` (3,): the inertial direction of L;
     - ``parameters``: (theta (8), shape parameters) of the module docstring; ``covariance``: their
       covariance (J^T J)^+ s^2 (s^2: the data rows' residual variance over their effective degrees
-      of freedom);
+      of freedom); ``robust_covariance``: the cluster-robust sandwich over the light curves (zeros with
+      fewer than ``_MIN_CLUSTERS`` = 12 light curves);
     - ``scales`` (C,): the fitted scale of each light curve (data = scale * model);
     - ``residuals`` (N,): log(data) - log(scale * model) per sample (input order);
     - ``cost``: half the sum of squared (weighted) residuals; ``success``: the solver converged;
@@ -519,6 +549,7 @@ class LightcurveFit(eqx.Module):
     c: float
     periods: Float[Array, 2]
     period_sigma: Float[Array, 2]
+    basin_period_sigma: Float[Array, 2]
     long_axis_mode: bool
     energy_ratio: float
     inertia: Float[Array, 3]
@@ -526,6 +557,7 @@ class LightcurveFit(eqx.Module):
     momentum_direction: Float[Array, 3]
     parameters: Float[Array, " P"]
     covariance: Float[Array, "P P"]
+    robust_covariance: Float[Array, "P P"]
     scales: Float[Array, " C"]
     residuals: Float[Array, " N"]
     cost: float
@@ -547,33 +579,48 @@ class LightcurveFit(eqx.Module):
     def competing_basins(self, within: float = 1.0) -> CompetingBasins:
         """The runner-up solutions the data do not tell from this one: the last stage's starts
         (``refine_costs``, ``refine_periods``) whose cost is within ``within`` noise units of the
-        winner's and whose periods differ from the winner's by more than 3 reported sigmas (another
-        basin, not the winner's own found twice).
+        winner's and whose periods differ from the winner's by more than 3 of its basin's sigmas
+        (``basin_period_sigma``: another basin, not the winner's own found twice).
 
         The noise unit of a cost is its standard deviation under the fit's own noise level,
         sqrt(N / 2) (s / sigma)^2 with N the samples fitted and (s / sigma)^2 = 2 cost / N (1 when
         ``sigma`` is the data's noise): the cost of the truth's basin varies by that much from one
         draw of the noise to another, so a runner-up within it is as good an answer.  Where there is
-        one, the reported ``period_sigma`` (the winner's own basin) understates the uncertainty: the
-        periods are one of these, and more data (nights that resolve the aliases) decide.
+        one, the periods are one of these, and more data (nights that resolve the aliases) decide;
+        the reported ``period_sigma`` and ``inertia_sigma`` span them (with the default ``within``).
 
         Returns a :class:`CompetingBasins` sorted by cost (empty arrays when there is none).
         """
         within = checks.scalar("within", within, positive=True, allow_zero=True)
-        costs = np.asarray(self.refine_costs, float)
         periods = np.asarray(self.refine_periods, float)
-        winner_periods = np.asarray(self.periods, float)
-        sigma = np.asarray(self.period_sigma, float)
-        samples = int(np.sum(np.isfinite(np.asarray(self.residuals))))
-        unit = math.sqrt(samples / 2) * max(2 * float(self.cost) / max(samples, 1), np.finfo(float).tiny)
-        excess = (costs - float(self.cost)) / unit
-        # Distance from the winner in its sigmas; a principal-axis rotator's second period is infinite.
-        finite = np.isfinite(winner_periods) & np.isfinite(periods)
-        difference = np.abs(np.where(finite, periods, 0.0) - np.where(finite, winner_periods, 0.0))
-        distance = (difference / np.maximum(sigma, np.finfo(float).tiny)).max(-1)
-        competing = np.isfinite(excess) & (excess >= 0) & (excess <= within) & (distance > 3)
-        order = np.flatnonzero(competing)[np.argsort(excess[competing], kind="stable")]
-        return CompetingBasins(cost_excess=excess[order], periods=periods[order], distance=distance[order])
+        order, excess, distance = _basins(
+            np.asarray(self.refine_costs, float),
+            periods,
+            np.asarray(self.periods, float),
+            np.asarray(self.basin_period_sigma, float),
+            int(np.sum(np.isfinite(np.asarray(self.residuals)))),
+            self.cost,
+            within,
+        )
+        return CompetingBasins(cost_excess=excess, periods=periods[order], distance=distance)
+
+    def standard_errors(self, covariance=None):
+        """(period sigma (2,), inertia sigma (3,)) of the winner's basin, first order in
+        ``covariance`` (P, P) of ``parameters``: ``fit.covariance`` (the model's alone, which a
+        posterior under the model's likelihood reproduces: :mod:`frbjax.posterior`) or
+        ``fit.robust_covariance``; by default the larger of the two per quantity, as
+        ``basin_period_sigma``.  No competing basins are spanned (``period_sigma`` spans them)."""
+        covariances = (self.covariance, self.robust_covariance) if covariance is None else (covariance,)
+        covariances = tuple(np.asarray(cov, float) for cov in covariances)
+        size = np.asarray(self.parameters).size
+        for cov in covariances:
+            if cov.shape != (size, size):
+                raise ValueError(f"covariance must have shape (P, P) = ({size}, {size}), got {cov.shape}")
+        principal_axis = not np.isfinite(float(self.periods[1]))
+        reference = tuple(jnp.asarray(r) for r in self._reference)
+        _, _, _, period_jacobian = _fitted_motion(jnp.asarray(self.parameters[:8]), reference, principal_axis)
+        period_jacobian = np.nan_to_num(np.asarray(period_jacobian), posinf=0.0, neginf=0.0)
+        return _standard_errors(period_jacobian, np.asarray(self.parameters, float), covariances)
 
     @property
     def ambiguous(self) -> bool:
@@ -726,6 +773,85 @@ def _misfit(residual, jacobian, samples, curve_count):
     variance = float(np.sum(residual[:samples] ** 2) / dof)
     inverse_normal = (right[kept].T / singular[kept] ** 2) @ right[kept]
     return _Misfit(variance, 1.0 + 3.0 * math.sqrt(2.0 / dof), inverse_normal)
+
+
+def _cluster_robust_covariance(residual, jacobian, curves, inverse_normal):
+    """The cluster-robust (sandwich) covariance (J^T J)^+ M (J^T J)^+ of the free parameters, the
+    light curves the clusters (CR3, the cluster jackknife's), or None with fewer than
+    ``_MIN_CLUSTERS`` of them.
+
+    M = (G - 1) / G sum_c (u_c - u_mean)(u_c - u_mean)^T over the light curves' scores
+    u_c = J_c^T (I - H_cc)^-1 r_c, H_cc = J_c (J^T J)^+ J_c^T the hat matrix's block of light curve c's
+    data rows (the rows after the data, the shape's regularisation, are a prior: in the bread, not the
+    meat; centring removes their share of the score).  (J^T J)^+ u_c is, to first order, how far the
+    fit moves when light curve c is left out, so this is the jackknife's variance over the light
+    curves (Bell & McCaffrey 2002; MacKinnon, Nielsen & Webb 2023, eq. 3.4 and sec. 3.3): it holds
+    whatever the residuals' correlation within a light curve.  The residuals themselves would not
+    do (CR1, u_c = J_c^T r_c): a fit with hundreds of shape parameters pulls each night's residuals
+    towards its model (H_cc's eigenvalues reach 0.99 on the tumbler family), and CR1's sigmas came
+    out 0.5 to 0.9 times the model's.  Leverages are capped at ``_MAX_LEVERAGE``."""
+    samples, clusters = curves.shape
+    if clusters < _MIN_CLUSTERS:
+        return None
+    data_jacobian, data_residual = jacobian[:samples], residual[:samples]
+    label = np.argmax(curves, 1)
+    scores = np.zeros((clusters, jacobian.shape[1]))
+    for curve in range(clusters):
+        rows = label == curve
+        block = data_jacobian[rows]
+        leverage, vectors = np.linalg.eigh(block @ inverse_normal @ block.T)
+        lifted = vectors @ ((vectors.T @ data_residual[rows]) / np.maximum(1.0 - leverage, 1.0 - _MAX_LEVERAGE))
+        scores[curve] = block.T @ lifted
+    scores = scores - scores.mean(0)
+    meat = (clusters - 1) / clusters * scores.T @ scores
+    return inverse_normal @ meat @ inverse_normal
+
+
+def _basins(costs, periods, winner_periods, sigma, samples, cost, within):
+    """(indices into ``costs``, cost excess, distance) of the competing basins, best first: the
+    starts within ``within`` noise units of the winner's cost at periods more than 3 ``sigma`` away
+    (:meth:`LightcurveFit.competing_basins`)."""
+    unit = math.sqrt(samples / 2) * max(2 * float(cost) / max(samples, 1), np.finfo(float).tiny)
+    excess = (costs - float(cost)) / unit
+    # Distance from the winner in its sigmas; a principal-axis rotator's second period is infinite.
+    finite = np.isfinite(winner_periods) & np.isfinite(periods)
+    difference = np.abs(np.where(finite, periods, 0.0) - np.where(finite, winner_periods, 0.0))
+    distance = (difference / np.maximum(sigma, np.finfo(float).tiny)).max(-1)
+    competing = np.isfinite(excess) & (excess >= 0) & (excess <= within) & (distance > 3)
+    order = np.flatnonzero(competing)[np.argsort(excess[competing], kind="stable")]
+    return order, excess[order], distance[order]
+
+
+def _scaled_moments(parameters):
+    """The moments (exp theta_0, exp theta_1, 1) of ``parameters`` scaled to a largest of 1."""
+    moments = np.exp(np.concatenate([np.asarray(parameters[:2], float), [0.0]]))
+    return moments / moments.max()
+
+
+def _standard_errors(period_jacobian, parameters, covariances):
+    """(periods' (2,), scaled moments' (3,)) standard errors, first order in each of ``covariances``
+    (of ``parameters``), the largest over them; ``period_jacobian`` (2, 8) the periods' in theta."""
+    moments = _scaled_moments(parameters)
+    largest = np.argmax(moments)
+    # d log(I_i / I_largest) / d theta: the moments are (exp theta_0, exp theta_1, 1).
+    d_log = np.zeros((3, 8))
+    for j in range(2):
+        d_log[:, j] = (np.arange(3) == j).astype(float) - float(largest == j)
+
+    def sigma(derivative):
+        variances = [np.diag(derivative @ np.asarray(cov, float)[:8, :8] @ derivative.T) for cov in covariances]
+        return np.sqrt(np.maximum(np.max(variances, 0), 0))
+
+    return sigma(period_jacobian), moments * sigma(d_log)
+
+
+def _mixture_sigma(sigma, values):
+    """Standard deviations of the equal-weight mixture of Gaussians centred at ``values`` (K, D), each
+    of standard deviation ``sigma`` (D,): sqrt(sigma^2 + the centres' variance); infinite or
+    non-finite centres (a rotator's second period) leave ``sigma`` as it is."""
+    finite = np.all(np.isfinite(values), 0)
+    spread = np.var(np.where(finite, values, 0.0), 0)
+    return np.sqrt(sigma**2 + np.where(finite, spread, 0.0))
 
 
 def _round_plan(round_index, n_refine):
@@ -1334,6 +1460,10 @@ def fit_lightcurve(
     reference = tuple(jnp.asarray(r[winner], dtype) for r in candidate_references)
     covariance = np.zeros((free.size, free.size))
     covariance[np.ix_(free > 0, free > 0)] = misfit.inverse_normal * misfit.variance
+    robust = _cluster_robust_covariance(outs[3][winner], outs[4][winner][:, free > 0], curves, misfit.inverse_normal)
+    robust_covariance = np.zeros_like(covariance)
+    if robust is not None:
+        robust_covariance[np.ix_(free > 0, free > 0)] = robust
 
     body, period_values, lam, period_jacobian = motions[winner]
     if shape == "convex":
@@ -1344,17 +1474,21 @@ def fit_lightcurve(
     # Periods, energy and their uncertainties (first order in the covariance).
     period_values, lam, period_jacobian = (np.asarray(x) for x in (period_values, lam, period_jacobian))
     period_jacobian = np.nan_to_num(period_jacobian, posinf=0.0, neginf=0.0)
-    period_sigma = np.sqrt(np.maximum(np.diag(period_jacobian @ covariance[:8, :8] @ period_jacobian.T), 0))
-    inertia_fit = np.exp(np.concatenate([p[:2], [0.0]]))
-    largest = np.argmax(inertia_fit)
-    moments = inertia_fit / inertia_fit[largest]
-    d_log = np.zeros((3, 8))
-    for j in range(2):
-        d_log[:, j] = (np.arange(3) == j).astype(float) - float(largest == j)
-    inertia_sigma = moments * np.sqrt(np.maximum(np.diag(d_log @ covariance[:8, :8] @ d_log.T), 0))
+    # The larger of the model's and the cluster-robust variances (module docstring, "Uncertainty").
+    basin_period_sigma, basin_inertia_sigma = _standard_errors(period_jacobian, p, (covariance, robust_covariance))
+    moments = _scaled_moments(p)
+    # Competing basins widen the sigmas to their equal-weight mixture's; a basin's moments are
+    # matched to the winner's by rank (its axes may be labelled otherwise).
+    order, _, _ = _basins(
+        refine_costs, refine_periods, period_values, basin_period_sigma, n, refine_costs[winner], within=1.0
+    )
+    rank = np.argsort(np.argsort(moments))
+    basin_moments = np.stack([moments] + [np.sort(_scaled_moments(fitted[k]))[rank] for k in order])
+    period_sigma = _mixture_sigma(basin_period_sigma, np.concatenate([period_values[None], refine_periods[order]]))
+    inertia_sigma = _mixture_sigma(basin_inertia_sigma, basin_moments)
     l_body = np.asarray(body.initial_angular_momentum)
     momentum_direction = np.asarray(_rotate(body.initial_attitude, l_body / np.linalg.norm(l_body)))
-    energy_ratio = float(np.sum(l_body**2 / inertia_fit) * inertia_fit.max() / np.sum(l_body**2))
+    energy_ratio = float(np.sum(l_body**2 / moments) / np.sum(l_body**2))
 
     # Scales and residuals of the fitted model, per curve.
     log_model = np.log(
@@ -1374,6 +1508,7 @@ def fit_lightcurve(
         c=float(c),
         periods=jnp.asarray(period_values),
         period_sigma=jnp.asarray(period_sigma),
+        basin_period_sigma=jnp.asarray(basin_period_sigma),
         long_axis_mode=bool(lam) and not principal_axis,
         energy_ratio=energy_ratio,
         inertia=jnp.asarray(moments, dtype),
@@ -1381,6 +1516,7 @@ def fit_lightcurve(
         momentum_direction=jnp.asarray(momentum_direction, dtype),
         parameters=jnp.asarray(p, dtype),
         covariance=jnp.asarray(covariance, dtype),
+        robust_covariance=jnp.asarray(robust_covariance, dtype),
         scales=jnp.asarray(np.exp(offsets), dtype),
         residuals=jnp.asarray(_with_omitted_rows(residuals, omitted), dtype),
         cost=float(refine_costs[winner]),
