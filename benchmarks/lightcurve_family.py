@@ -37,7 +37,7 @@ Rates over the members run are printed and written with the members to
 already in it are skipped (``--resume``), so that a long run can be continued.
 
 Usage: python benchmarks/lightcurve_family.py [--members 0,5,12] [--width 0.1] [--resume] [--truth-from PATH]
-       [--starts-per-period 16] [--period-grid 16,16] [--refine 8] [--convex-subdivisions 1]
+       [--starts-per-period 16] [--period-grid 16,16] [--refine 8] [--convex-subdivisions 1] [--all-rounds]
        [--output-dir DIR] [--plot-only] [--basins-only]
 (the figure: lightcurve_family.png beside the JSON, redrawn after each run or with --plot-only)
 """
@@ -266,6 +266,9 @@ def main(argv=None):
     parser.add_argument("--starts-per-period", type=int, default=None)
     parser.add_argument("--refine", type=int, default=None)
     parser.add_argument("--convex-subdivisions", type=int, default=None, help="fit_lightcurve's default: 2")
+    parser.add_argument(
+        "--all-rounds", action="store_true", help="every search round whatever the misfit (stop_at_noise=False)"
+    )
     parser.add_argument("--resume", action="store_true")
     parser.add_argument("--truth-from", help="an earlier run's JSON: its members' truth-refined figures")
     parser.add_argument("--output-dir", default=str(pathlib.Path(__file__).parent / "results"))
@@ -294,6 +297,8 @@ def main(argv=None):
         fit_options["n_refine"] = options.refine
     if options.convex_subdivisions is not None:
         fit_options["convex_subdivisions"] = options.convex_subdivisions
+    if options.all_rounds:
+        fit_options["stop_at_noise"] = False
     output.parent.mkdir(parents=True, exist_ok=True)
     # A resumed run keeps what the file holds besides its members (e.g. a run at other settings).
     previous = json.loads(output.read_text()) if options.resume and output.exists() else {}

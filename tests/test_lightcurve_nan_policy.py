@@ -16,12 +16,20 @@ import numpy as np
 import pytest
 
 from frbjax import FitError, FreeRigidBody
-from frbjax.lightcurve import brightness, ConvexShape, fit_lightcurve, LightcurveFit
+from frbjax.lightcurve import AmbiguousFitWarning, brightness, ConvexShape, fit_lightcurve, LightcurveFit
 
 
 NIGHTS, PER_NIGHT = 8, 9
+# Rounds only while the fit misses the noise (stop_at_noise=True), as the rounds' tests below say; the
+# other fits here are about the data, not the rounds.
 OPTIONS = dict(
-    periods=(0.297, 0.303), principal_axis=True, shape="ellipsoid", period_grid=(9,), starts_per_period=8, n_refine=4
+    periods=(0.297, 0.303),
+    principal_axis=True,
+    shape="ellipsoid",
+    period_grid=(9,),
+    starts_per_period=8,
+    n_refine=4,
+    stop_at_noise=True,
 )
 
 
@@ -175,8 +183,6 @@ def test_aliases_the_data_do_not_tell_apart_are_reported():
     moved 1.5 noise units above the winner, or onto the winner's periods, is not reported."""
     import equinox as eqx
 
-    from frbjax.lightcurve import AmbiguousFitWarning
-
     times, flux, sun, observer, night = observations()
     with pytest.warns(AmbiguousFitWarning, match="other basin") as record:
         fit = fit_lightcurve(times, flux, sun, observer, lightcurve=night, **OPTIONS)
@@ -205,6 +211,32 @@ def test_aliases_the_data_do_not_tell_apart_are_reported():
     assert not same.ambiguous
     with pytest.raises(ValueError, match="within"):
         fit.competing_basins(within=-1.0)
+    # The reported sigma spans the basins (their equal-weight mixture's: the data cannot rank them),
+    # the basin's own is the winner's alone; the true period lies 0.3 of the winner's basin's sigmas
+    # ... measured below.
+    print("period sigma", float(fit.period_sigma[0]), "basin's", float(fit.basin_period_sigma[0]))
+    spread = np.std(np.concatenate([[float(fit.periods[0])], basins.periods[:, 0]]))
+    assert float(fit.period_sigma[0]) >= spread > float(fit.basin_period_sigma[0])
+    assert abs(float(fit.periods[0]) - 0.3) < 3 * float(fit.period_sigma[0])
+    assert not np.any(np.asarray(fit.robust_covariance))  # 8 light curves: too few for the sandwich
+    np.testing.assert_array_equal(fit.standard_errors()[0], np.asarray(fit.basin_period_sigma))
+
+
+def test_all_rounds_whatever_the_misfit():
+    """The default (``stop_at_noise=False``): the second round runs although the first is within the noise (the
+    first round's refined starts are those of the one-round fit, cost for cost), and the lowest cost of
+    both wins."""
+    times, flux, sun, observer, night = observations()
+    default_rounds = {key: value for key, value in OPTIONS.items() if key != "stop_at_noise"}
+    with pytest.warns(AmbiguousFitWarning):
+        one = fit_lightcurve(times, flux, sun, observer, lightcurve=night, search_rounds=2, **OPTIONS)
+        both = fit_lightcurve(times, flux, sun, observer, lightcurve=night, search_rounds=2, **default_rounds)
+    assert one.search_rounds == 1 and both.search_rounds == 2
+    first = np.asarray(one.refine_costs)
+    np.testing.assert_allclose(np.asarray(both.refine_costs)[: len(first)], first, rtol=1e-12)
+    assert len(both.refine_costs) == 2 * len(first) and both.cost == np.min(np.asarray(both.refine_costs))
+    with pytest.raises(ValueError, match="stop_at_noise must be True or False"):
+        fit_lightcurve(times, flux, sun, observer, lightcurve=night, stop_at_noise="no", **OPTIONS)
 
 
 def test_a_misfit_searches_again_and_warns():

@@ -20,12 +20,14 @@ from nbclient.util import run_sync  # noqa: E402
 REPOSITORY = pathlib.Path(__file__).resolve().parents[1]
 NOTEBOOKS = sorted((REPOSITORY / "notebooks").glob("*.ipynb"))
 # N_SAMPLES: the drawing sizes.  FIT_SETTINGS: notebooks/lightcurve.ipynb's inversion with a small
-# search (one period cell, 8 starts, 2 refined) and the ellipsoid model (the convex model's final
-# solve, the largest of its programs, left out: tests/test_lightcurve_fit.py runs it), so that every
-# cell runs, the shape cells on the ellipsoid's facets; the inversion's quality is measured there too.
+# search (one period cell, 8 starts, 2 refined, rounds only on a misfit) and the ellipsoid model (the
+# convex model's final solve, the largest of its programs, left out: tests/test_lightcurve_fit.py runs
+# it), so that every cell runs, the shape cells on the ellipsoid's facets; the inversion's quality is
+# measured there too.
 # CHAINS, WARMUP, DRAWS: notebooks/posterior.ipynb's sampler (2 chains of 150 + 150 steps).
 SMALL_PARAMETERS = """N_SAMPLES = 2000
-FIT_SETTINGS = dict(shape="ellipsoid", convex_subdivisions=1, period_grid=(1, 1), starts_per_period=8, n_refine=2)
+FIT_SETTINGS = dict(shape="ellipsoid", convex_subdivisions=1, period_grid=(1, 1), starts_per_period=8, n_refine=2,
+                    stop_at_noise=True)
 CHAINS, WARMUP, DRAWS = 2, 150, 150
 """
 TIMEOUT = 300
