@@ -37,7 +37,7 @@ Rates over the members run are printed and written with the members to
 already in it are skipped (``--resume``), so that a long run can be continued.
 
 Usage: python benchmarks/lightcurve_family.py [--members 0,5,12] [--width 0.1] [--resume] [--truth-from PATH]
-       [--starts-per-period 16] [--period-grid 16,16] [--refine 8] [--convex-subdivisions 1] [--all-rounds]
+       [--starts-per-period 16] [--period-grid 16,16] [--refine 8] [--convex-subdivisions 1] [--stop-at-noise]
        [--output-dir DIR] [--plot-only] [--basins-only]
 (the figure: lightcurve_family.png beside the JSON, redrawn after each run or with --plot-only)
 """
@@ -205,17 +205,19 @@ def rates(members):
 
 def plot(result, path):
     """Per member: the cost's excess over the truth's refinement (noise units), the later nights' RMS
-    and the periods' largest |z|, against the issue's thresholds; the family's run with one search
-    round (in ``earlier_runs``, when the file has it) in grey."""
+    and the periods' largest |z|, against the issue's thresholds; the family's run with the rounds
+    stopped at the noise and the sigmas of the model's covariance alone (the defaults until
+    2026-12-03, the file's top level then: ``earlier_runs.four_rounds_stop_at_noise_2026_12_02``,
+    when the file has it) in grey."""
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
     runs = [("now", result["members"], "C0")]
-    earlier = result.get("earlier_runs", {}).get("one_round_2026_12_02")
+    earlier = result.get("earlier_runs", {}).get("four_rounds_stop_at_noise_2026_12_02")
     if earlier:
-        runs.insert(0, ("before: one search round", earlier["members"], "0.6"))
+        runs.insert(0, ("before: rounds stopped at the noise, the model's sigmas", earlier["members"], "0.6"))
     panels = [
         (
             "cost excess over the truth's refinement\n(noise units, sqrt(N/2); below 0.01 at 0.01)",
@@ -267,7 +269,7 @@ def main(argv=None):
     parser.add_argument("--refine", type=int, default=None)
     parser.add_argument("--convex-subdivisions", type=int, default=None, help="fit_lightcurve's default: 2")
     parser.add_argument(
-        "--all-rounds", action="store_true", help="every search round whatever the misfit (stop_at_noise=False)"
+        "--stop-at-noise", action="store_true", help="rounds only while the fit misses the noise (stop_at_noise=True)"
     )
     parser.add_argument("--resume", action="store_true")
     parser.add_argument("--truth-from", help="an earlier run's JSON: its members' truth-refined figures")
@@ -297,8 +299,8 @@ def main(argv=None):
         fit_options["n_refine"] = options.refine
     if options.convex_subdivisions is not None:
         fit_options["convex_subdivisions"] = options.convex_subdivisions
-    if options.all_rounds:
-        fit_options["stop_at_noise"] = False
+    if options.stop_at_noise:
+        fit_options["stop_at_noise"] = True
     output.parent.mkdir(parents=True, exist_ok=True)
     # A resumed run keeps what the file holds besides its members (e.g. a run at other settings).
     previous = json.loads(output.read_text()) if options.resume and output.exists() else {}

@@ -95,6 +95,8 @@ def rates(records):
         for quantity in ("period", "inertia"):
             values = np.concatenate([r[f"{kind}_{quantity}_z"] for r in records])
             with_values = [r for r in records if r[f"{kind}_{quantity}_z"]]
+            if not with_values:
+                continue
             out[f"{kind}_{quantity}"] = {
                 "count": int(values.size),
                 "within_1_2_3": [float(np.mean(values < k)) for k in (1, 2, 3)],
