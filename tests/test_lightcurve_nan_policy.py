@@ -211,9 +211,9 @@ def test_aliases_the_data_do_not_tell_apart_are_reported():
     assert not same.ambiguous
     with pytest.raises(ValueError, match="within"):
         fit.competing_basins(within=-1.0)
-    # The reported sigma spans the basins (their equal-weight mixture's: the data cannot rank them),
-    # the basin's own is the winner's alone.  Measured: 1.45e-4 against 1.39e-5, the winner
-    # 0.300023 (0.16 reported sigmas from the truth, 1.6 of its basin's).
+    # The reported sigma spans the basins (their equal-weight mixture's spread about the winner: the
+    # data cannot rank them), the basin's own is the winner's alone.  Measured: 1.79e-4 against
+    # 1.39e-5, the winner 0.300023 (0.13 reported sigmas from the truth, 1.6 of its basin's).
     print("period sigma", float(fit.period_sigma[0]), "basin's", float(fit.basin_period_sigma[0]))
     spread = np.std(np.concatenate([[float(fit.periods[0])], basins.periods[:, 0]]))
     assert float(fit.period_sigma[0]) >= spread > float(fit.basin_period_sigma[0])

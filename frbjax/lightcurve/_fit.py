@@ -65,9 +65,10 @@ rotation through each night (Liang & Zeger 1986; Bell & McCaffrey 2002; MacKinno
 ``_MIN_CLUSTERS`` light curves).  That is the winner's basin's uncertainty (``basin_period_sigma``).
 The other starts of the last stage that fit within the noise of the winner's cost at periods more
 than three of those sigmas away are competing basins (aliases the data do not rule out): the result
-lists them, the fit warns, and the reported ``period_sigma`` and ``inertia_sigma`` are those of the
-equal-weight mixture of the winner's and their basins (each with the winner's basin's spread): the
-data cannot rank them, so the answer is any of them.  On the tumbler family
+lists them, the fit warns, and the reported ``period_sigma`` and ``inertia_sigma`` are the
+root-mean-square distances from the winner of the equal-weight mixture of the winner's and their
+basins (each with the winner's basin's spread): the data cannot rank them, so the answer is any of
+them.  On the tumbler family
 (benchmarks/lightcurve_family.py, docs/lightcurves.md) the model's covariance alone put the true
 periods within three sigmas for 17 of 24 members; these sigmas, for 22 of the same fits, and for all
 24 with every search round (the default).
@@ -481,7 +482,7 @@ def _warn_if_ambiguous(result, stacklevel=3):
     warnings.warn(
         f"fit_lightcurve: {len(basins.cost_excess)} other basin(s) fit the data within the noise of the winner "
         f"(periods {_format_periods(winner)}): {listed}.  The data do not tell them apart: the reported sigmas are "
-        "those of the equal-weight mixture of these basins and the winner's (the winner's own: basin_period_sigma; "
+        "the root-mean-square distances from the winner of these basins and its own (that alone: basin_period_sigma; "
         "LightcurveFit.competing_basins()).  More nights, or a wider spread of them, decide.",
         AmbiguousFitWarning,
         stacklevel=stacklevel,
@@ -851,12 +852,16 @@ def _standard_errors(period_jacobian, parameters, covariances):
 
 
 def _mixture_sigma(sigma, values):
-    """Standard deviations of the equal-weight mixture of Gaussians centred at ``values`` (K, D), each
-    of standard deviation ``sigma`` (D,): sqrt(sigma^2 + the centres' variance); infinite or
-    non-finite centres (a rotator's second period) leave ``sigma`` as it is."""
+    """Root-mean-square distance from the winner, ``values[0]``, of the equal-weight mixture of
+    Gaussians centred at ``values`` (K, D), each of standard deviation ``sigma`` (D,):
+    sqrt(sigma^2 + mean_k (values_k - values_0)^2), the error of the reported value if the truth is
+    in any of the basins alike (about the winner, not the mixture's mean: the winner is what is
+    reported, and an alias at the edge of the basins is as likely to win as one at their centre);
+    infinite or non-finite centres (a rotator's second period) leave ``sigma`` as it is."""
     finite = np.all(np.isfinite(values), 0)
-    spread = np.var(np.where(finite, values, 0.0), 0)
-    return np.sqrt(sigma**2 + np.where(finite, spread, 0.0))
+    centres = np.where(finite, values, 0.0)
+    offsets = centres - centres[:1]
+    return np.sqrt(sigma**2 + np.mean(offsets**2, 0))
 
 
 def _round_plan(round_index, n_refine):
@@ -1491,7 +1496,7 @@ def fit_lightcurve(
     # The larger of the model's and the cluster-robust variances (module docstring, "Uncertainty").
     basin_period_sigma, basin_inertia_sigma = _standard_errors(period_jacobian, p, (covariance, robust_covariance))
     moments = _scaled_moments(p)
-    # Competing basins widen the sigmas to their equal-weight mixture's; a basin's moments are
+    # Competing basins widen the sigmas to their equal-weight mixture's spread about the winner; a basin's moments are
     # matched to the winner's by rank (its axes may be labelled otherwise).
     order, _, _ = _basins(
         refine_costs, refine_periods, period_values, basin_period_sigma, n, refine_costs[winner], within=1.0
