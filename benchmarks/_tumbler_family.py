@@ -86,6 +86,22 @@ class Tumbler:
     def span(self) -> float:
         return float(self.times.max() - self.times.min())
 
+    def body_at(self, epoch: float) -> FreeRigidBody:
+        """The true motion with its time counted from ``epoch`` (a fit's ``initial=``; fit_lightcurve's
+        default epoch is the median time)."""
+        body = self.body
+        return FreeRigidBody(self.inertia, np.asarray(body.angular_momentum(epoch)), np.asarray(body.quaternion(epoch)))
+
+    def moments_z(self, moments, sigma) -> list:
+        """|I - I_true| / sigma for a fit's two smaller moments (``moments`` scaled to a largest of 1,
+        the true moments matched to them by rank; a rotator's are fixed: none)."""
+        if self.kind == "PA":
+            return []
+        moments, sigma = np.asarray(moments, float), np.asarray(sigma, float)
+        true = np.sort(self.inertia / np.max(self.inertia))[np.argsort(np.argsort(moments))]
+        smaller = moments < 1
+        return (np.abs(moments - true)[smaller] / sigma[smaller]).tolist()
+
 
 def _kind(index):
     start = 0

@@ -61,7 +61,6 @@ jax.config.update("jax_enable_x64", True)
 
 import numpy as np  # noqa: E402
 
-from frbjax import FreeRigidBody  # noqa: E402
 from frbjax.lightcurve import AmbiguousFitWarning, fit_lightcurve, LightcurveFit, MisfitWarning  # noqa: E402
 
 
@@ -96,11 +95,7 @@ def invert(case, width, options, stored=None):
     if stored is None:
         # The truth's basin: the same data refined from the true motion, its time counted from the
         # fit's epoch (fit_lightcurve's default: the median time).
-        epoch = float(np.median(case.times))
-        body = case.body
-        truth = FreeRigidBody(
-            case.inertia, np.asarray(body.angular_momentum(epoch)), np.asarray(body.quaternion(epoch))
-        )
+        truth = case.body_at(float(np.median(case.times)))
         refined = fit_lightcurve(*data, periods=ranges, initial=truth, **common, **{**options, "search_rounds": 1})
         truth_refined = {
             "truth_refined_period_z": (
@@ -116,12 +111,7 @@ def invert(case, width, options, stored=None):
     samples = len(case.times)
     periods, sigma = np.asarray(found.periods), np.asarray(found.period_sigma)
     z = np.abs(periods[: len(true_periods)] - true_periods) / sigma[: len(true_periods)]
-    inertia_z = []
-    if not rotator:
-        moments, moment_sigma = np.asarray(found.inertia, float), np.asarray(found.inertia_sigma, float)
-        true_moments = np.sort(case.inertia / np.max(case.inertia))[np.argsort(np.argsort(moments))]
-        smaller = moments < 1
-        inertia_z = (np.abs(moments - true_moments)[smaller] / moment_sigma[smaller]).tolist()
+    inertia_z = case.moments_z(found.inertia, found.inertia_sigma)
     member = {
         "index": case.index,
         "kind": case.kind,

@@ -1455,15 +1455,21 @@ def fit_lightcurve(
             start_periods, costs = start_periods[:0], costs[:0]
         return out, tuple(r[alive] for r in refs), start_periods, costs
 
-    # ---- the search's rounds: more while the winner's residuals exceed the noise
+    # ---- the search's rounds: all of them, or (stop_at_noise) while the winner misses the noise
+    def best(rounds):
+        # The refined starts of all rounds so far, the lowest cost's index, and its misfit.
+        outs = [np.concatenate(parts) for parts in zip(*(r[0] for r in rounds))]
+        winner = int(np.argmin(np.where(np.isfinite(outs[1]), outs[1], np.inf)))
+        return outs, winner, _misfit(outs[3][winner], outs[4][winner][:, free > 0], n, curves.shape[1])
+
     rounds = []
     for round_index in range(search_rounds):
         rounds.append(search_round(round_index))
-        outs = [np.concatenate(parts) for parts in zip(*(r[0] for r in rounds))]
-        winner = int(np.argmin(np.where(np.isfinite(outs[1]), outs[1], np.inf)))
-        misfit = _misfit(outs[3][winner], outs[4][winner][:, free > 0], n, curves.shape[1])
-        if stop_at_noise and misfit.variance <= misfit.threshold:
-            break
+        last = round_index + 1 == search_rounds
+        if last or stop_at_noise:
+            outs, winner, misfit = best(rounds)
+            if last or misfit.variance <= misfit.threshold:
+                break
     fitted, refine_costs, oks, residual_rows, jacobians = outs
     candidate_references = tuple(np.concatenate(parts) for parts in zip(*(r[1] for r in rounds)))
     search_periods = np.concatenate([r[2] for r in rounds])
