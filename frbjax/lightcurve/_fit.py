@@ -1502,8 +1502,8 @@ def fit_lightcurve(
     # The larger of the model's and the cluster-robust variances (module docstring, "Uncertainty").
     basin_period_sigma, basin_inertia_sigma = _standard_errors(period_jacobian, p, (covariance, robust_covariance))
     moments = _scaled_moments(p)
-    # Competing basins widen the sigmas to their equal-weight mixture's spread about the winner; a basin's moments are
-    # matched to the winner's by rank (its axes may be labelled otherwise).
+    # Competing basins widen the sigmas to their equal-weight mixture's spread about the winner; a
+    # basin's moments are matched to the winner's by rank (its axes may be labelled otherwise).
     order, _, _ = _basins(
         refine_costs, refine_periods, period_values, basin_period_sigma, n, refine_costs[winner], within=1.0
     )
