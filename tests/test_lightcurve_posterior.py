@@ -12,6 +12,7 @@ import warnings
 
 import numpy as np
 import pytest
+from _compile_options import fast_jit
 from test_lightcurve_nan_policy import observations, OPTIONS
 
 from frbjax.lightcurve import fit_lightcurve
@@ -121,8 +122,10 @@ def test_the_potential_is_the_fits_cost(data_and_fit):
     # The sampler's data for the shape sampled (lightcurve_posterior's own preparation).
     data, config, _ = _lightcurve._problem(*arguments, night, False, "raise", fit, 0.01, "sampled")
     assert config[0] == "ellipsoid" and config[4]
-    cost = jax.jit(_lightcurve._fit_cost, static_argnums=2)
-    assert abs(float(cost(jnp.asarray(fit.parameters), data, config)) / fit.cost - 1) < 1e-9
+    # The configuration bound (it is static); the programs compiled with tests/_compile_options.py's options
+    # (a check of the derivative against differences of the cost: 19 s with XLA's defaults).
+    cost = fast_jit(lambda parameters, data: _lightcurve._fit_cost(parameters, data, config))
+    assert abs(float(cost(jnp.asarray(fit.parameters), data)) / fit.cost - 1) < 1e-9
     rng = np.random.default_rng(0)
     sigmas = np.sqrt(np.maximum(np.diag(np.asarray(fit.covariance)), 0))
 
@@ -132,9 +135,11 @@ def test_the_potential_is_the_fits_cost(data_and_fit):
         return scale * direction * sigmas
 
     parameters = jnp.asarray(fit.parameters) + random_step(0.5)
-    gradient = jax.jit(jax.grad(_lightcurve._fit_cost), static_argnums=2)(parameters, data, config)
+    gradient = fast_jit(jax.grad(lambda parameters, data: _lightcurve._fit_cost(parameters, data, config)))(
+        parameters, data
+    )
     for _ in range(3):
         step = random_step(1e-4)
-        plus, minus = (float(cost(parameters + sign * step, data, config)) for sign in (1, -1))
+        plus, minus = (float(cost(parameters + sign * step, data)) for sign in (1, -1))
         expected = (plus - minus) / 2
         assert abs(float(gradient @ step) / expected - 1) < 1e-6, (float(gradient @ step), expected)

@@ -29,6 +29,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
+from _compile_options import fast_jit
 from jax.test_util import check_grads
 
 import frbjax.special as special
@@ -91,7 +92,7 @@ def _jvp_jit(name, with_mc):
     def tangent(*flat):
         return jax.jvp(fn, tuple(flat[:k]), tuple(flat[k:]))[1]
 
-    return jax.jit(tangent)
+    return fast_jit(tangent)
 
 
 @functools.cache
@@ -103,7 +104,7 @@ def _vjp_jit(name, with_mc):
         out, pullback = jax.vjp(fn, *flat[:k])
         return pullback(tuple(flat[k:]) if isinstance(out, tuple) else flat[k])
 
-    return jax.jit(cotangent)
+    return fast_jit(cotangent)
 
 
 def partials(name, args, mode, mc=None):
@@ -491,7 +492,7 @@ def test_carlson_zero_argument_tangent_is_finite():
     for name, points in cases.items():
         fn = getattr(special, name)
         # One compiled JVP per function (eagerly, the JAX path's operations ran one by one: 23 s).
-        jvp = jax.jit(lambda point, tangents, fn=fn: jax.jvp(fn, point, tangents)[1])
+        jvp = fast_jit(lambda point, tangents, fn=fn: jax.jvp(fn, point, tangents)[1])
         for point in points:
             for i, x in enumerate(point):
                 if x == 0:
@@ -543,7 +544,7 @@ def test_check_grads_with_mc():
 
 
 def test_grad_under_jit_and_vmap():
-    f = jax.jit(jax.vmap(jax.grad(lambda u, m: special.ellipj(u, m)[0], argnums=(0, 1))))
+    f = fast_jit(jax.vmap(jax.grad(lambda u, m: special.ellipj(u, m)[0], argnums=(0, 1))))
     u = np.linspace(-3, 3, 5)
     m = np.full(5, 0.4)
     du, dm = f(u, m)

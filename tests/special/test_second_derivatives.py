@@ -24,6 +24,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
+from _compile_options import fast_jit
 
 import frbjax.special as special
 
@@ -76,9 +77,11 @@ MODES = {
     "rev-fwd": lambda f: jax.jacrev(jax.jacfwd(f)),
     "fwd-rev": lambda f: jax.jacfwd(jax.jacrev(f)),
 }
-# Worst normwise relative errors measured on POINTS over the three modes (and with mc):
-# R_F 5.4e-16, R_D 3.6e-16, R_J 5.1e-16, R_C 5.1e-16, K 2.9e-16, E 3.5e-16, F 4.4e-16, Pi(n|m) 6.8e-16,
-# Pi(n; phi|m) 8.0e-16; tolerances about twice that.
+# Worst normwise relative errors measured on POINTS over the three modes (and with mc), the programs
+# compiled with tests/_compile_options.py's options (with XLA's defaults in brackets):
+# R_F 7.9e-16 (5.4e-16), R_D 3.7e-16 (3.6e-16), R_J 7.8e-16 (5.1e-16), R_C 6.4e-16 (5.1e-16), K 2.9e-16,
+# E 3.5e-16, F 4.4e-16, Pi(n|m) 8.2e-16 (6.8e-16), Pi(n; phi|m) 9.6e-16 (8.0e-16); tolerances 1.3 to 3 times
+# that.
 TOL = {
     "elliprf": 1e-15,
     "elliprd": 1e-15,
@@ -122,7 +125,7 @@ def _hessian_program(name, mode, with_mc):
         scalar = lambda v: fn(*v, mc=1 - v[-1])  # noqa: E731  d/dm moves m and mc together
     else:
         scalar = lambda v: fn(*v)  # noqa: E731
-    return jax.jit(jax.vmap(MODES[mode](scalar)))
+    return fast_jit(jax.vmap(MODES[mode](scalar)))
 
 
 def hessians(name, mode, with_mc=False):
@@ -203,7 +206,7 @@ def test_hessian_of_a_composite():
         return ref.ellippi(n, m) * ref.ellipkinc(1 - n, m) + ref.elliprj(ref.mpf(0), m, ref.mpf(1), 1 - n)
 
     point = np.array([0.3, 0.6])
-    ours = np.asarray(jax.jit(jax.hessian(composite))(jnp.asarray(point)))
+    ours = np.asarray(fast_jit(jax.hessian(composite))(jnp.asarray(point)))
     _, _, _, want = ref.taylor_table(
         composite_reference, [point[:1], point[1:]], lambda n, m: (ref.n_step(n), ref.m_step(m)), order=2
     )
