@@ -35,6 +35,7 @@ from jax.test_util import check_grads
 import frbjax.special as special
 
 from . import _mpmath_reference as ref
+from ._stored import stored
 
 
 HALF_PI = np.pi / 2
@@ -161,7 +162,7 @@ def _steps_abs(*xs):
     return tuple(ref.step(abs(x)) for x in xs)
 
 
-@functools.cache
+@stored([(name,) for name in ARGNAMES if name.startswith("ellipr")])
 def carlson_grid(name):
     rng = np.random.default_rng(300 + list(ARGNAMES).index(name))
     nargs = len(ARGNAMES[name])
@@ -177,7 +178,7 @@ def _param(m, mc):
     return [ref.parameter(a, b) for a, b in zip(m, mc if mc is not None else [None] * len(m))]
 
 
-@functools.cache
+@stored()
 def complete_grid():
     rng = np.random.default_rng(310)
     m = np.concatenate([rng.uniform(0, 1, 40), 1 - ref.log_uniform(rng, -15, -1, 15), [0.0, 1e-300, 0.5, 1 - 1e-15]])
@@ -194,7 +195,7 @@ def complete_grid():
     return out
 
 
-@functools.cache
+@stored([(name, kind) for name in ("ellipkinc", "ellippiinc", "ellippi") for kind in ("plain", "mc")])
 def legendre_grid(name, kind):
     """Points (no phi = 0: zero derivatives are checked in the finiteness test), and the value,
     gradient and Hessian of the reference there."""
@@ -239,7 +240,7 @@ def _sizes(name, columns, mc):
     return [s_n, s_m]
 
 
-@functools.cache
+@stored([("plain",), ("mc",)])
 def jacobi_grid(kind):
     """(u, m, mc, reference value/gradient/Hessian in (u, m) of (sn, cn, dn, am))."""
     rng = np.random.default_rng(330)
@@ -399,7 +400,7 @@ def test_jacobi_partials(kind, mode):
 # ------------------------------------------------------------------------------------- float32
 
 
-@functools.cache
+@stored([(name,) for name in ("elliprf", "elliprj", "ellipk", "ellipkinc", "ellippiinc", "ellipj")])
 def grid32(name):
     rng = np.random.default_rng(340)
     size = 40

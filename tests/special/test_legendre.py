@@ -36,6 +36,7 @@ import scipy.special
 import frbjax.special as special
 
 from . import _mpmath_reference as ref
+from ._stored import stored
 
 
 HALF_PI = np.pi / 2
@@ -101,7 +102,7 @@ def mc_grid(rng, n=40):
     )
 
 
-@functools.cache
+@stored()
 def complete_grids():
     rng = np.random.default_rng(21)
     m = m_grid(rng)
@@ -197,7 +198,7 @@ def m_scale(m, mc=None):
     return mc if mc is not None else np.minimum(m, 1 - m)
 
 
-@functools.cache
+@stored()
 def f_grids():
     """F(phi|m): {'plain': (args, mc, reference), 'mc': ...}; args = (phi, m)."""
     rng = np.random.default_rng(31)
@@ -249,7 +250,7 @@ def f_grids():
     return out
 
 
-@functools.cache
+@stored()
 def pi_grids():
     """Pi(n; phi|m): {'plain': ((n, phi, m), mc, reference), 'mc': ...}."""
     rng = np.random.default_rng(41)
@@ -289,7 +290,7 @@ def pi_grids():
     return out
 
 
-@functools.cache
+@stored()
 def pi_complete_grids():
     rng = np.random.default_rng(51)
     uni = rng.uniform
@@ -362,7 +363,7 @@ def test_incomplete_float64(name, kind):
 # ------------------------------------------------------------------------------------- float32
 
 
-@functools.cache
+@stored()
 def grid32():
     rng = np.random.default_rng(61)
     size = 120

@@ -29,6 +29,7 @@ from _compile_options import fast_jit
 import frbjax.special as special
 
 from . import _mpmath_reference as ref
+from ._stored import stored
 
 
 ARGNAMES = {
@@ -111,7 +112,7 @@ def _steps(name):
     return lambda *a: tuple(kinds[arg](x) for arg, x in zip(ARGNAMES[name], a))
 
 
-@functools.cache
+@stored([(name,) for name in POINTS])
 def reference(name):
     points = np.array(POINTS[name], dtype=np.float64)
     _, _, _, hessian = ref.taylor_table(_reference_function(name), list(points.T), _steps(name), order=2)
