@@ -655,6 +655,7 @@ def _rc_positive_jvp(primals, tangents):
 # ------------------------------------------------------------------------------------- public names
 
 
+@_compiled.one_program
 def elliprf(x: ArrayLike, y: ArrayLike, z: ArrayLike) -> Array:
     r"""Carlson's symmetric integral of the first kind (DLMF 19.16.1).
 
@@ -669,6 +670,7 @@ def elliprf(x: ArrayLike, y: ArrayLike, z: ArrayLike) -> Array:
     return _rf(x, y, z)
 
 
+@_compiled.one_program
 def elliprd(x: ArrayLike, y: ArrayLike, z: ArrayLike) -> Array:
     r"""Carlson's degenerate integral of the second kind (DLMF 19.16.5).
 
@@ -736,6 +738,7 @@ def _rj_general_jvp(primals, tangents):
     return jax.jvp(frozen, primals, tangents)
 
 
+@_compiled.one_program
 def elliprj(x: ArrayLike, y: ArrayLike, z: ArrayLike, p: ArrayLike) -> Array:
     r"""Carlson's symmetric integral of the third kind (DLMF 19.16.2).
 
@@ -753,6 +756,7 @@ def elliprj(x: ArrayLike, y: ArrayLike, z: ArrayLike, p: ArrayLike) -> Array:
     return jnp.where(valid, result, jnp.nan)
 
 
+@_compiled.one_program
 def elliprc(x: ArrayLike, y: ArrayLike) -> Array:
     r"""Carlson's degenerate integral $R_C(x, y) = R_F(x, y, y)$ (DLMF 19.2.17, 19.16.6).
 

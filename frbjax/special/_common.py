@@ -7,21 +7,24 @@ import numpy as np
 from jax import lax
 
 
+def real_array(a):
+    """``jnp.asarray(a)``, refusing with ValueError what is not real numbers (strings, complex numbers,
+    objects): the functions' domain is real, and values outside it give NaN (as in scipy.special)."""
+    try:
+        array = jnp.asarray(a)
+    except TypeError as error:
+        raise ValueError(f"the elliptic functions take real numbers: {error}") from None
+    if jnp.issubdtype(array.dtype, jnp.complexfloating):
+        raise ValueError(f"the elliptic functions take real numbers, got dtype {array.dtype}")
+    return array
+
+
 def promote(*args):
     """Broadcast the arguments to one floating dtype (float64 only when x64 is on).
 
-    Arguments that are not real numbers (strings, complex numbers, objects) raise ValueError: the
-    functions' domain is real, and values outside it give NaN (as in scipy.special).
+    Arguments that are not real numbers raise ValueError (``real_array``).
     """
-    arrays = []
-    for a in args:
-        try:
-            array = jnp.asarray(a)
-        except TypeError as error:
-            raise ValueError(f"the elliptic functions take real numbers: {error}") from None
-        if jnp.issubdtype(array.dtype, jnp.complexfloating):
-            raise ValueError(f"the elliptic functions take real numbers, got dtype {array.dtype}")
-        arrays.append(array)
+    arrays = [real_array(a) for a in args]
     dtype = jnp.result_type(*arrays, float)
     arrays = [a.astype(dtype) for a in arrays]
     return jnp.broadcast_arrays(*arrays)

@@ -321,6 +321,7 @@ def _ellipj_given_jvp(primals, tangents):
     return values, _ellipj_tangents(u, m, mc, quarter, values, tangents[:3])
 
 
+@_compiled.one_program
 def ellipj(u: ArrayLike, m: ArrayLike, *, mc: ArrayLike | None = None) -> tuple[Array, Array, Array, Array]:
     r"""Jacobi elliptic functions sn, cn, dn and the amplitude am of argument $u$, parameter $m$.
 

@@ -31,6 +31,7 @@ import jax.numpy as jnp
 from jax import Array
 from jax.typing import ArrayLike
 
+from . import _compiled
 from ._carlson import _horner, _rd, _rf, _rf_rj, _rj, _rj_parameter_largest
 from ._common import complement, is_double, iterate, over_sqrt, promote
 
@@ -207,6 +208,7 @@ def _ellipe_jvp(primals, tangents):
     return _ellipe(m, mc), 0.5 * (dm - dmc) * derivative
 
 
+@_compiled.one_program
 def ellipk(m: ArrayLike, *, mc: ArrayLike | None = None) -> Array:
     r"""Complete elliptic integral of the first kind $K(m)$ (DLMF 19.2.8), parameter $m = k^2$.
 
@@ -219,12 +221,14 @@ def ellipk(m: ArrayLike, *, mc: ArrayLike | None = None) -> Array:
     return _ellipk(m, mc)
 
 
+@_compiled.one_program
 def ellipkm1(p: ArrayLike) -> Array:
     r"""$K(1 - p)$, accurate as $p \to 0$ (``scipy.special.ellipkm1``); DLMF 19.2.8, 19.25.1."""
     (p,) = promote(p)
     return _ellipk(1 - p, p)
 
 
+@_compiled.one_program
 def ellipe(m: ArrayLike, *, mc: ArrayLike | None = None) -> Array:
     r"""Complete elliptic integral of the second kind $E(m)$ (DLMF 19.2.8), via DLMF 19.25.1.
 
@@ -270,6 +274,7 @@ def _ellipkinc_jvp(primals, tangents):
     return value, tangent
 
 
+@_compiled.one_program
 def ellipkinc(phi: ArrayLike, m: ArrayLike, *, mc: ArrayLike | None = None) -> Array:
     r"""Incomplete elliptic integral of the first kind $F(\phi|m)$ (DLMF 19.2.4).
 
@@ -501,6 +506,7 @@ def _ellippiinc_jvp(primals, tangents):
     return value, tangent_nm + tangent_phi
 
 
+@_compiled.one_program
 def ellippiinc(n: ArrayLike, phi: ArrayLike, m: ArrayLike, *, mc: ArrayLike | None = None) -> Array:
     r"""Incomplete elliptic integral of the third kind (DLMF 19.2.7, characteristic $n$, parameter $m$).
 
@@ -535,6 +541,7 @@ def _ellippi_jvp(primals, tangents):
     return jax.jvp(_pi_complete, (n, m, mc), (dn, dparam, -dparam))
 
 
+@_compiled.one_program
 def ellippi(n: ArrayLike, m: ArrayLike, *, mc: ArrayLike | None = None) -> Array:
     r"""Complete elliptic integral of the third kind $\Pi(n|m) = \Pi(n; \pi/2|m)$ (DLMF 19.2.8), $n < 1$.
 
