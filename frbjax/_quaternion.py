@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import jax
 import jax.numpy as jnp
 from jax import Array
 from jax.typing import ArrayLike
@@ -122,6 +123,12 @@ def exp_pure(rotation_vector: Array) -> Array:
     return jnp.concatenate([scalar[..., None], vector_scale[..., None] * rotation_vector], axis=-1)
 
 
+# The public conversions' arithmetic as one program each: called eagerly, their few dozen operations
+# were dispatched one by one (quaternion_from_matrix: 2.4 ms a call against 0.05 ms compiled).
+_as_matrix_program = jax.jit(as_matrix)
+_from_matrix_program = jax.jit(from_matrix)
+
+
 def quaternion_to_matrix(q: ArrayLike) -> Array:
     r"""Rotation matrix $R(q)$ (..., 3, 3) of unit quaternions $q = (w, x, y, z)$ (..., 4), body to space.
 
@@ -134,7 +141,7 @@ def quaternion_to_matrix(q: ArrayLike) -> Array:
         values = real_array("q", q)
         check_finite("q", values)
         check_unit_rows("q", values)
-    return as_matrix(jnp.asarray(q))
+    return _as_matrix_program(jnp.asarray(q))
 
 
 def quaternion_from_matrix(matrix: ArrayLike) -> Array:
@@ -149,4 +156,4 @@ def quaternion_from_matrix(matrix: ArrayLike) -> Array:
         values = real_array("matrix", matrix)
         check_finite("matrix", values)
         check_rotation_matrices("matrix", values)
-    return from_matrix(jnp.asarray(matrix))
+    return _from_matrix_program(jnp.asarray(matrix))
