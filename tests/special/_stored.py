@@ -43,7 +43,8 @@ def fingerprint(function):
     and the reference module's, and mpmath's version."""
     digest = hashlib.sha256()
     for path in (inspect.getfile(function), inspect.getfile(_mpmath_reference)):
-        digest.update(Path(path).read_bytes())
+        # Line ends as git stores them: a checkout that writes CRLF holds the same code.
+        digest.update(Path(path).read_bytes().replace(b"\r\n", b"\n"))
     digest.update(mpmath.__version__.encode())
     return digest.hexdigest()
 
