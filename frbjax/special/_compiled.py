@@ -99,8 +99,8 @@ def one_program(function: Callable[P, R]) -> Callable[P, R]:
     """A public special function as one compiled program per argument types and path.
 
     Called eagerly, the function's hundreds of operations ran one by one (``ellippiinc`` of 21 points:
-    0.46 s a call, 1.96 s the first; compiled once: 0.15 ms a call, 1.43 s the first; one core,
-    docs/performance.md), where a ``jax.numpy`` function or a FreeRigidBody method is one program.
+    0.56 s a call, 1.89 s the first; compiled once: 83 µs a call, 1.22 s the first; one core,
+    benchmarks/special_eager.py), where a ``jax.numpy`` function or a FreeRigidBody method is one program.
     The path is read from ``FRBJAX_KERNELS`` at each call and keys the compiled program, so that a
     change of the variable takes effect at the next call, as before.  Inside a caller's ``jit``,
     ``vmap`` or ``grad`` the function is traced inline like any other.

@@ -53,3 +53,20 @@ def test_kernels_benchmark_quick():
     )
     assert proc.returncode == 0, proc.stdout + proc.stderr
     assert "elliprc: first value" in proc.stdout and "scipy / kernels" in proc.stdout, proc.stdout
+
+
+def test_special_eager_quick(tmp_path):
+    """benchmarks/special_eager.py --quick: ellipk called eagerly, one program and scipy, each in its own process."""
+    output = tmp_path / "special_eager.json"
+    proc = subprocess.run(
+        [sys.executable, str(ROOT / "benchmarks" / "special_eager.py"), "--quick", "--output", str(output)],
+        cwd=ROOT,
+        capture_output=True,
+        text=True,
+        timeout=600,
+    )
+    assert proc.returncode == 0, proc.stdout + proc.stderr
+    row = json.loads(output.read_text())["functions"]["ellipk"]
+    for mode in ("one program", "scipy"):
+        assert row[mode]["first_s"] > 0 and row[mode]["call_s"] > 0, row
+    assert "one program / scipy per call" in proc.stdout
