@@ -5,10 +5,10 @@ program per argument types (``frbjax.special._compiled.one_program``); before, t
 operations were dispatched one by one at every call (its ``__wrapped__``, timed here as "op by op").
 For each function, in a fresh process per mode (so that nothing is compiled before): the first
 call's time (compile included) and the median time of 20 later calls, on 21 points; scipy.special's
-eager call on the same points is the peer.  Prints the ratios and writes
-benchmarks/results/special_eager.json.
+eager call on the same points is the peer.  Prints the ratios and writes special_eager.json into
+``--output-dir`` (benchmarks/results by default).
 
-    taskset -c 0 python benchmarks/special_eager.py [--quick]
+    taskset -c 0 python benchmarks/special_eager.py [--quick] [--output-dir DIR]
 """
 
 from __future__ import annotations
@@ -75,7 +75,7 @@ def measure(name, mode):
 def main():
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--quick", action="store_true", help="ellipk only, one program and scipy (a smoke run)")
-    parser.add_argument("--output", type=pathlib.Path, default=RESULTS)
+    parser.add_argument("--output-dir", type=pathlib.Path, default=RESULTS.parent)
     args = parser.parse_args()
     functions = ("ellipk",) if args.quick else FUNCTIONS
     modes = ("one program", "scipy") if args.quick else MODES
@@ -94,9 +94,10 @@ def main():
             )
             ratios.insert(1, f"first call {row['op by op']['first_s'] / row['one program']['first_s']:.2f}")
         print(f"  {'; '.join(ratios)}", flush=True)
-    args.output.parent.mkdir(parents=True, exist_ok=True)
-    args.output.write_text(json.dumps(results, indent=1) + "\n")
-    print(f"wrote {args.output}")
+    output = args.output_dir / RESULTS.name
+    output.parent.mkdir(parents=True, exist_ok=True)
+    output.write_text(json.dumps(results, indent=1) + "\n")
+    print(f"wrote {output}")
 
 
 if __name__ == "__main__":

@@ -7,6 +7,8 @@ import subprocess
 import sys
 from pathlib import Path
 
+from _benchmark_runs import run_quick
+
 
 ROOT = Path(__file__).resolve().parents[2]
 
@@ -57,16 +59,8 @@ def test_kernels_benchmark_quick():
 
 def test_special_eager_quick(tmp_path):
     """benchmarks/special_eager.py --quick: ellipk called eagerly, one program and scipy, each in its own process."""
-    output = tmp_path / "special_eager.json"
-    proc = subprocess.run(
-        [sys.executable, str(ROOT / "benchmarks" / "special_eager.py"), "--quick", "--output", str(output)],
-        cwd=ROOT,
-        capture_output=True,
-        text=True,
-        timeout=600,
-    )
-    assert proc.returncode == 0, proc.stdout + proc.stderr
-    row = json.loads(output.read_text())["functions"]["ellipk"]
+    stdout = run_quick("special_eager.py", tmp_path)
+    row = json.loads((tmp_path / "special_eager.json").read_text())["functions"]["ellipk"]
     for mode in ("one program", "scipy"):
         assert row[mode]["first_s"] > 0 and row[mode]["call_s"] > 0, row
-    assert "one program / scipy per call" in proc.stdout
+    assert "one program / scipy per call" in stdout
