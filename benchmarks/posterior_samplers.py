@@ -55,12 +55,20 @@ Again on 2026-11-29 (a body's derivatives from its series on dual numbers: the m
 value_and_grad 89 us against 256 us): NUTS 911, NUTS vectorized 765, AIES 1224, ESS 6752 (the
 ensembles' code unchanged and faster too: this machine's speed varies between runs), NUTS / AIES
 0.74 and NUTS / ESS 0.13; attitude_posterior for 200 attitudes 24.5 s first call, 15.8 s second.
+Again on 2026-12-03 (a faster run of the same machine type): NUTS 2276, NUTS vectorized 1640, AIES
+2894, ESS 10342; NUTS / AIES 0.79 and NUTS / ESS 0.22; the potential's value 4.8 us and its value
+and gradient 64 us, so that NUTS / AIES could reach at most 1.3 at the gradient's cost and 17.4 at
+the value's, NUTS / ESS 0.37 and 4.9 (a run an hour earlier timed the value at 3.9 us: 25 and 7.5);
+attitude_posterior for 200 attitudes 19.7 s first call, 12.4 s second.
 
 3. ``--lightcurve`` (run on its own: about a quarter of an hour): effective samples per second on a
    light-curve posterior, the short-axis tumbler of benchmarks/lightcurve_posterior.py (384 samples,
    320 facets, the shape held: 8 motion parameters), NUTS through ``lightcurve_posterior`` (4 chains
    of 300 + 300) and AIES and ESS (32 walkers) on its own whitened potential, each called once with
    its compilation (seconds against minutes); writes posterior_samplers_lightcurve.json.
+   Measured 2026-12-03: log I1 and log I2 NUTS 5.7 and 15.2, AIES 3.4 and 10.3 (not converged:
+   R-hat 1.087), ESS 78 and 94; the value 106 us, value and gradient 916 us: NUTS / AIES at most 4.4
+   at the gradient's cost and 38 at the value's, NUTS / ESS 0.22 and 1.9.
 
 Writes benchmarks/results/posterior_samplers.json and posterior_samplers.png (ESS/s per sampler,
 log scale).  ``--quick``: tiny sizes (a smoke test of a few seconds of sampling, plus compilation).
