@@ -6,8 +6,7 @@ worker, in the order of the collection, as a worker frees up.  pytest-xdist's de
 few long tests (a benchmark's smoke run, the notebooks, the posteriors) at the end, where one worker
 ran them while the other waited.  Ordered by their measured seconds instead (longest processing time
 first), the two workers finish together: on the durations below, a simulation of the scheduler gives
-523 s for the run against 535 s with the default order (the sum over both workers being 1046 s);
-measured on fresh clones run back to back (2026-12-03), 523 s against 560 s.
+523 s for the run against 535 s with the default order (the sum over both workers being 1046 s).
 
 ``FILE_SECONDS``: each file's tests' seconds (setup, call and teardown) in a full run of the suite
 (2026-12-03, `make test`'s command with ``--junitxml``, summed per file); files under 4 s are left
