@@ -17,6 +17,7 @@ from ._checks import check_finite, check_nonzero_rows, check_positive, is_concre
 from ._frame import angular_velocity, dot as _dot, matrix_product, matrix_times as _apply, to_body, to_principal
 from ._fusion import materialise, sum_last, when_any
 from ._inertia import InertiaTensor, through_principal_frame, validate_tensor
+from ._kernel_path import keyed_by_path
 from ._precession import jvp_of_moved, precessing, with_precession_derivatives
 from ._regimes import (
     classify,
@@ -207,7 +208,7 @@ def _evaluate(consts, tau, attitude=True):
     )
 
 
-@jax.jit
+@keyed_by_path
 def _construct(inertia, angular_momentum, attitude, axes=None):
     """The fields of a FreeRigidBody (see its docstring) from validated inputs, as one jitted program:
     one compiled kernel (``_construct_compiled``) where the motion's kernels are selected."""
@@ -545,12 +546,13 @@ def _motion_derivatives(outputs):
 
 
 def _compiled(method):
-    """A method of (body, t) as one jitted program, cached by the shapes and dtypes of both.
+    """A method of (body, t) as one jitted program, cached by the shapes and dtypes of both and by the
+    kernels' path (``_kernel_path``).
 
     Called eagerly, an evaluation is one dispatch of a compiled program (as equinox's filter_jit and
     diffrax do); inside the caller's jit, vmap or grad it is traced inline like any other function.
     """
-    compiled = jax.jit(method)
+    compiled = keyed_by_path(method)
 
     @functools.wraps(method)
     def call(self, t):

@@ -19,6 +19,8 @@ import os
 
 import jax
 
+from ._kernel_path import current, fresh_copy
+
 
 def _cores():
     """The cores this process may run on."""
@@ -50,13 +52,17 @@ def cpu_jit(function=None, **jit_options):
     """``jax.jit(function, **jit_options)``, compiled with ``DEFAULT_COMPILER_OPTIONS`` where the
     default backend is the CPU and it is called outside any trace (a decorator, with or without
     ``jit_options``).  Its ``compiled(options)`` is the jit for other options (a sorted tuple of
-    items), one per options, for ``call_with_options``."""
+    items), one per options and kernels' path (``_kernel_path``), for ``call_with_options``."""
     if function is None:
         return functools.partial(cpu_jit, **jit_options)
 
     @functools.cache
+    def compiled_for(options, path):
+        del path  # the cache's key only (``_kernel_path``): the copy reads the variables when traced
+        return jax.jit(fresh_copy(function), compiler_options=dict(options) or None, **jit_options)
+
     def compiled(options):
-        return jax.jit(function, compiler_options=dict(options) or None, **jit_options)
+        return compiled_for(options, current())
 
     @functools.wraps(function)
     def call(*args, **kwargs):

@@ -15,6 +15,7 @@ from . import _compiled_motion
 from ._body import _validate, _working_dtype, flow_state, motion_once
 from ._checks import check_finite, on_host, real_array
 from ._inertia import InertiaTensor, through_principal_frame
+from ._kernel_path import keyed_by_path
 
 
 def _state_in_principal_frame(inertia, angular_momentum, attitude, t, axes):
@@ -27,7 +28,7 @@ def _state_in_principal_frame(inertia, angular_momentum, attitude, t, axes):
     return motion_once(inertia, angular_momentum, attitude, t, True, axes)
 
 
-@jax.jit
+@keyed_by_path
 def _tensor_free_flow(matrix, moments, axes, angular_momentum, attitude, t):
     batch = jnp.broadcast_shapes(moments.shape[:-1], angular_momentum.shape[:-1], attitude.shape[:-1], t.shape)
     moments = jnp.broadcast_to(moments, batch + (3,))
@@ -68,7 +69,7 @@ def _compiled_state(inertia, angular_momentum, attitude, t):
     return state[..., :3], state[..., 3:]
 
 
-@jax.jit
+@keyed_by_path
 def _free_flow(inertia, angular_momentum, attitude, t):
     batch = jnp.broadcast_shapes(inertia.shape[:-1], angular_momentum.shape[:-1], attitude.shape[:-1], t.shape)
     inertia, angular_momentum = (jnp.broadcast_to(a, batch + (3,)) for a in (inertia, angular_momentum))

@@ -51,6 +51,7 @@ from . import _quaternion as quaternion
 from ._checks import is_concrete, real_array
 from ._free_flow import free_flow
 from ._inertia import InertiaTensor, validate_tensor
+from ._kernel_path import keyed_by_path
 
 
 __all__ = ["METHODS", "RigidBodySplitting", "RigidBodyTerm", "splitting_trajectory"]
@@ -773,7 +774,7 @@ def _check_initial_torque(term, t0, y0, args):
         )
 
 
-@eqx.filter_jit
+@keyed_by_path(jit=eqx.filter_jit)
 def _eager_advance(solver, term, t, h, y, args):
     return solver.advance(term, t, h, y, args)
 
@@ -794,7 +795,7 @@ def _trajectory_program(solver, steps, dtype, save_every=1):
             return jax.tree.map(lambda x: x[None], saved_steps(y0, jnp.zeros((), dtype))[1])
         return jax.lax.scan(saved_steps, y0, jnp.arange(0, steps, save_every, dtype=dtype))[1]
 
-    return eqx.filter_jit(trajectory)
+    return keyed_by_path(trajectory, jit=eqx.filter_jit)
 
 
 def splitting_trajectory(term, y0, *, dt, steps, t0=0.0, args=None, method="blanes_moan6", save_every=1):

@@ -14,11 +14,14 @@ import functools
 
 import jax
 
+from ._kernel_path import keyed_by_path
+
 
 def traced_once(function, static_argnums=()):
-    """``function`` under ``jax.jit`` (``static_argnums`` static), its trace shared by every call
-    with the same argument types, whichever abstract mesh JAX's context names (module docstring)."""
-    jitted = jax.jit(function, static_argnums=static_argnums)
+    """``function`` under ``jax.jit`` (``static_argnums`` static; one program per kernels' path,
+    ``_kernel_path``), its trace shared by every call with the same argument types, whichever abstract
+    mesh JAX's context names (module docstring)."""
+    jitted = keyed_by_path(function, static_argnums=static_argnums)
 
     @functools.wraps(function)
     def call(*args):

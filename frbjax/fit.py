@@ -82,6 +82,7 @@ from . import _checks as checks, _compiled_motion, _quaternion as quaternion
 from ._body import FreeRigidBody, state_with_elliptic_derivatives, with_principal_axes
 from ._cpu_options import call_with_options, cpu_jit, DEFAULT_COMPILER_OPTIONS
 from ._errors import FitError
+from ._kernel_path import keyed_by_path
 from ._multistart import solve_each
 from ._trace_once import traced_once
 
@@ -463,8 +464,8 @@ def _principal_result(moments, moments_covariance):
     )
 
 
-_make_body = eqx.filter_jit(FreeRigidBody)
-_make_tensor_body = eqx.filter_jit(FreeRigidBody.from_inertia_tensor)
+_make_body = keyed_by_path(FreeRigidBody, jit=eqx.filter_jit)
+_make_tensor_body = keyed_by_path(FreeRigidBody.from_inertia_tensor, jit=eqx.filter_jit)
 
 
 def _fitted_body(inertia, angular_momentum, attitude, tensor=False):

@@ -51,7 +51,6 @@ def test_body_keeps_its_conditionals_under_vmap(monkeypatch):
     On the JAX path, whose formulas hold the fusion boundaries (the compiled kernels' programs have
     none of their own)."""
     monkeypatch.setenv("FRBJAX_KERNELS", "jax")
-    jax.clear_caches()
 
     def quaternion(x):
         return FreeRigidBody(x[:3], x[3:6]).quaternion(x[6])

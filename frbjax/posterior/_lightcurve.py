@@ -50,6 +50,7 @@ import numpy as np
 import numpyro
 
 from .. import _checks as checks, _progress
+from .._kernel_path import keyed_by_path
 from ..lightcurve._fit import (
     _curve_mean,
     _laplacian,
@@ -140,7 +141,7 @@ def _potential_generator(config):
     return generator
 
 
-@functools.partial(jax.jit, static_argnums=2)
+@keyed_by_path(static_argnums=2)
 def _rows_at(parameters, data, config):
     """The fit's rows and their Jacobian at ``parameters`` (one compiled program)."""
     return _rows(parameters, data["reference"], data, (data["ones"], None, None), config)

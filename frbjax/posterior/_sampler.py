@@ -27,6 +27,7 @@ import numpy as np
 from numpyro.infer.hmc import hmc
 
 from .. import _progress
+from .._kernel_path import keyed_by_path
 from ..fit import _attitude_residual, _model
 from ._prior import PARAMETER_BLOCKS
 
@@ -157,7 +158,7 @@ def _chains(
     )
 
 
-@functools.partial(jax.jit, static_argnames=("num_warmup", "num_samples", "progress_every", "vectorized"))
+@keyed_by_path(static_argnames=("num_warmup", "num_samples", "progress_every", "vectorized"))
 def _run(z0, keys, data, prior, *, num_warmup, num_samples, progress_every, vectorized):
     out = _chains(
         z0, keys, data, prior, num_warmup, num_samples, progress_every, vectorized, _potential_generator, FORWARD_MODE
@@ -179,8 +180,7 @@ def _run(z0, keys, data, prior, *, num_warmup, num_samples, progress_every, vect
     )
 
 
-@functools.partial(
-    jax.jit,
+@keyed_by_path(
     static_argnames=(
         "num_warmup",
         "num_samples",
