@@ -20,7 +20,8 @@ demo: $(STAMP)
 # pytest exits 5 when it collects no test; that is reported, not hidden.  OpenBLAS (scipy's, which
 # jaxlib's LAPACK calls use) gets one thread: its threads gain nothing in these tests and, spinning
 # beside the other worker, made two light-curve inversions take over 300 s each instead of 136 s.
-# Each test file runs on one worker (--dist loadfile), so that a module's fixtures are computed once.
+# Each test file runs on one worker (--dist loadfile), so that a module's fixtures are computed once;
+# the files go out longest first (tests/_schedule.py; --no-loadscope-reorder keeps that order).
 # (pytest-xdist 3.8's loadgroup does not group under pytest 9: it renames items through an attribute
 # pytest 9 no longer reads.)
 # `make lint` (seconds; `make test` runs it first): ruff's rules and format, as pyproject.toml sets
@@ -43,7 +44,7 @@ typecheck: $(STAMP)
 # hung, fails with every thread's stack printed, instead of holding the run until CI's limit; a worker
 # that crashes ends the run (--max-worker-restart 0) with its report, where replacing it could leave
 # the run waiting until CI's limit (seen with pytest-xdist 3.8 and --dist loadfile).
-PYTEST := OPENBLAS_NUM_THREADS=1 $(BIN)/python -m pytest -n 2 --dist loadfile --max-worker-restart 0 -q \
+PYTEST := OPENBLAS_NUM_THREADS=1 $(BIN)/python -m pytest -n 2 --dist loadfile --no-loadscope-reorder --max-worker-restart 0 -q \
 	--durations=15 --timeout 600 --timeout-method thread
 SLOW_TOTAL ?= 180
 test: $(STAMP) lint

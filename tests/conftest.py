@@ -18,6 +18,8 @@
   the programs of later tests are compiled again.
 * The time budget (tests/_time_budget.py): a test over 60 s fails unless it is marked ``slow``, and
   the slow tests together must stay under 180 s.
+* The test files are collected longest first (tests/_schedule.py), so that with `make test`'s
+  ``--no-loadscope-reorder`` the two xdist workers finish together.
 """
 
 import gc
@@ -25,6 +27,7 @@ import os
 
 import jax
 import pytest
+from _schedule import longest_first
 from _time_budget import (  # noqa: F401  (pytest finds the hooks among this module's names)
     pytest_runtest_call,
     pytest_runtest_logreport,
@@ -65,3 +68,7 @@ def pytest_runtest_teardown(item, nextitem):
     if _MAP_LIMIT is not None and _mappings() > _MAP_LIMIT:
         jax.clear_caches()
         gc.collect()
+
+
+def pytest_collection_modifyitems(config, items):
+    longest_first(items, config.rootpath)

@@ -109,3 +109,13 @@ def test_slow_tests_within_their_total_pass_without_xdist(suite):
     run = _run(suite, "test_marked.py", slow_total=10)
     assert run.returncode == 0, run.stdout + run.stderr
     assert "tests marked slow: 2," in run.stdout and "over the limit" not in run.stdout
+
+
+def test_the_schedule_names_files_that_exist():
+    """tests/_schedule.py's table orders the files by name: a renamed or removed file would silently
+    drop to the end of the order."""
+    from _schedule import FILE_SECONDS
+
+    root = Path(__file__).resolve().parents[1]
+    assert [name for name in FILE_SECONDS if not (root / name).is_file()] == []
+    assert list(FILE_SECONDS.values()) == sorted(FILE_SECONDS.values(), reverse=True)
