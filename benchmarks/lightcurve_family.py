@@ -96,7 +96,10 @@ def invert(case, width, options, stored=None):
         # The truth's basin: the same data refined from the true motion, its time counted from the
         # fit's epoch (fit_lightcurve's default: the median time).
         truth = case.body_at(float(np.median(case.times)))
-        refined = fit_lightcurve(*data, periods=ranges, initial=truth, **common, **{**options, "search_rounds": 1})
+        # Without the mirror image's solve: the truth's own basin, whatever its mirror's cost.
+        refined = fit_lightcurve(
+            *data, periods=ranges, initial=truth, **common, **{**options, "search_rounds": 1, "mirror_pole": False}
+        )
         truth_refined = {
             "truth_refined_period_z": (
                 np.abs(np.asarray(refined.periods)[: len(true_periods)] - true_periods)
@@ -112,6 +115,10 @@ def invert(case, width, options, stored=None):
     periods, sigma = np.asarray(found.periods), np.asarray(found.period_sigma)
     z = np.abs(periods[: len(true_periods)] - true_periods) / sigma[: len(true_periods)]
     inertia_z = case.moments_z(found.inertia, found.inertia_sigma)
+    truth = case.body_at(float(np.median(case.times)))
+    true_pole = np.asarray(truth.rotation_matrix(0.0)) @ np.asarray(truth.angular_momentum(0.0))
+    true_pole /= np.linalg.norm(true_pole)
+    degrees_from_truth = lambda pole: float(np.degrees(np.arccos(np.clip(np.asarray(pole) @ true_pole, -1, 1))))  # noqa: E731
     member = {
         "index": case.index,
         "kind": case.kind,
@@ -135,6 +142,13 @@ def invert(case, width, options, stored=None):
         "noise_ratio": float(found.noise_ratio),
         "search_rounds": int(found.search_rounds),
         "misfit_warned": any(issubclass(w.category, MisfitWarning) for w in caught),
+        # The pole (the inertial direction of L) and the mirror image's (``mirror_pole``), in degrees
+        # from the truth's; the mirror's cost above the winner's (noise units) and whether it warns.
+        "pole_from_truth": degrees_from_truth(found.momentum_direction),
+        "mirror_pole_from_truth": degrees_from_truth(found.mirror_momentum_direction),
+        "mirror_cost_excess": float(found.mirror_cost_excess),
+        "pole_separation": float(found.pole_separation),
+        "pole_ambiguous": bool(found.pole_ambiguous),
         "refine_costs": np.asarray(found.refine_costs).tolist(),
         "refine_periods": np.asarray(found.refine_periods).tolist(),
         "seconds": seconds,
@@ -185,6 +199,13 @@ def rates(members):
         "periods_off_and_warned": [
             sum(m.get("ambiguous", False) for m in members if max(m["period_z"]) > 3),
             sum(max(m["period_z"]) > 3 for m in members),
+        ],
+        # The fits that warn of two poles (the winner's mirror image within the noise), and among
+        # those whose later nights miss, the share that warns.
+        "pole_ambiguous": sum(m.get("pole_ambiguous", False) for m in members) / count,
+        "later_nights_missed_and_pole_warned": [
+            sum(m.get("pole_ambiguous", False) for m in members if m["held_out_rms"] > 1.5 * NOISE),
+            sum(m["held_out_rms"] > 1.5 * NOISE for m in members),
         ],
         # The fits that warn that their residuals still exceed the noise after their last round.
         "misfit_warned": sum(m.get("misfit_warned", False) for m in members) / count,

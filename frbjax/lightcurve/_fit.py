@@ -87,6 +87,22 @@ starts wins; a winner above the bound warns: the search has missed the data's ba
 understates the noise (docs/lightcurves.md: the rounds on the tumbler family of
 benchmarks/lightcurve_family.py).
 
+The pole's mirror image
+-----------------------
+Light curves observed with the Sun and the observer near one plane (the ecliptic, for most
+asteroids) leave the pole ambiguous (Kaasalainen & Lamberg 2006, Inverse Problems 22, 749): with M
+the reflection through that plane and D = diag(1, 1, -1) the body's, the attitude R -> M R D and the
+body-frame L -> -D L map a torque-free motion to another with the same moments and periods (Euler's
+equations keep their form under the body's reflection), its pole at -M L (the longitude 180 degrees
+away, the same latitude), and the mirrored convex shape (its areas on the normals D n, the icosphere
+being symmetric under D) then gives exactly the same light curves for every direction in the plane.
+Off the plane they differ, and the data decide as far as they reach. So the winner's mirror image
+(the plane the one nearest the observations' directions) is solved on all the data too, the lower
+cost wins, and the other pole is reported with its cost above the winner's; within a noise unit and
+more than 10 degrees away, the fit warns of two poles. On the tumbler family (docs/lightcurves.md)
+three of the six members whose later nights were predicted worst had been won by the mirror image
+of the truth's pole, within 0.36 noise units of the truth's.
+
 The windows hold the samples within a radius of the epoch, the first a tenth of the data, each next
 radius 1.8 times the last: a window's fit predicts the phase a factor 1.8 further out, where its
 period error has not yet grown to a cycle.  On every window but the last each start keeps its grid
@@ -146,6 +162,10 @@ _CONVEX_STARTS = 4
 # steps of 1 / _SHIFTS_PER_CYCLE, for each period.
 _SHIFT_CYCLES = 1
 _SHIFTS_PER_CYCLE = 4
+# The winner's and its mirror image's poles are two answers (``LightcurveFit.pole_ambiguous``) when
+# they fit within a noise unit of each other and lie more than this many degrees apart; nearer, the
+# mirror image is the winner's pole found again (a pole near the plane's normal is its own image).
+_POLE_SEPARATION = 10.0
 
 
 # ------------------------------------------------------------------------------------ the model
@@ -447,6 +467,43 @@ def _fitted_motion(theta, reference, principal_axis):
     return _body(theta, reference), values, long_axis, jacobian
 
 
+def _plane_normal(sun, observer):
+    """The unit normal of the plane nearest the directions (N, 3) to the Sun and to the observer: the
+    eigenvector of sum (s s^T + o o^T) with the smallest eigenvalue."""
+    _, vectors = np.linalg.eigh(sun.T @ sun + observer.T @ observer)
+    return vectors[:, 0]
+
+
+def _mirrored_normals(normals):
+    """The index of each normal's image under the body's reflection D = diag(1, 1, -1): the icosphere
+    is symmetric under it, so that a convex shape's mirror image has the same normals, its areas
+    permuted."""
+    image = normals * np.array([1.0, 1.0, -1.0])
+    index = np.argmax(image @ normals.T, -1)
+    if not np.allclose(normals[index], image, atol=1e-9):
+        raise AssertionError("the shape's normals are not symmetric under z -> -z")
+    return index
+
+
+def _mirror_image(parameters, reference, plane_normal, normal_index):
+    """The parameters and reference frame of the motion and shape mirrored through the plane of
+    ``plane_normal`` (module docstring, "The pole's mirror image"): the attitude R -> M R D, the
+    body-frame L -> -D L, the convex shape's areas moved to the mirrored normals (``normal_index``;
+    None: an ellipsoid, its own image)."""
+    inertia, momentum, attitude = _initial_state(jnp.asarray(parameters[:8]), tuple(map(jnp.asarray, reference)))
+    body_reflection = np.diag([1.0, 1.0, -1.0])
+    reflection = np.eye(3) - 2 * np.outer(plane_normal, plane_normal)
+    rotation = reflection @ np.asarray(quaternion.as_matrix(attitude)) @ body_reflection
+    mirrored_attitude = np.asarray(quaternion.from_matrix(jnp.asarray(rotation)))
+    direction = -body_reflection @ np.asarray(momentum)
+    direction /= np.linalg.norm(direction)
+    mirrored = np.array(parameters, float)
+    mirrored[3:8] = 0.0
+    if normal_index is not None:
+        mirrored[8:] = np.asarray(parameters)[8:][normal_index]
+    return mirrored, (mirrored_attitude, direction, _tangent_basis(direction))
+
+
 # ------------------------------------------------------------------------------------ the result
 
 
@@ -466,27 +523,37 @@ class CompetingBasins(typing.NamedTuple):
 
 class AmbiguousFitWarning(UserWarning):
     """:func:`fit_lightcurve` found basins at other periods that fit the data within the noise of the
-    winner's (:meth:`LightcurveFit.competing_basins`): the reported sigmas span them all."""
+    winner's (:meth:`LightcurveFit.competing_basins`: the reported sigmas span them all), or a mirror
+    pole that does (:attr:`LightcurveFit.pole_ambiguous`)."""
 
 
 def _warn_if_ambiguous(result, stacklevel=3):
-    """An :class:`AmbiguousFitWarning` naming the competing basins of ``result``, if it has any."""
+    """An :class:`AmbiguousFitWarning` naming the competing basins of ``result`` and its mirror pole,
+    if it has any."""
     basins = result.competing_basins()
-    if not len(basins.cost_excess):
-        return
-    winner = np.asarray(result.periods, float)
-    listed = "; ".join(
-        f"periods {_format_periods(p)} at {e:.2f} noise units of cost ({d:.0f} sigma away)"
-        for e, p, d in zip(basins.cost_excess, basins.periods, basins.distance)
-    )
-    warnings.warn(
-        f"fit_lightcurve: {len(basins.cost_excess)} other basin(s) fit the data within the noise of the winner "
-        f"(periods {_format_periods(winner)}): {listed}.  The data do not tell them apart: the reported sigmas are "
-        "the root-mean-square distances from the winner of these basins and its own (that alone: basin_period_sigma; "
-        "LightcurveFit.competing_basins()).  More nights, or a wider spread of them, decide.",
-        AmbiguousFitWarning,
-        stacklevel=stacklevel,
-    )
+    messages = []
+    if len(basins.cost_excess):
+        winner = np.asarray(result.periods, float)
+        listed = "; ".join(
+            f"periods {_format_periods(p)} at {e:.2f} noise units of cost ({d:.0f} sigma away)"
+            for e, p, d in zip(basins.cost_excess, basins.periods, basins.distance)
+        )
+        messages.append(
+            f"{len(basins.cost_excess)} other basin(s) fit the data within the noise of the winner (periods "
+            f"{_format_periods(winner)}): {listed}.  The data do not tell them apart: the reported sigmas are the "
+            "root-mean-square distances from the winner of these basins and its own (that alone: "
+            "basin_period_sigma; LightcurveFit.competing_basins()).  More nights, or a wider spread of them, decide."
+        )
+    if result.pole_ambiguous:
+        messages.append(
+            f"the mirror image of the winner through the plane of the observations, solved on the data, fits them "
+            f"within {result.mirror_cost_excess:.2f} noise units of cost, its pole "
+            f"{_format_direction(result.mirror_momentum_direction)} {result.pole_separation:.0f} degrees from the "
+            f"winner's {_format_direction(result.momentum_direction)}: observations near one plane do not tell the "
+            "two poles apart (LightcurveFit.mirror_momentum_direction); nights further from that plane decide."
+        )
+    if messages:
+        warnings.warn("fit_lightcurve: " + "  And ".join(messages), AmbiguousFitWarning, stacklevel=stacklevel)
 
 
 class MisfitWarning(UserWarning):
@@ -511,6 +578,10 @@ def _format_periods(periods):
     return "(" + ", ".join(f"{p:.6g}" for p in np.asarray(periods, float) if np.isfinite(p)) + ")"
 
 
+def _format_direction(direction):
+    return "(" + ", ".join(f"{x:.3f}" for x in np.asarray(direction, float)) + ")"
+
+
 class LightcurveFit(eqx.Module):
     """Result of :func:`fit_lightcurve`.
 
@@ -525,7 +596,12 @@ class LightcurveFit(eqx.Module):
       principal-axis rotation about the largest moment);
     - ``inertia`` (3,): fitted moments scaled to a largest of 1; ``inertia_sigma`` (3,), as
       ``period_sigma``;
-    - ``momentum_direction`` (3,): the inertial direction of L;
+    - ``momentum_direction`` (3,): the inertial direction of L (the pole of the angular momentum);
+      ``mirror_momentum_direction`` (3,), ``mirror_cost_excess``: the other pole of the winner and its
+      mirror image through the plane of the observations (module docstring, "The pole's mirror
+      image"), and its cost above the winner's in noise units (NaN and inf with
+      ``mirror_pole=False``): within a noise unit and more than 10 degrees away, the data do not
+      tell the two poles apart (:attr:`pole_ambiguous`; :func:`fit_lightcurve` warns);
     - ``parameters``: (theta (8), shape parameters) of the module docstring; ``covariance``: their
       covariance (J^T J)^+ s^2 (s^2: the data rows' residual variance over their effective degrees
       of freedom); ``robust_covariance``: the cluster-robust sandwich over the light curves (zeros with
@@ -561,6 +637,8 @@ class LightcurveFit(eqx.Module):
     inertia: Float[Array, 3]
     inertia_sigma: Float[Array, 3]
     momentum_direction: Float[Array, 3]
+    mirror_momentum_direction: Float[Array, 3]
+    mirror_cost_excess: float
     parameters: Float[Array, " P"]
     covariance: Float[Array, "P P"]
     robust_covariance: Float[Array, "P P"]
@@ -632,6 +710,18 @@ class LightcurveFit(eqx.Module):
     def ambiguous(self) -> bool:
         """True when another basin fits the data within the noise of this one (:meth:`competing_basins`)."""
         return len(self.competing_basins().cost_excess) > 0
+
+    @property
+    def pole_separation(self) -> float:
+        """The angle (degrees) between ``momentum_direction`` and ``mirror_momentum_direction``."""
+        cosine = float(np.dot(np.asarray(self.momentum_direction), np.asarray(self.mirror_momentum_direction)))
+        return math.degrees(math.acos(min(max(cosine, -1.0), 1.0))) if math.isfinite(cosine) else math.nan
+
+    @property
+    def pole_ambiguous(self) -> bool:
+        """True when the mirror image's pole fits the data within a noise unit of the winner's and lies
+        more than 10 degrees from it: two poles the observations, near one plane, do not tell apart."""
+        return bool(self.mirror_cost_excess <= 1.0 and self.pole_separation > _POLE_SEPARATION)
 
     def predict(self, times, sun, observer):
         """The model brightness (unscaled: multiply by a light curve's scale) at ``times``."""
@@ -955,6 +1045,7 @@ def _check_options(
     n_refine,
     search_rounds,
     stop_at_noise,
+    mirror_pole,
     seed,
     rtol,
     atol,
@@ -1003,8 +1094,9 @@ def _check_options(
     checks.integer("starts_per_period", starts_per_period, minimum=1)
     checks.integer("n_refine", n_refine, minimum=1)
     checks.integer("search_rounds", search_rounds, minimum=1)
-    if not isinstance(stop_at_noise, (bool, np.bool_)):
-        raise ValueError(f"stop_at_noise must be True or False, got {stop_at_noise!r}")
+    for name, flag in (("stop_at_noise", stop_at_noise), ("mirror_pole", mirror_pole)):
+        if not isinstance(flag, (bool, np.bool_)):
+            raise ValueError(f"{name} must be True or False, got {flag!r}")
     checks.integer("seed", seed, minimum=0)
     checks.scalar("rtol", rtol, positive=True)
     checks.scalar("atol", atol, positive=True)
@@ -1044,6 +1136,7 @@ def fit_lightcurve(
     n_refine: int = 32,
     search_rounds: int = 4,
     stop_at_noise: bool = False,
+    mirror_pole: bool = True,
     seed: int = 0,
     rtol: float = 1e-8,
     atol: float = 1e-8,
@@ -1081,6 +1174,11 @@ def fit_lightcurve(
     warning names and the sigmas span; ``stop_at_noise=True`` stops at the first round whose winner
     is within the bound, about ``search_rounds`` times faster where that is the first, at the risk of
     a confident answer in such an alias (measured on the tumbler family: docs/lightcurves.md).
+    ``mirror_pole``: the winner's mirror image through the plane of the observations, which fits
+    light curves taken near one plane nearly as well (module docstring), is solved too, and the
+    lower cost wins; the other pole is reported (:attr:`LightcurveFit.mirror_momentum_direction`)
+    and a warning names it where the data do not tell the two apart.  One more Levenberg-Marquardt
+    solve on all the data.
     ``shape``: "convex" (log-areas on the facet normals of an icosphere of
     ``convex_subdivisions``, with ``regularisation`` = (closure weight, smoothness weight)) or
     "ellipsoid".  The defaults (``n_refine=32``, 320 normals) are the settings measured on the
@@ -1129,6 +1227,7 @@ def fit_lightcurve(
         n_refine=n_refine,
         search_rounds=search_rounds,
         stop_at_noise=stop_at_noise,
+        mirror_pole=mirror_pole,
         seed=seed,
         rtol=rtol,
         atol=atol,
@@ -1154,6 +1253,7 @@ def fit_lightcurve(
     if shape == "convex":
         normals, solid_angles, faces = _unit_normals(convex_subdivisions)
         laplacian = _laplacian(faces)
+        normal_index = _mirrored_normals(normals)
     else:
         normals = search_normals
         laplacian = np.zeros((1, 1))
@@ -1455,10 +1555,42 @@ def fit_lightcurve(
             start_periods, costs = start_periods[:0], costs[:0]
         return out, tuple(r[alive] for r in refs), start_periods, costs
 
+    def mirror_round(parameters, reference):
+        """The start ``parameters`` (with its ``reference``) mirrored through the plane of the
+        observations (:func:`_mirror_image`) and solved on all the data as the last stage solves its
+        starts (continued from where it stops, as the leader is): a round of one refined start."""
+        final_data, final_config = (data, config) if shape == "convex" else (ellipsoid_data, ellipsoid_config)
+        mirrored, mirrored_reference = _mirror_image(
+            parameters, reference, _plane_normal(sun, observer), normal_index if shape == "convex" else None
+        )
+        references = tuple(r[None] for r in mirrored_reference)
+        out = None
+        for _ in range(1 + _CONTINUATIONS):
+            if out is not None and (out[2][0] or not np.isfinite(out[1][0])):
+                break
+            out = _refine(
+                as_jax(mirrored[None] if out is None else out[0]),
+                as_jax(references),
+                None,
+                final_data,
+                jnp.asarray(masks[-1][None, None], dtype),
+                None,
+                final_config,
+                **solver_settings,
+            )
+            out = [np.asarray(x) for x in out]
+        return out, references, np.zeros((0, 2)), np.zeros(0)
+
     # ---- the search's rounds: all of them, or (stop_at_noise) while the winner misses the noise
     def best(rounds):
-        # The refined starts of all rounds so far, the lowest cost's index, and its misfit.
-        outs = [np.concatenate(parts) for parts in zip(*(r[0] for r in rounds))]
+        # The refined starts of all rounds so far, the lowest cost's index, and its misfit.  A round's
+        # residuals and Jacobians solved without the period prior have no rows for it (zeros).
+        rows = max(r[0][3].shape[1] for r in rounds)
+        padded = [
+            r[0][:3] + [np.pad(x, [(0, 0), (0, rows - x.shape[1])] + [(0, 0)] * (x.ndim - 2)) for x in r[0][3:]]
+            for r in rounds
+        ]
+        outs = [np.concatenate(parts) for parts in zip(*padded)]
         winner = int(np.argmin(np.where(np.isfinite(outs[1]), outs[1], np.inf)))
         return outs, winner, _misfit(outs[3][winner], outs[4][winner][:, free > 0], n, curves.shape[1])
 
@@ -1470,6 +1602,13 @@ def fit_lightcurve(
             outs, winner, misfit = best(rounds)
             if last or misfit.variance <= misfit.threshold:
                 break
+    mirror_row = None
+    if mirror_pole:
+        references = tuple(np.concatenate(parts) for parts in zip(*(r[1] for r in rounds)))
+        rounds.append(mirror_round(outs[0][winner], tuple(r[winner] for r in references)))
+        # The mirror image's row, and the winner's before it: whichever is not the winner is the other pole.
+        mirror_row, searched_winner = len(outs[0]), winner
+        outs, winner, misfit = best(rounds)
     fitted, refine_costs, oks, residual_rows, jacobians = outs
     candidate_references = tuple(np.concatenate(parts) for parts in zip(*(r[1] for r in rounds)))
     search_periods = np.concatenate([r[2] for r in rounds])
@@ -1514,6 +1653,15 @@ def fit_lightcurve(
     l_body = np.asarray(body.initial_angular_momentum)
     momentum_direction = np.asarray(_rotate(body.initial_attitude, l_body / np.linalg.norm(l_body)))
     energy_ratio = float(np.sum(l_body**2 / moments) / np.sum(l_body**2))
+    mirror_direction, mirror_excess = np.full(3, np.nan), math.inf
+    if mirror_row is not None:
+        other = searched_winner if winner == mirror_row else mirror_row
+        other_body = motions[other][0]
+        other_l = np.asarray(other_body.initial_angular_momentum)
+        mirror_direction = np.asarray(_rotate(other_body.initial_attitude, other_l / np.linalg.norm(other_l)))
+        unit = math.sqrt(n / 2) * max(2 * float(refine_costs[winner]) / n, np.finfo(float).tiny)
+        excess = (float(refine_costs[other]) - float(refine_costs[winner])) / unit
+        mirror_excess = excess if math.isfinite(excess) else math.inf
 
     # Scales and residuals of the fitted model, per curve.
     log_model = np.log(
@@ -1539,6 +1687,8 @@ def fit_lightcurve(
         inertia=jnp.asarray(moments, dtype),
         inertia_sigma=jnp.asarray(inertia_sigma, dtype),
         momentum_direction=jnp.asarray(momentum_direction, dtype),
+        mirror_momentum_direction=jnp.asarray(mirror_direction, dtype),
+        mirror_cost_excess=mirror_excess,
         parameters=jnp.asarray(p, dtype),
         covariance=jnp.asarray(covariance, dtype),
         robust_covariance=jnp.asarray(robust_covariance, dtype),
@@ -1551,7 +1701,7 @@ def fit_lightcurve(
         refine_costs=jnp.asarray(refine_costs, dtype),
         refine_periods=jnp.asarray(refine_periods, dtype),
         noise_ratio=math.sqrt(misfit.variance),
-        search_rounds=len(rounds),
+        search_rounds=len(rounds) - (mirror_row is not None),
         _reference=reference,
         shape_model=shape,
         regularisation=tuple(float(w) for w in regularisation),
