@@ -97,7 +97,7 @@ equations keep their form under the body's reflection), its pole at -M L (the lo
 away, the same latitude), and the mirrored convex shape (its areas on the normals D n, the icosphere
 being symmetric under D) then gives exactly the same light curves for every direction in the plane.
 Off the plane they differ, and the data decide as far as they reach. So the winner's mirror image
-(the plane the one nearest the observations' directions) is solved on all the data too, the lower
+(through the plane nearest the observations' directions) is solved on all the data too, the lower
 cost wins, and the other pole is reported with its cost above the winner's; within a noise unit and
 more than 10 degrees away, the fit warns of two poles. On the tumbler family (docs/lightcurves.md)
 three of the six members whose later nights were predicted worst had been won by the mirror image
@@ -612,10 +612,10 @@ class LightcurveFit(eqx.Module):
     - ``search_periods`` (S, 2), ``search_costs`` (S,): the periods of every start and its cost on the
       first window (the search's landscape; every round's starts, in turn); ``refine_costs`` (K,),
       ``refine_periods`` (K, 2): the cost and the periods of each start solved on all the data (the
-      refinement's last stage of every round: the best four for a convex shape), the winner's among
-      them: runner-ups within the noise of the winner's cost (about sqrt(N / 2)) at other periods are
-      basins the data do not tell apart (:meth:`competing_basins`, :attr:`ambiguous`;
-      :func:`fit_lightcurve` warns of them);
+      refinement's last stage of every round: the best four for a convex shape; then the best one's
+      mirror image, ``mirror_pole``), the winner's among them: runner-ups within the noise of the
+      winner's cost (about sqrt(N / 2)) at other periods are basins the data do not tell apart
+      (:meth:`competing_basins`, :attr:`ambiguous`; :func:`fit_lightcurve` warns of them);
     - ``noise_ratio``: s / sigma, the residuals' level over the stated noise (1 where the model and
       ``sigma`` hold; where (s / sigma)^2 exceeds 1 + 3 sqrt(2 / dof) after the last round,
       :func:`fit_lightcurve` warns: :class:`MisfitWarning`); ``search_rounds``: the rounds it ran
