@@ -25,10 +25,16 @@ motion (``initial=`` the true body), which gives the cost the data allow.  Per m
 - ``noise_ratio``, ``search_rounds``, ``misfit_warned``: the fit's residual level over the noise
   (``LightcurveFit.noise_ratio``), the search's rounds (more while it is above its chi-square
   bound) and whether the fit warned that it still is (``MisfitWarning``);
+- ``pole_from_truth``, ``mirror_pole_from_truth``: the angles (degrees) of the fit's pole (the inertial
+  direction of L) and of its other pole (the winner's mirror image through the plane of the
+  observations, ``mirror_pole``) from the truth's; ``mirror_cost_excess``, ``pole_separation``,
+  ``pole_ambiguous``: the other pole's cost above the winner's (noise units), its angle from the
+  winner's, and whether the fit warns of the two (``LightcurveFit.pole_ambiguous``);
 - wall time of the inversion (first call in the process includes compilation).
 
-The refinement from the truth runs one round of the search (``search_rounds=1``): it is the reference
-the data allow, not a search.  ``--truth-from PATH`` takes its figures from an earlier run's members
+The refinement from the truth runs one round of the search (``search_rounds=1``) without the mirror
+image's solve (``mirror_pole=False``): it is the reference the data allow in the truth's basin, not a
+search.  ``--truth-from PATH`` takes its figures from an earlier run's members
 (a JSON of this script) instead of computing them again: the same computation, for a rerun of the
 fits alone.
 
@@ -216,19 +222,18 @@ def rates(members):
 
 def plot(result, path):
     """Per member: the cost's excess over the truth's refinement (noise units), the later nights' RMS
-    and the periods' largest |z|, against the issue's thresholds; the family's run with the rounds
-    stopped at the noise and the sigmas of the model's covariance alone (the defaults until
-    2026-12-03, the file's top level then: ``earlier_runs.four_rounds_stop_at_noise_2026_12_02``,
-    when the file has it) in grey."""
+    and the periods' largest |z|, against the issue's thresholds; the family's run before the mirror
+    image's solve (``earlier_runs.every_round_2026_12_03``, when the file has it) in grey; ringed in
+    red, the fits that warn of two poles (``pole_ambiguous``)."""
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
     runs = [("now", result["members"], "C0")]
-    earlier = result.get("earlier_runs", {}).get("four_rounds_stop_at_noise_2026_12_02")
+    earlier = result.get("earlier_runs", {}).get("every_round_2026_12_03")
     if earlier:
-        runs.insert(0, ("before: rounds stopped at the noise, the model's sigmas", earlier["members"], "0.6"))
+        runs.insert(0, ("before: without the mirror image's solve", earlier["members"], "0.6"))
     panels = [
         (
             "cost excess over the truth's refinement\n(noise units, sqrt(N/2); below 0.01 at 0.01)",
@@ -243,6 +248,17 @@ def plot(result, path):
         for offset, (name, members, colour) in zip((-0.15, 0.15) if len(runs) == 2 else (0.0,), runs):
             index = np.array([m["index"] for m in members])
             axis.scatter(index + offset, [value(m) for m in members], color=colour, s=22, label=name, zorder=3)
+            poles = [m for m in members if m.get("pole_ambiguous")]
+            if poles:
+                axis.scatter(
+                    np.array([m["index"] for m in poles]) + offset,
+                    [value(m) for m in poles],
+                    facecolors="none",
+                    edgecolors="C3",
+                    s=70,
+                    label="warns of two poles" if axis is axes[0] else None,
+                    zorder=4,
+                )
         axis.axhline(threshold, color="C3", lw=1, ls="--", label="the issue's threshold")
         axis.set_yscale("log")
         axis.set_ylabel(label, fontsize=8)
@@ -262,7 +278,8 @@ def plot(result, path):
     figure.suptitle(
         "fit_lightcurve on the tumbler family (+-10% period ranges): within the noise "
         f"{rates_now['cost_within_noise']:.0%}, later nights {rates_now['held_out_within_1.5_noise']:.0%}, "
-        f"periods {rates_now['periods_within_3_sigma']:.0%}",
+        f"periods {rates_now['periods_within_3_sigma']:.0%}"
+        + (f"; two poles warned {rates_now['pole_ambiguous']:.0%}" if "pole_ambiguous" in rates_now else ""),
         fontsize=9,
     )
     figure.tight_layout()
