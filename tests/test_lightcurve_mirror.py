@@ -58,10 +58,10 @@ def test_the_mirror_image_gives_the_same_light_curves_in_its_plane():
     observer = _in_plane(plane, len(times), rng)
     flux = np.asarray(brightness(body, shape, times, sun, observer))
     mirrored_flux = np.asarray(brightness(image, mirrored_shape, times, sun, observer))
-    # Measured: 4.4e-15 relative over 40 days (about 90 precession cycles).
-    np.testing.assert_allclose(mirrored_flux, flux, rtol=2e-13)
+    # Measured: 1.4e-14 relative over 40 days (58 precession cycles), one sample dark in both.
+    np.testing.assert_allclose(mirrored_flux, flux, rtol=3e-14)
 
-    # Off the plane the two differ: the observations there tell the poles apart.
+    # Off the plane the two differ (measured: up to 26%): the observations there tell the poles apart.
     lifted = (sun + 0.3 * plane) / np.linalg.norm(sun + 0.3 * plane, axis=-1, keepdims=True)
     assert (
         np.max(
