@@ -98,10 +98,10 @@ def invert(case, width, options, stored=None):
     seconds = time.perf_counter() - start
     held_out = tuple(case.held_out[key] for key in ("times", "flux", "sun", "observer", "night"))
     held_out_rms = lambda result: lightcurve.problems.held_out_rms(result, held_out)  # noqa: E731
+    # The true motion, its time counted from the fit's epoch (fit_lightcurve's default: the median time).
+    truth = case.body_at(float(np.median(case.times)))
     if stored is None:
-        # The truth's basin: the same data refined from the true motion, its time counted from the
-        # fit's epoch (fit_lightcurve's default: the median time).
-        truth = case.body_at(float(np.median(case.times)))
+        # The truth's basin: the same data refined from the true motion.
         # Without the mirror image's solve: the truth's own basin, whatever its mirror's cost.
         refined = fit_lightcurve(
             *data, periods=ranges, initial=truth, **common, **{**options, "search_rounds": 1, "mirror_pole": False}
@@ -121,7 +121,6 @@ def invert(case, width, options, stored=None):
     periods, sigma = np.asarray(found.periods), np.asarray(found.period_sigma)
     z = np.abs(periods[: len(true_periods)] - true_periods) / sigma[: len(true_periods)]
     inertia_z = case.moments_z(found.inertia, found.inertia_sigma)
-    truth = case.body_at(float(np.median(case.times)))
     true_pole = np.asarray(truth.rotation_matrix(0.0)) @ np.asarray(truth.angular_momentum(0.0))
     true_pole /= np.linalg.norm(true_pole)
     degrees_from_truth = lambda pole: float(np.degrees(np.arccos(np.clip(np.asarray(pole) @ true_pole, -1, 1))))  # noqa: E731

@@ -44,6 +44,7 @@ import numpy as np  # noqa: E402
 
 from frbjax import FreeRigidBody, quaternion_from_matrix  # noqa: E402
 from frbjax.lightcurve import fit_lightcurve  # noqa: E402
+from frbjax.lightcurve._fit import _plane_normal  # noqa: E402  (the fit's own, ``mirror_pole``)
 
 
 sys.path.insert(0, str(pathlib.Path(__file__).parent))
@@ -53,12 +54,6 @@ import lightcurve  # noqa: E402  (its `problems`: tests/test_lightcurve_fit.py's
 
 ROOT = pathlib.Path(__file__).resolve().parents[1]
 MISSED = (3, 6, 10, 13, 14, 15)
-
-
-def plane_normal(sun, observer):
-    """The unit normal of the plane nearest the directions (rows of ``sun`` and ``observer``)."""
-    _, vectors = np.linalg.eigh(sun.T @ sun + observer.T @ observer)
-    return vectors[:, 0]
 
 
 def mirror_image(body, normal):
@@ -100,7 +95,7 @@ def member(index):
         warnings.simplefilter("ignore")
         found = fit_lightcurve(*data, periods=ranges, mode="both", **common)
     search_seconds = time.perf_counter() - start
-    normal = plane_normal(case.sun, case.observer)
+    normal = _plane_normal(case.sun, case.observer)
     reflection = np.eye(3) - 2 * np.outer(normal, normal)
     start = time.perf_counter()
     with warnings.catch_warnings():

@@ -19,7 +19,7 @@ import os
 
 import jax
 
-from ._kernel_path import current, fresh_copy
+from ._kernel_path import keyed_by_path
 
 
 def _cores():
@@ -57,12 +57,8 @@ def cpu_jit(function=None, **jit_options):
         return functools.partial(cpu_jit, **jit_options)
 
     @functools.cache
-    def compiled_for(options, path):
-        del path  # the cache's key only (``_kernel_path``): the copy reads the variables when traced
-        return jax.jit(fresh_copy(function), compiler_options=dict(options) or None, **jit_options)
-
     def compiled(options):
-        return compiled_for(options, current())
+        return keyed_by_path(function, compiler_options=dict(options) or None, **jit_options)
 
     @functools.wraps(function)
     def call(*args, **kwargs):

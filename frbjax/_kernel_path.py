@@ -2,12 +2,11 @@
 
 Whether the compiled kernels or the JAX formulas evaluate a function is decided when it is traced, from
 ``FRBJAX_KERNELS`` (the special functions and the motion) and ``FRBJAX_MOTION_KERNEL`` (the motion
-alone).  ``jax.jit`` keys its cache by the arguments' types, and shares one trace between every jit of
-the same Python function: a program traced under one setting was reused after the variable changed
-(a body's methods, compiled on the kernels, then ran them under ``FRBJAX_KERNELS=jax``).  Each
-compiled program of the library is therefore made once per path, from its own copy of the function,
-as the special functions' ``one_program`` keys on the path: a change of either variable takes effect
-at the next call.
+alone).  ``jax.jit`` keys its cache by the arguments' types only: a program traced under one setting
+was reused after the variable changed (a body's methods, compiled on the kernels, then ran them under
+``FRBJAX_KERNELS=jax``).  Each compiled program of the library is therefore made once per path
+(``special._compiled.keyed_jit``, as the special functions' ``one_program`` is), so that a change of
+either variable takes effect at the next call.
 """
 
 from __future__ import annotations
@@ -26,30 +25,9 @@ def current() -> tuple[str, str]:
     return os.environ.get(_compiled._SWITCH, "auto"), os.environ.get(_compiled_motion._SWITCH, "compiled")
 
 
-def fresh_copy(function):
-    """A new function object that calls ``function``, with its name, docstring and signature: jit's
-    caches are keyed by the function object, so each copy is traced on its own."""
-
-    @functools.wraps(function)
-    def copy(*args, **kwargs):
-        return function(*args, **kwargs)
-
-    return copy
-
-
 def keyed_by_path(function=None, *, jit=jax.jit, **jit_options):
     """``jit(function, **jit_options)`` made once per path (``current()``) and called for the current
     one: a decorator, with or without options; ``jit`` is ``jax.jit`` or ``equinox.filter_jit``."""
     if function is None:
         return functools.partial(keyed_by_path, jit=jit, **jit_options)
-
-    @functools.cache
-    def program(path):
-        del path  # the cache's key only: the copy reads the variables when it is traced
-        return jit(fresh_copy(function), **jit_options)
-
-    @functools.wraps(function)
-    def call(*args, **kwargs):
-        return program(current())(*args, **kwargs)
-
-    return call
+    return _compiled.keyed_jit(function, current, jit=jit, **jit_options)

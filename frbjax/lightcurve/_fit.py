@@ -1253,7 +1253,6 @@ def fit_lightcurve(
     if shape == "convex":
         normals, solid_angles, faces = _unit_normals(convex_subdivisions)
         laplacian = _laplacian(faces)
-        normal_index = _mirrored_normals(normals)
     else:
         normals = search_normals
         laplacian = np.zeros((1, 1))
@@ -1560,9 +1559,8 @@ def fit_lightcurve(
         observations (:func:`_mirror_image`) and solved on all the data as the last stage solves its
         starts (continued from where it stops, as the leader is): a round of one refined start."""
         final_data, final_config = (data, config) if shape == "convex" else (ellipsoid_data, ellipsoid_config)
-        mirrored, mirrored_reference = _mirror_image(
-            parameters, reference, _plane_normal(sun, observer), normal_index if shape == "convex" else None
-        )
+        normal_index = _mirrored_normals(normals) if shape == "convex" else None
+        mirrored, mirrored_reference = _mirror_image(parameters, reference, _plane_normal(sun, observer), normal_index)
         references = tuple(r[None] for r in mirrored_reference)
         out = None
         for _ in range(1 + _CONTINUATIONS):

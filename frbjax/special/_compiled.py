@@ -95,6 +95,35 @@ def _release(version):
     return tuple(numbers)
 
 
+def keyed_jit(function, key, *, jit=jax.jit, **jit_options):
+    """``jit(function, **jit_options)`` made once per value of ``key()`` (read at each call) and called
+    for the current one: the compiled kernels or the JAX formulas are chosen when a function is traced,
+    from environment variables, which jit's cache does not know.  Each value gets its own copy of the
+    function: jit shares one trace between every jit of the same function object (jax 0.10), so a
+    second jit of ``function`` itself would reuse the first's trace.  ``jit`` is ``jax.jit`` or
+    ``equinox.filter_jit``."""
+
+    @functools.cache
+    def program(value):
+        del value  # the cache's key only: the copy reads the variables when it is traced
+
+        @functools.wraps(function)
+        def copy(*args, **kwargs):
+            return function(*args, **kwargs)
+
+        return jit(copy, **jit_options)
+
+    @functools.wraps(function)
+    def call(*args, **kwargs):
+        return program(key())(*args, **kwargs)
+
+    return call
+
+
+def _path():
+    return os.environ.get(_SWITCH, "auto")
+
+
 def one_program(function: Callable[P, R]) -> Callable[P, R]:
     """A public special function as one compiled program per argument types and path.
 
@@ -106,10 +135,7 @@ def one_program(function: Callable[P, R]) -> Callable[P, R]:
     ``vmap`` or ``grad`` the function is traced inline like any other.
     """
 
-    @functools.partial(jax.jit, static_argnames="path")
-    def program(*args, path, **kwargs):
-        del path  # a key of jit's cache only: ``selected`` reads the variable when this is traced
-        return function(*args, **kwargs)
+    program = keyed_jit(function, _path)
 
     @functools.wraps(function)
     def call(*args: P.args, **kwargs: P.kwargs) -> R:
@@ -117,7 +143,7 @@ def one_program(function: Callable[P, R]) -> Callable[P, R]:
         # check: jit would refuse a string with a TypeError of its own before the function runs.
         arrays = [real_array(a) for a in args]
         keywords = {name: None if a is None else real_array(a) for name, a in kwargs.items()}
-        return program(*arrays, path=os.environ.get(_SWITCH, "auto"), **keywords)
+        return program(*arrays, **keywords)
 
     return call
 
