@@ -60,7 +60,8 @@ SIZE = sum(count for _, count in KINDS)
 class Tumbler:
     """One member: data (``times`` in days from the body's epoch, ``flux`` with its per-night scales,
     unit vectors ``sun`` and ``observer``, ``night`` labels), the held-out nights likewise
-    (``held_out``: a dict of the same five arrays), and the truth."""
+    (``held_out``: a dict of the same five arrays and ``noiseless``, the true flux without noise or
+    scale), and the truth."""
 
     index: int
     kind: str
@@ -230,8 +231,8 @@ def tumbler(index: int, seed: int = 0, nights: int = NIGHTS, per_night: float = 
     rate, low, high, tilt = rng.uniform(0.3, 0.7), rng.uniform(5, 15), rng.uniform(25, 45), rng.uniform(0, 0.2)
     all_times = np.concatenate([times, later])
     sun, observer = _directions(all_times, rate, low, high, tilt)
-    flux = np.asarray(_flux(inertia, momentum, attitude, normals, areas, all_times, sun, observer))
-    flux = flux * np.exp(NOISE * rng.normal(size=flux.shape))
+    noiseless = np.asarray(_flux(inertia, momentum, attitude, normals, areas, all_times, sun, observer))
+    flux = noiseless * np.exp(NOISE * rng.normal(size=noiseless.shape))
     labels = np.concatenate([night, NIGHTS + later_night])
     flux = flux * np.exp(rng.normal(size=NIGHTS + HELD_OUT_NIGHTS))[labels]
 
@@ -255,7 +256,12 @@ def tumbler(index: int, seed: int = 0, nights: int = NIGHTS, per_night: float = 
         observer=observer[fit],
         night=labels[fit],
         held_out=dict(
-            times=all_times[held], flux=flux[held], sun=sun[held], observer=observer[held], night=labels[held]
+            times=all_times[held],
+            flux=flux[held],
+            sun=sun[held],
+            observer=observer[held],
+            night=labels[held],
+            noiseless=noiseless[held],
         ),
         inertia=inertia,
         angular_momentum=momentum,

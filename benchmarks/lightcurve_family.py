@@ -12,8 +12,12 @@ motion (``initial=`` the true body), which gives the cost the data allow.  Per m
 - ``cost_excess``: the search's cost minus the truth-refined cost, in units of the noise of a cost
   (sqrt(N / 2), the standard deviation of half a chi-square with N degrees of freedom); the issue's
   "within the noise" is ``cost_excess <= 1``;
-- ``held_out_rms``: the RMS of log(data / model) over the four later nights, each night's scale
-  fitted (the data carry 1% noise: the issue's "within 1.5x the noise" is ``<= 0.015``);
+- ``held_out_error``: the RMS of log(truth / model) over the four later nights against the noiseless
+  truth, each night's scale fitted: the prediction's own error, the measure of the issue's table
+  ("later nights predicted, rms vs the noiseless truth"); "within 1.5x the noise" is ``<= 0.015``;
+- ``held_out_rms``: the same against the noisy data (the 1% noise included: about
+  sqrt(held_out_error^2 + 0.01^2)), the measure of the runs before 2026-12-04, held to ``<= 0.015``
+  too (``rates``: ``held_out_data_within_1.5_noise``);
 - ``period_z``: |P - P_true| / sigma for each period (the issue: within 3 reported sigmas), and
   ``truth_refined_period_z`` the same for the refinement from the truth in its basin's sigmas
   (``LightcurveFit.basin_period_sigma``: the truth's basin alone); ``basin_period_sigma`` the
@@ -98,6 +102,8 @@ def invert(case, width, options, stored=None):
     seconds = time.perf_counter() - start
     held_out = tuple(case.held_out[key] for key in ("times", "flux", "sun", "observer", "night"))
     held_out_rms = lambda result: lightcurve.problems.held_out_rms(result, held_out)  # noqa: E731
+    noiseless = (*held_out[:1], case.held_out["noiseless"], *held_out[2:])
+    held_out_error = lambda result: lightcurve.problems.held_out_rms(result, noiseless)  # noqa: E731
     # The true motion, its time counted from the fit's epoch (fit_lightcurve's default: the median time).
     truth = case.body_at(float(np.median(case.times)))
     if stored is None:
@@ -113,6 +119,7 @@ def invert(case, width, options, stored=None):
             ).tolist(),
             "truth_refined_cost": float(refined.cost),
             "truth_refined_held_out_rms": held_out_rms(refined),
+            "truth_refined_held_out_error": held_out_error(refined),
             "truth_refined_noise_ratio": float(refined.noise_ratio),
         }
     else:
@@ -143,6 +150,7 @@ def invert(case, width, options, stored=None):
         "long_axis_mode": bool(found.long_axis_mode),
         "cost": float(found.cost),
         "cost_excess": (float(found.cost) - truth_refined["truth_refined_cost"]) / math.sqrt(samples / 2),
+        "held_out_error": held_out_error(found),
         "held_out_rms": held_out_rms(found),
         "noise_ratio": float(found.noise_ratio),
         "search_rounds": int(found.search_rounds),
@@ -184,6 +192,12 @@ def with_basins(member):
     }
 
 
+def later_nights(member):
+    """The later nights' prediction error against the noiseless truth (``held_out_error``), or for a
+    record of the runs before 2026-12-04, which have none, the RMS against the data."""
+    return member.get("held_out_error", member["held_out_rms"])
+
+
 def rates(members):
     count = len(members)
     if not count:
@@ -191,7 +205,10 @@ def rates(members):
     return {
         "members": count,
         "cost_within_noise": sum(m["cost_excess"] <= 1 for m in members) / count,
-        "held_out_within_1.5_noise": sum(m["held_out_rms"] <= 1.5 * NOISE for m in members) / count,
+        # The issue's measure (the prediction against the noiseless truth) and, as in the runs before
+        # 2026-12-04, the same against the noisy data.
+        "held_out_within_1.5_noise": sum(later_nights(m) <= 1.5 * NOISE for m in members) / count,
+        "held_out_data_within_1.5_noise": sum(m["held_out_rms"] <= 1.5 * NOISE for m in members) / count,
         "periods_within_3_sigma": sum(max(m["period_z"]) <= 3 for m in members) / count,
         # The moments of the tumblers (a rotator's are fixed): both smaller ones within 3 sigmas.
         "inertia_within_3_sigma": (
@@ -209,8 +226,8 @@ def rates(members):
         # those whose later nights miss, the share that warns.
         "pole_ambiguous": sum(m.get("pole_ambiguous", False) for m in members) / count,
         "later_nights_missed_and_pole_warned": [
-            sum(m.get("pole_ambiguous", False) for m in members if m["held_out_rms"] > 1.5 * NOISE),
-            sum(m["held_out_rms"] > 1.5 * NOISE for m in members),
+            sum(m.get("pole_ambiguous", False) for m in members if later_nights(m) > 1.5 * NOISE),
+            sum(later_nights(m) > 1.5 * NOISE for m in members),
         ],
         # The fits that warn that their residuals still exceed the noise after their last round.
         "misfit_warned": sum(m.get("misfit_warned", False) for m in members) / count,
@@ -221,25 +238,30 @@ def rates(members):
 
 def plot(result, path):
     """Per member: the cost's excess over the truth's refinement (noise units), the later nights' RMS
-    and the periods' largest |z|, against the issue's thresholds; the family's run before the mirror
-    image's solve (``earlier_runs.every_round_2026_12_03``, when the file has it) in grey; ringed in
-    red, the fits that warn of two poles (``pole_ambiguous``)."""
+    and the periods' largest |z|, against the issue's thresholds; the family's run of the same
+    defaults on 2026-12-03 (``earlier_runs.mirror_2026_12_03``, when the file has it, its later nights
+    measured against the data) in grey; ringed in red, the fits that warn of two poles
+    (``pole_ambiguous``)."""
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
     runs = [("now", result["members"], "C0")]
-    earlier = result.get("earlier_runs", {}).get("every_round_2026_12_03")
+    earlier = result.get("earlier_runs", {}).get("mirror_2026_12_03")
     if earlier:
-        runs.insert(0, ("before: without the mirror image's solve", earlier["members"], "0.6"))
+        runs.insert(0, ("2026-12-03, the same defaults", earlier["members"], "0.6"))
     panels = [
         (
             "cost excess over the truth's refinement\n(noise units, sqrt(N/2); below 0.01 at 0.01)",
             lambda m: max(m["cost_excess"], 1e-2),
             1,
         ),
-        ("later nights' RMS (1% noise)", lambda m: m["held_out_rms"], 1.5 * NOISE),
+        (
+            "later nights' RMS vs the noiseless truth\n(grey: vs the data, its 1% noise included)",
+            later_nights,
+            1.5 * NOISE,
+        ),
         ("periods' largest |P - P_true| / sigma\n(below 0.01 at 0.01)", lambda m: max(max(m["period_z"]), 1e-2), 3),
     ]
     figure, axes = plt.subplots(3, 1, figsize=(10, 8), sharex=True)
@@ -255,7 +277,7 @@ def plot(result, path):
                     facecolors="none",
                     edgecolors="C3",
                     s=70,
-                    label="warns of two poles" if axis is axes[0] else None,
+                    label="warns of two poles" if axis is axes[0] and name == "now" else None,
                     zorder=4,
                 )
         axis.axhline(threshold, color="C3", lw=1, ls="--", label="the issue's threshold")
