@@ -40,7 +40,8 @@ The refinement from the truth runs one round of the search (``search_rounds=1``)
 image's solve (``mirror_pole=False``): it is the reference the data allow in the truth's basin, not a
 search.  ``--truth-from PATH`` takes its figures from an earlier run's members
 (a JSON of this script) instead of computing them again: the same computation, for a rerun of the
-fits alone.
+fits alone (the records of runs before 2026-12-04 have no ``truth_refined_held_out_error``: none is
+then recorded).
 
 Rates over the members run are printed and written with the members to
 ``benchmarks/results/lightcurve_family.json``; the file is updated after every member, and members
