@@ -44,8 +44,10 @@ fits alone (the records of runs before 2026-12-04 have no ``truth_refined_held_o
 then recorded).
 
 Rates over the members run are printed and written with the members to
-``benchmarks/results/lightcurve_family.json``; the file is updated after every member, and members
-already in it are skipped (``--resume``), so that a long run can be continued.
+``benchmarks/results/lightcurve_family.json`` (among them ``sigma_coverage``: the shares of all the
+periods' and of all the smaller moments' |z| within 1, 2 and 3 sigmas; ``--rates-only`` recomputes
+them from the stored members); the file is updated after every member, and members already in it are
+skipped (``--resume``), so that a long run can be continued.
 
 Usage: python benchmarks/lightcurve_family.py [--members 0,5,12] [--width 0.1] [--resume] [--truth-from PATH]
        [--starts-per-period 16] [--period-grid 16,16] [--refine 8] [--convex-subdivisions 1] [--stop-at-noise]
@@ -216,6 +218,15 @@ def rates(members):
             sum(max(m["inertia_z"]) <= 3 for m in members if m.get("inertia_z"))
             / max(sum(bool(m.get("inertia_z")) for m in members), 1)
         ),
+        # Every period's and smaller moment's |z| (both of each fit): the shares within 1, 2 and 3
+        # sigmas, for a Gaussian 68%, 95% and 99.7%.
+        "sigma_coverage": {
+            name: [float(np.mean(np.array(values) <= k)) if values else None for k in (1, 2, 3)]
+            for name, values in (
+                ("periods", [z for m in members for z in m["period_z"]]),
+                ("inertia", [z for m in members for z in (m.get("inertia_z") or [])]),
+            )
+        },
         # The fits that warn of competing basins, and among those whose periods are more than 3
         # sigmas off, the share that warns (the "says when the landscape has competing basins").
         "ambiguous": sum(m.get("ambiguous", False) for m in members) / count,
@@ -328,11 +339,18 @@ def main(argv=None):
     parser.add_argument(
         "--basins-only", action="store_true", help="add the competing basins to the JSON's members and its rates"
     )
+    parser.add_argument("--rates-only", action="store_true", help="recompute the JSON's rates from its members")
     options = parser.parse_args(argv)
     output = pathlib.Path(options.output_dir) / "lightcurve_family.json"
     if options.basins_only:
         stored = json.loads(output.read_text())
         stored["members"] = [with_basins(m) for m in stored["members"]]
+        stored["rates"] = rates(stored["members"])
+        output.write_text(json.dumps(stored, indent=1) + "\n")
+        print(json.dumps(stored["rates"], indent=1))
+        return
+    if options.rates_only:
+        stored = json.loads(output.read_text())
         stored["rates"] = rates(stored["members"])
         output.write_text(json.dumps(stored, indent=1) + "\n")
         print(json.dumps(stored["rates"], indent=1))
