@@ -11,8 +11,8 @@ wall time (one process, OPENBLAS_NUM_THREADS=1 recommended).  For a tumbler it a
 periods' own reading as the periodogram scores its readings (``truth_rms``) and counts the tumbling
 proposals that score better (``truth_rank_if_formed``; ``listed_if_formed`` when that is fewer than
 the list holds): whether a miss is the search's (the truth's reading not formed) or the ranking's
-(formed, it would rank below the list), and ``inside_or_listed_if_formed`` in the summary bounds
-what a better search with the same ranking could reach.
+(formed, it would rank below the list), and ``inside_or_listed_if_formed`` in the summary: what a
+search that formed the truth's reading would reach with the same ranking.
 
 Writes benchmarks/results/lightcurve_periodogram.json and .png (the RMS map around the best basis for
 one member with the truth's basis marked, the one-period scan, and the family's outcomes).
@@ -24,6 +24,7 @@ one member with the truth's basis marked, the one-period scan, and the family's 
 from __future__ import annotations
 
 import argparse
+import inspect
 import json
 import pathlib
 import platform
@@ -57,12 +58,14 @@ def truth_score(case):
     readings it proposes (the same drifting series at its defaults, refined locally from the truth):
     where it would rank had the search formed it.  (The periodogram's private series: a diagnostic,
     not an interface.)"""
-    series = _Data(case.times, np.log(case.flux), case.night, drift=1)
-    indices = _reading_indices(2, 3)
+    defaults = {name: value.default for name, value in inspect.signature(tumbler_periodogram).parameters.items()}
+    drift = defaults["drift"]
+    series = _Data(case.times, np.log(case.flux), case.night, drift=drift)
+    indices = _reading_indices(defaults["psi_order"], defaults["phi_order"])
     resolution = 1 / float(np.ptp(case.times))
     f_psi, f_phi = 1 / case.periods[0], 1 / case.periods[1]
     rss = _refine(series, indices, f_psi, f_phi, 0.15 * resolution, levels=2, points=5)[2]
-    return float(np.sqrt(rss / (series.dof - 2 * len(indices) * 2)))
+    return float(np.sqrt(rss / (series.dof - 2 * len(indices) * (drift + 1))))
 
 
 def holds(proposal, mode, periods):
@@ -195,7 +198,7 @@ def main():
         half_width_median=float(np.median(widths)) if len(widths) else None,
         half_width_max=float(np.max(widths)) if len(widths) else None,
         # Inside a proposal, or a tumbler whose true reading, had the search formed it, would have
-        # been listed: the most that a better search with the same ranking could reach.
+        # been listed: what a search that formed it would reach with the same ranking.
         inside_or_listed_if_formed=sum(r["inside_any"] or r.get("listed_if_formed", False) for r in records),
         wall_s_median=float(np.median([r["wall_s"] for r in records])),
         wall_s_max=float(np.max([r["wall_s"] for r in records])),
