@@ -342,15 +342,10 @@ def main(argv=None):
     parser.add_argument("--rates-only", action="store_true", help="recompute the JSON's rates from its members")
     options = parser.parse_args(argv)
     output = pathlib.Path(options.output_dir) / "lightcurve_family.json"
-    if options.basins_only:
+    if options.basins_only or options.rates_only:
         stored = json.loads(output.read_text())
-        stored["members"] = [with_basins(m) for m in stored["members"]]
-        stored["rates"] = rates(stored["members"])
-        output.write_text(json.dumps(stored, indent=1) + "\n")
-        print(json.dumps(stored["rates"], indent=1))
-        return
-    if options.rates_only:
-        stored = json.loads(output.read_text())
+        if options.basins_only:
+            stored["members"] = [with_basins(m) for m in stored["members"]]
         stored["rates"] = rates(stored["members"])
         output.write_text(json.dumps(stored, indent=1) + "\n")
         print(json.dumps(stored["rates"], indent=1))
