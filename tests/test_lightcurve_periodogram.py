@@ -2,7 +2,8 @@
 
 A pure two-period Fourier series's lattice basis is recovered to a fraction of the resolution 1 / T; members of the
 synthetic family of benchmarks/_tumbler_family.py at the size of CI (12 nights, every second sample)
-have their true periods inside the proposals; the proposals pass fit_lightcurve's option check (a fit
+have their true periods inside the proposals, from the light curves alone and with the geometric
+ranking (``sun``, ``observer``); the proposals pass fit_lightcurve's option check (a fit
 itself takes minutes: benchmarks/lightcurve_periodogram.py and the fit's own tests cover that); bad
 input is refused naming the argument.
 """
@@ -96,6 +97,20 @@ def test_family_members_inside_proposals(index):
     assert found is not None and found <= 3  # measured: rank 1 (member 8) and 0 (member 19)
 
 
+@pytest.mark.parametrize("index", [19, 20])
+def test_family_members_inside_geometric_proposals(index):
+    # With the Sun's and the observer's directions the readings are ranked by the geometric series
+    # (the psi harmonics turning with the bisector's azimuth about a trial pole): member 20's truth,
+    # outside the Fourier ranking's twelve at this size, comes first.
+    case = family.tumbler(index, nights=12, per_night=0.5)
+    result = tumbler_periodogram(
+        case.times, case.flux, sun=case.sun, observer=case.observer, lightcurve=case.night, period_range=(0.1, 5.0)
+    )
+    found = rank(result, case.periods)
+    print(case.kind, case.periods, "rank", found, result.modes)
+    assert found is not None and found <= 1  # measured: rank 0 (both)
+
+
 def test_proposals_pass_fit_lightcurve_checks():
     times, flux, night, periods = two_period_signal()
     result = tumbler_periodogram(times, flux, lightcurve=night, period_range=(0.2, 5.0))
@@ -138,6 +153,28 @@ def test_bad_input_names_the_argument():
         tumbler_periodogram(times, flux, period_range=band, drift=-1)
     with pytest.raises(ValueError, match="cannot fit"):
         tumbler_periodogram(times[:20], flux[:20], period_range=band)
+    sun = np.tile([1.0, 0.0, 0.0], (len(times), 1))
+    observer = np.tile([0.0, 1.0, 0.0], (len(times), 1))
+    with pytest.raises(ValueError, match="give both"):
+        tumbler_periodogram(times, flux, sun=sun, period_range=band)
+    with pytest.raises(ValueError, match="observer must have shape"):
+        tumbler_periodogram(times, flux, sun=sun, observer=observer[:-1], period_range=band)
+    with pytest.raises(ValueError, match="sun must be unit vectors"):
+        tumbler_periodogram(times, flux, sun=2 * sun, observer=observer, period_range=band)
+    with pytest.raises(ValueError, match="sun must be finite"):
+        tumbler_periodogram(
+            times,
+            flux,
+            sun=np.where(np.arange(len(times))[:, None] == 2, np.nan, sun),
+            observer=observer,
+            period_range=band,
+        )
+    with pytest.raises(ValueError, match="opposite at sample 0"):
+        tumbler_periodogram(times, flux, sun=sun, observer=-sun, period_range=band)
+    with pytest.raises(ValueError, match="poles must be >= 1"):
+        tumbler_periodogram(times, flux, sun=sun, observer=observer, period_range=band, poles=0)
+    with pytest.raises(ValueError, match="geometric_orders must be"):
+        tumbler_periodogram(times, flux, sun=sun, observer=observer, period_range=band, geometric_orders=2)
     # Magnitudes may be negative.
     result = tumbler_periodogram(times, -2.5 * np.log10(flux), magnitudes=True, lightcurve=night, period_range=band)
     assert len(result.proposals) >= 1

@@ -49,9 +49,25 @@ The search (all linear least squares, numpy, vectorised over frequencies):
    (each column times the Legendre polynomials of time up to degree ``drift``: the months of changing
    geometry, the synodic drift of the psi phase among them), after a local refinement; the best
    ``refined_readings`` of the unrefined scores are refined, and the readings are ranked by their RMS.
+   With the Sun's and the observer's directions (``sun``, ``observer``: the geometric ranking) the
+   basis scan of step 2 drifts alike, and each refined reading is rescored by the series the
+   geometry prescribes.  With the attitude R = R_L Rz(psi) B(t) (``tumbler_periods``), the body-frame
+   direction of the phase-angle bisector b is B^T Rz(-psi) R_L^T b: in the frame of L its azimuth
+   alpha(t) enters only as psi - alpha, so that each psi harmonic j carries exp(-i j alpha(t)) (the
+   synodic correction: over months the bisector's azimuth about L moves by tens of degrees), and the
+   coefficients vary with the aspect, cos theta(t) = b . L, to first order.  For a trial pole L the
+   columns are cos and sin of 2 pi (j f_psi + k f_phi) t - j alpha(t), each times 1 and cos theta(t)
+   (|j| <= psi, |k| <= phi of ``geometric_orders``, (2, 2)), fitted by linear least squares as
+   above; the reading's score is the best over ``poles`` trial poles spread over the sphere (a
+   Fibonacci lattice: 400 are about 10 degrees apart), the frequencies refined locally at the best
+   three.  The sense of rotation is the pole's: L and -L differ.  Fewer free coefficients than the
+   drifting series (48 against 68), and a drift the geometry fixes: on the family the truth's own
+   reading ranks higher among the aliases (docs/lightcurves.md).
 5. Principal-axis comparison: the best single period with 2 (psi_order + phi_order) harmonics,
    drifting alike, moved to its double while that fits within the noise's allowance (a period's
-   half fits as well).  When no reading lowers its RMS by more than the noise allows, the period,
+   half fits as well; with the geometry the comparison is then made in the geometric series, the
+   period's harmonics up to 2 (psi + phi) of ``geometric_orders`` turning with the bisector's azimuth
+   like psi's).  When no reading lowers its RMS by more than the noise allows, the period,
    its double and its half are proposed first as a principal-axis rotator's; otherwise the single
    period takes the last slot.  Each centre becomes a range of +- ``tolerance`` / T in frequency (the
    periods' uncertainty at the full span), at most +- ``max_width`` relative, and the list is cut at
@@ -93,8 +109,8 @@ class TumblerPeriodogram:
     - ``modes``: the reading behind each proposal, "SAM", "LAM" or "PA";
     - ``centres``: (P_psi, P_phi) at the centre of each proposal (P_phi infinite for "PA");
     - ``scores``: the RMS of the residuals of the proposal's series (log flux; lower is better): the
-      reading's series with drifting coefficients (module docstring, step 4), the single period's
-      for "PA";
+      reading's series with drifting coefficients (module docstring, step 4), or the geometric series
+      when ``sun`` and ``observer`` were given; the single period's for "PA";
     - ``bases``, ``basis_rms``: the refined lattice bases (f1, f2), best first, and their RMS;
       ``rms_one_period``: the RMS of the best single-period series (the principal-axis comparison);
     - ``frequencies``, ``rms``: the one-period scan (step 1); ``span``: T;
@@ -178,18 +194,34 @@ class _Data:
         indices = np.asarray(indices, int).reshape(-1, bases.shape[1])
         out = np.empty(len(bases))
         for start in range(0, len(bases), chunk):
-            columns = self.columns(bases[start : start + chunk], indices)  # (G, P, N)
-            # Each curve's offset is fitted with the series: the normal equations of the columns
-            # less their curves' means, X_c X_c^T = X X^T - S diag(1 / n) S^T (S: the columns' sums
-            # over each curve, n: the curves' counts), and X_c v = X v for the centred data v.
-            sums = columns @ self.indicator  # (G, P, C)
-            gram = columns @ np.swapaxes(columns, 1, 2) - (sums / self.counts) @ np.swapaxes(sums, 1, 2)
-            moment = columns @ self.values
-            scale = np.trace(gram, axis1=1, axis2=2)[:, None, None] / gram.shape[1]
-            gram = gram + (1e-10 * scale + 1e-300) * np.eye(gram.shape[1])
-            coefficients = np.linalg.solve(gram, moment[..., None])[..., 0]
-            out[start : start + chunk] = self.total - np.sum(coefficients * moment, -1)
-        return np.maximum(out, 0.0)
+            out[start : start + chunk] = self.rss_of(self.columns(bases[start : start + chunk], indices))
+        return out
+
+    def rss_of(self, columns):
+        """Residual sum of squares of the least-squares fit of the columns (G, P, N) and every curve's
+        offset to the data, for each of the G sets: (G,)."""
+        # Each curve's offset is fitted with the series: the normal equations of the columns less
+        # their curves' means, X_c X_c^T = X X^T - S diag(1 / n) S^T (S: the columns' sums over each
+        # curve, n: the curves' counts), and X_c v = X v for the centred data v.
+        sums = columns @ self.indicator  # (G, P, C)
+        gram = columns @ np.swapaxes(columns, 1, 2) - (sums / self.counts) @ np.swapaxes(sums, 1, 2)
+        moment = columns @ self.values
+        scale = np.trace(gram, axis1=1, axis2=2)[:, None, None] / gram.shape[1]
+        gram = gram + (1e-10 * scale + 1e-300) * np.eye(gram.shape[1])
+        coefficients = np.linalg.solve(gram, moment[..., None])[..., 0]
+        return np.maximum(self.total - np.sum(coefficients * moment, -1), 0.0)
+
+    def geometric_columns(self, frequencies, indices, azimuth, cos_theta):
+        """Columns of the geometric series (module docstring, step 4 with ``sun`` and ``observer``) for
+        the frequencies (G, 2) = (f_psi, f_phi) and a pole's bisector angles, azimuth and cos theta
+        ((G, N) or (N,)): cos and sin of 2 pi (j f_psi + k f_phi) t - j azimuth for the ``indices``
+        (j, k) (K, 2), each times 1 and cos theta: (G, 4 K, N)."""
+        j, k = indices[:, 0], indices[:, 1]
+        rates = frequencies[:, :1] * j + frequencies[:, 1:] * k  # (G, K)
+        phase = 2 * np.pi * rates[:, :, None] * self.times - j[:, None] * np.asarray(azimuth)[..., None, :]
+        unit = np.exp(1j * phase)
+        unit = np.concatenate([unit, unit * np.asarray(cos_theta)[..., None, :]], 1)
+        return np.concatenate([unit.real, unit.imag], 1)
 
 
 def _lattice_indices(order):
@@ -247,6 +279,59 @@ def _reading_indices(psi_order, phi_order):
     )
 
 
+def _fibonacci_sphere(count):
+    """``count`` nearly uniformly spread unit vectors: the Fibonacci lattice on the sphere."""
+    k = np.arange(count) + 0.5
+    z = 1 - 2 * k / count
+    azimuth = np.pi * (1 + np.sqrt(5.0)) * k
+    ring = np.sqrt(1 - z * z)
+    return np.stack([ring * np.cos(azimuth), ring * np.sin(azimuth), z], -1)
+
+
+def _bisector_angles(bisector, poles):
+    """Azimuth and cos(theta) (each (G, N)) of the unit bisectors (N, 3) in frames whose z axis is each
+    pole (G, 3) (the azimuth's origin is arbitrary: a constant phase the coefficients absorb)."""
+    helper = np.where(np.abs(poles[:, :1]) < 0.9, np.array([[1.0, 0.0, 0.0]]), np.array([[0.0, 1.0, 0.0]]))
+    first = helper - np.sum(helper * poles, -1, keepdims=True) * poles
+    first /= np.linalg.norm(first, axis=-1, keepdims=True)
+    second = np.cross(poles, first)
+    return np.arctan2(second @ bisector.T, first @ bisector.T), poles @ bisector.T
+
+
+def _geometric_fit(data, f_psi, f_phi, indices, poles, angles, step, levels=2, points=5, best_poles=3, chunk=100):
+    """The residual sum of squares of the geometric series (``_Data.geometric_columns``) at its best
+    pole and frequencies near (f_psi, f_phi): every pole at the given frequencies, then at each of the
+    ``best_poles`` best poles local grids of the frequencies shrinking by 3 each level (of f_psi alone
+    for a single-period series, ``indices[:, 1] == 0``)."""
+    azimuth, cos_theta = angles
+    here = np.array([[f_psi, f_phi]])
+    rss = np.concatenate(
+        [
+            data.rss_of(data.geometric_columns(here, indices, azimuth[g : g + chunk], cos_theta[g : g + chunk]))
+            for g in range(0, len(poles), chunk)
+        ]
+    )
+    single = not np.any(indices[:, 1])
+    best = np.inf
+    for g in np.argsort(rss)[:best_poles]:
+        centre, size = (float(rss[g]), f_psi, f_phi), step
+        for _ in range(levels):
+            offsets = (np.arange(points) - points // 2) * size
+            grid = np.stack(
+                [centre[1] + offsets, np.full(points, centre[2])]
+                if single
+                else [a.reshape(-1) for a in np.meshgrid(centre[1] + offsets, centre[2] + offsets, indexing="ij")],
+                -1,
+            )
+            trial = data.rss_of(data.geometric_columns(grid, indices, azimuth[g], cos_theta[g]))
+            i = int(np.argmin(trial))
+            if trial[i] < centre[0]:
+                centre = (float(trial[i]), float(grid[i, 0]), float(grid[i, 1]))
+            size /= 3
+        best = min(best, centre[0])
+    return best
+
+
 def _readings(f1, f2):
     """Candidate (f_psi, f_phi, mode) of a lattice basis (f1, f2), 0 < f2 < f1, in the order of their
     rank (module docstring, step 4)."""
@@ -266,6 +351,8 @@ def tumbler_periodogram(
     times,
     brightness,
     *,
+    sun=None,
+    observer=None,
     lightcurve=None,
     magnitudes: bool = False,
     period_range=None,
@@ -282,12 +369,17 @@ def tumbler_periodogram(
     drift: int = 1,
     max_width: float = 0.1,
     refined_readings: int = 32,
+    poles: int = 400,
+    geometric_orders=(2, 2),
 ) -> TumblerPeriodogram:
     """Candidate ranges of a tumbler's two periods (P_psi, P_phi) from its light curves (module
     docstring): a two-period Fourier periodogram after Pravec et al. (2005, Icarus 173, 108).
 
     Arguments: ``times`` (N,); ``brightness`` (N,) fluxes (> 0), or magnitudes with ``magnitudes=True``;
-    ``lightcurve`` (N,) label of each sample's light curve (one unknown additive offset in log flux
+    ``sun``, ``observer`` (N, 3) or (3,): unit vectors from the body to the Sun and to the observer, as
+    for :func:`fit_lightcurve` (optional, both or neither: they turn on the geometric ranking, module
+    docstring, step 4; ``poles`` trial directions of L, ``geometric_orders`` its series' (psi, phi)
+    orders); ``lightcurve`` (N,) label of each sample's light curve (one unknown additive offset in log flux
     each, e.g. a night of relative photometry; default: one curve).  ``period_range`` = (p_min, p_max):
     the band searched for the light curve's basis periods 1 / f1 and 1 / f2 (the time unit of
     ``times``); P_phi may come out longer (f_phi is a difference of lattice frequencies).
@@ -310,10 +402,13 @@ def tumbler_periodogram(
 
     Refused with a ValueError naming the argument: times not one-dimensional, not finite or all
     equal, brightness not finite, of another shape, or <= 0 without ``magnitudes``, labels of another
-    shape, a ``period_range`` that is missing or not positive and increasing, fewer samples than the
+    shape, only one of ``sun`` and ``observer``, either of another shape, not finite or not unit
+    vectors, the two opposite (phase angle 180 degrees), ``poles`` below 1, ``geometric_orders`` not
+    two orders >= 1, a ``period_range`` that is missing or not positive and increasing, fewer samples than the
     series has parameters, counts or orders below 1 (``drift`` below 0), non-positive ``oversampling``
     or ``tolerance``, ``max_width`` outside (0, 1).  numpy
-    only (float64); 3 to 8 seconds for a thousand samples on one core (benchmarks/lightcurve_periodogram.py).
+    only (float64); for a thousand samples on one core 3 to 8 seconds, about a minute with the
+    geometric ranking (benchmarks/lightcurve_periodogram.py).
     """
     times = checks.real_array("times", times)
     if times.ndim != 1:
@@ -329,6 +424,26 @@ def tumbler_periodogram(
     else:
         checks.check_positive("brightness", values)
         values = np.log(values.astype(float))
+    if (sun is None) != (observer is None):
+        raise ValueError("sun and observer: give both (the geometric ranking) or neither")
+    bisector = None
+    if sun is not None:
+        directions = []
+        for name, value in (("sun", sun), ("observer", observer)):
+            value = checks.real_array(name, value)
+            if value.shape not in ((3,), (n, 3)):
+                raise ValueError(f"{name} must have shape (N, 3) = ({n}, 3) like times, or (3,), got {value.shape}")
+            value = np.broadcast_to(value, (n, 3)).astype(float)
+            checks.check_finite(name, value)
+            checks.check_unit_rows(name, value, what="unit vectors")
+            directions.append(value)
+        bisector = directions[0] + directions[1]
+        length = np.linalg.norm(bisector, axis=-1)
+        if np.any(length < 1e-6):
+            raise ValueError(
+                f"sun and observer are opposite at sample {int(np.argmin(length))} (phase angle 180 degrees)"
+            )
+        bisector = bisector / length[:, None]
     labels = np.zeros(n, int) if lightcurve is None else np.asarray(lightcurve)
     if labels.shape != (n,):
         raise ValueError(f"lightcurve must have shape (N,) = ({n},) like times, got {labels.shape}")
@@ -350,13 +465,20 @@ def tumbler_periodogram(
     second_minima = checks.integer("second_minima", second_minima, minimum=1)
     refined_readings = checks.integer("refined_readings", refined_readings, minimum=1)
     map_halfwidth = checks.scalar("map_halfwidth", map_halfwidth, positive=True, allow_zero=True)
+    poles = checks.integer("poles", poles, minimum=1)
+    if np.shape(geometric_orders) != (2,):
+        raise ValueError(f"geometric_orders must be (psi_order, phi_order), got {geometric_orders!r}")
+    geometric_orders = tuple(checks.integer("geometric_orders", order, minimum=1) for order in geometric_orders)
     times = times.astype(float)
     span = float(times.max() - times.min())
     if span <= 0:
         raise ValueError("times must span an interval: all are equal")
     indices = _lattice_indices(order)
     curves = len(np.unique(labels))
-    parameters = max(2 * len(indices), 2 * len(_reading_indices(psi_order, phi_order)) * (drift + 1)) + curves
+    parameters = max(2 * len(indices), 2 * len(_reading_indices(psi_order, phi_order)) * (drift + 1))
+    if bisector is not None:
+        parameters = max(parameters, 4 * len(_reading_indices(*geometric_orders)))
+    parameters += curves
     if n <= parameters:
         raise ValueError(
             f"times: {n} samples cannot fit a two-period series of order {order} (psi_order {psi_order}, "
@@ -382,7 +504,11 @@ def tumbler_periodogram(
         float(fa + fine[int(np.argmin(data.rss((fa + fine)[:, None], harmonics[:, None])))]) for fa in fundamentals
     ]
 
-    # ---- 2. the second frequency for each candidate f1, then joint refinement
+    # ---- 2. the second frequency for each candidate f1, then joint refinement (with the geometry,
+    # the series' coefficients drift as the readings' do: the lattice of a tumbler seen over months
+    # at a changing aspect fits a fixed series worse than some of its aliases).
+    basis_data = data if bisector is None else _Data(times, values, labels, drift=drift)
+    basis_terms = 2 * len(indices) * (1 if bisector is None else drift + 1)
     found = []
     for fa in fundamentals:
         for f1 in (fa, fa / 2):
@@ -391,9 +517,9 @@ def tumbler_periodogram(
             grid = np.arange(2 * resolution, f1 - 2 * resolution, step * oversampling / 3)
             if len(grid) < 3:
                 continue
-            rss_two = data.rss(np.stack([np.full_like(grid, f1), grid], -1), indices)
+            rss_two = basis_data.rss(np.stack([np.full_like(grid, f1), grid], -1), indices)
             for i in _local_minima(rss_two, second_minima, 3):
-                found.append(_refine(data, indices, f1, float(grid[i]), step, levels=2, points=5))
+                found.append(_refine(basis_data, indices, f1, float(grid[i]), step, levels=2, points=5))
     found.sort(key=lambda item: item[2])
     lattices = []  # distinct lattices, best first
     for item in found:
@@ -453,8 +579,30 @@ def tumbler_periodogram(
         if 2 * f_pa > f_high or float(np.min(trial)) > rss_pa + allowance:
             break
         rss_pa, f_pa = float(np.min(trial)), float(2 * f_pa + offsets[int(np.argmin(trial))])
+    if bisector is None:
+        extra = 2 * (len(reading_indices) - len(pa_harmonics)) * (drift + 1)
+    else:
+        # ---- 3b. the geometric ranking: each reading (and the single period) rescored by the series
+        # whose psi harmonics turn with the bisector's azimuth about a trial pole, at its best pole
+        # and frequencies near the reading's.  The centres stay the drifting series' refinements: the
+        # azimuth's rate about a pole trades with f_psi, and on the grid of poles (about 10 degrees
+        # apart) the geometric fit's frequencies can move by a resolution element (measured on the
+        # family: one more truth inside the ranges with these centres).
+        pole_grid = _fibonacci_sphere(poles)
+        angles = _bisector_angles(bisector, pole_grid)
+        geometric_indices = _reading_indices(*geometric_orders)
+        rescored = []
+        for f_psi, f_phi, mode, _ in readings:
+            rss = _geometric_fit(data, f_psi, f_phi, geometric_indices, pole_grid, angles, 0.4 * resolution, levels=3)
+            rescored.append((f_psi, f_phi, mode, rss))
+        readings = sorted(rescored, key=lambda item: item[3])
+        reading_dof = data.dof - 4 * len(geometric_indices)
+        pa_harmonics = np.arange(1, 2 * sum(geometric_orders) + 1)
+        single = np.stack([pa_harmonics, 0 * pa_harmonics], -1)
+        rss_pa = _geometric_fit(data, f_pa, 0.0, single, pole_grid, angles, step / 2)
+        pa_dof = data.dof - 4 * len(pa_harmonics)
+        extra = 4 * (len(geometric_indices) - len(pa_harmonics))
     noise = (readings[0][3] if readings else rss_pa) / max(reading_dof, 1)
-    extra = 2 * (len(reading_indices) - len(pa_harmonics)) * (drift + 1)
     tumbling = bool(readings) and (rss_pa - readings[0][3]) / noise > 5 * max(extra, 1)
 
     # ---- 4. ranges: +- tolerance / T in frequency, at most +- max_width relative
@@ -489,11 +637,11 @@ def tumbler_periodogram(
         del proposals[-1], modes[-1], centres[-1], scores[-1]
         add_principal(f_pa, rms(rss_pa, pa_dof))
     best = lattices[0] if lattices else (f_pa, f_pa / 2, rss_pa)
-    basis_dof = data.dof - 2 * len(indices)
+    basis_dof = data.dof - basis_terms
     if map_halfwidth > 0:
         offsets = np.linspace(-map_halfwidth, map_halfwidth, 41) * resolution
         map_f1, map_f2 = np.meshgrid(best[0] + offsets, best[1] + offsets, indexing="ij")
-        map_rss = data.rss(np.stack([map_f1.reshape(-1), map_f2.reshape(-1)], -1), indices)
+        map_rss = basis_data.rss(np.stack([map_f1.reshape(-1), map_f2.reshape(-1)], -1), indices)
         map_rms = np.sqrt(map_rss / max(basis_dof, 1)).reshape(map_f1.shape)
     else:
         map_f1 = map_f2 = map_rms = np.zeros((0, 0))
