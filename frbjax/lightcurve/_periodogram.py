@@ -379,8 +379,8 @@ def tumbler_periodogram(
     ``sun``, ``observer`` (N, 3) or (3,): unit vectors from the body to the Sun and to the observer, as
     for :func:`fit_lightcurve` (optional, both or neither: they turn on the geometric ranking, module
     docstring, step 4; ``poles`` trial directions of L, ``geometric_orders`` its series' (psi, phi)
-    orders); ``lightcurve`` (N,) label of each sample's light curve (one unknown additive offset in log flux
-    each, e.g. a night of relative photometry; default: one curve).  ``period_range`` = (p_min, p_max):
+    orders); ``lightcurve`` (N,) label of each sample's light curve (one unknown additive offset in
+    log flux each, e.g. a night of relative photometry; default: one curve).  ``period_range`` = (p_min, p_max):
     the band searched for the light curve's basis periods 1 / f1 and 1 / f2 (the time unit of
     ``times``); P_phi may come out longer (f_phi is a difference of lattice frequencies).
 
@@ -404,8 +404,8 @@ def tumbler_periodogram(
     equal, brightness not finite, of another shape, or <= 0 without ``magnitudes``, labels of another
     shape, only one of ``sun`` and ``observer``, either of another shape, not finite or not unit
     vectors, the two opposite (phase angle 180 degrees), ``poles`` below 1, ``geometric_orders`` not
-    two orders >= 1, a ``period_range`` that is missing or not positive and increasing, fewer samples than the
-    series has parameters, counts or orders below 1 (``drift`` below 0), non-positive ``oversampling``
+    two orders >= 1, a ``period_range`` that is missing or not positive and increasing, fewer samples
+    than the series has parameters, counts or orders below 1 (``drift`` below 0), non-positive ``oversampling``
     or ``tolerance``, ``max_width`` outside (0, 1).  numpy
     only (float64); for a thousand samples on one core 3 to 8 seconds, 15 to 32 with the geometric
     ranking (benchmarks/lightcurve_periodogram.py).
@@ -586,8 +586,7 @@ def tumbler_periodogram(
         # whose psi harmonics turn with the bisector's azimuth about a trial pole, at its best pole
         # and frequencies near the reading's.  The centres stay the drifting series' refinements: the
         # azimuth's rate about a pole trades with f_psi, and on the grid of poles (about 10 degrees
-        # apart) the geometric fit's frequencies can move by a resolution element (measured on the
-        # family: one more truth inside the ranges with these centres).
+        # apart) the geometric fit's frequencies can move by a resolution element.
         pole_grid = _fibonacci_sphere(poles)
         angles = _bisector_angles(bisector, pole_grid)
         geometric_indices = _reading_indices(*geometric_orders)
