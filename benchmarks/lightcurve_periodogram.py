@@ -54,10 +54,10 @@ from _tumbler_family import SIZE, tumbler  # noqa: E402
 
 from frbjax.lightcurve import tumbler_periodogram  # noqa: E402
 from frbjax.lightcurve._periodogram import (  # noqa: E402
-    _bisector_angles,
     _Data,
     _fibonacci_sphere,
     _geometric_fit,
+    _pole_angles,
     _reading_indices,
     _refine,
 )
@@ -77,7 +77,7 @@ def truth_score(case, geometry):
         poles = _fibonacci_sphere(defaults["poles"])
         bisector = case.sun + case.observer
         bisector = bisector / np.linalg.norm(bisector, axis=-1, keepdims=True)
-        angles = _bisector_angles(bisector, poles)
+        angles = _pole_angles(bisector, poles, defaults["geometric_orders"][0])
         rss = _geometric_fit(series, f_psi, f_phi, indices, poles, angles, 0.4 * resolution, levels=3)
         return float(np.sqrt(rss / (series.dof - 4 * len(indices))))
     drift = defaults["drift"]
