@@ -78,7 +78,7 @@ def truth_score(case, geometry):
         bisector = case.sun + case.observer
         bisector = bisector / np.linalg.norm(bisector, axis=-1, keepdims=True)
         angles = _pole_angles(bisector, poles, defaults["geometric_orders"][0])
-        rss = _geometric_fit(series, f_psi, f_phi, indices, poles, angles, 0.4 * resolution, levels=3)
+        rss = _geometric_fit(series, f_psi, f_phi, indices, poles, angles, bisector, 0.4 * resolution, levels=3)
         return float(np.sqrt(rss / (series.dof - 4 * len(indices))))
     drift = defaults["drift"]
     series = _Data(case.times, np.log(case.flux), case.night, drift=drift)

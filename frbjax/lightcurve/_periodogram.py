@@ -43,12 +43,14 @@ The search (all linear least squares, numpy, vectorised over frequencies):
    integer combinations of the other's) are merged.
 4. Each of the best ``lattices_kept`` lattices gives candidate period pairs, (f_psi, f_phi) =
    (f1 + c, c) (the SAM reading) and (f1, c) (the LAM reading), for c among f2, f1 - f2, f1 + f2 and
-   their halves (a lattice found through its even harmonics).  Each reading is scored in its own
-   basis by a series with the few psi harmonics a body's attitude about L gives (|j| <= ``psi_order``)
-   and more phi harmonics (|k| <= ``phi_order``), its coefficients drifting slowly over the span
-   (each column times the Legendre polynomials of time up to degree ``drift``: the months of changing
-   geometry, the synodic drift of the psi phase among them), after a local refinement; the best
-   ``refined_readings`` of the unrefined scores are refined, and the readings are ranked by their RMS.
+   their halves (a lattice found through its even harmonics), and (f1 - c, c) for c = f2, f1 - f2
+   (a LAM's lattice found through f_psi + f_phi, as the family's long-axis tumblers often are).
+   Each reading is scored in its own basis by a series with the few psi harmonics a body's attitude
+   about L gives (|j| <= ``psi_order``) and more phi harmonics (|k| <= ``phi_order``), its
+   coefficients drifting slowly over the span (each column times the Legendre polynomials of time up
+   to degree ``drift``: the months of changing geometry, the synodic drift of the psi phase among
+   them), after a local refinement; the best ``refined_readings`` of the unrefined scores are
+   refined, and the readings are ranked by their RMS.
    With the Sun's and the observer's directions (``sun``, ``observer``: the geometric ranking) the
    basis scan of step 2 drifts alike, and each refined reading is rescored by the series the
    geometry prescribes.  With the attitude R = R_L Rz(psi) B(t) (``tumbler_periods``), the body-frame
@@ -60,9 +62,10 @@ The search (all linear least squares, numpy, vectorised over frequencies):
    (|j| <= psi, |k| <= phi of ``geometric_orders``, (2, 2)), fitted by linear least squares as
    above; the reading's score is the best over ``poles`` trial poles spread over the sphere (a
    Fibonacci lattice: 400 are about 10 degrees apart), the frequencies refined locally at the best
-   three.  The sense of rotation is the pole's: L and -L differ.  Fewer free coefficients than the
-   drifting series (48 against 68), and a drift the geometry fixes: on the family the truth's own
-   reading ranks higher among the aliases (docs/lightcurves.md).
+   three, then each of those poles to about a degree.  The sense of rotation is the pole's: L and -L
+   differ.  Fewer free coefficients than the drifting series (48 against 68), and a drift the
+   geometry fixes: on the family the truth's own reading ranks higher among the aliases
+   (docs/lightcurves.md).
 5. Principal-axis comparison: the best single period with 2 (psi_order + phi_order) harmonics,
    drifting alike, moved to its double while that fits within the noise's allowance (a period's
    half fits as well; with the geometry the comparison is then made in the geometric series, the
@@ -301,11 +304,27 @@ def _pole_angles(bisector, poles, harmonics):
     return turns, poles @ bisector.T
 
 
-def _geometric_fit(data, f_psi, f_phi, indices, poles, angles, step, levels=2, points=5, best_poles=3, chunk=100):
+def _pole_neighbours(pole, size):
+    """The pole (3,) and its eight neighbours on a square of half-side ``size`` radians about it: (9, 3)."""
+    helper = np.array([1.0, 0.0, 0.0]) if abs(pole[0]) < 0.9 else np.array([0.0, 1.0, 0.0])
+    first = helper - (helper @ pole) * pole
+    first /= np.linalg.norm(first)
+    second = np.cross(pole, first)
+    steps = np.array([(a, b) for a in (-1, 0, 1) for b in (-1, 0, 1)], float) * size
+    neighbours = pole + steps[:, :1] * first + steps[:, 1:] * second
+    return neighbours / np.linalg.norm(neighbours, axis=-1, keepdims=True)
+
+
+def _geometric_fit(
+    data, f_psi, f_phi, indices, poles, angles, bisector, step, levels=2, points=5, best_poles=3, chunk=100
+):
     """The residual sum of squares of the geometric series (``_Data.geometric_columns``) at its best
     pole and frequencies near (f_psi, f_phi): every pole at the given frequencies, then at each of the
     ``best_poles`` best poles local grids of the frequencies shrinking by 3 each level (of f_psi alone
-    for a single-period series, ``indices[:, 1] == 0``); ``angles``: ``_pole_angles`` of the ``poles``."""
+    for a single-period series, ``indices[:, 1] == 0``), then the pole itself on local grids shrinking
+    by 2 from half the poles' spacing (three levels, to about a degree: the grid's 10 degrees limit
+    how well the true reading fits); ``angles``: ``_pole_angles`` of the
+    ``poles``, ``bisector`` (N, 3) the phase-angle bisectors."""
     turns, cos_theta = angles
     here = np.array([[f_psi, f_phi]])
     rss = np.concatenate(
@@ -331,6 +350,16 @@ def _geometric_fit(data, f_psi, f_phi, indices, poles, angles, step, levels=2, p
             if trial[i] < centre[0]:
                 centre = (float(trial[i]), float(grid[i, 0]), float(grid[i, 1]))
             size /= 3
+        pole, size = poles[g], 0.5 * np.sqrt(4 * np.pi / len(poles))
+        frequencies = np.array([centre[1:]] * 9)
+        for _ in range(3):
+            neighbours = _pole_neighbours(pole, size)
+            local_turns, local_cos = _pole_angles(bisector, neighbours, turns.shape[-2] - 1)
+            trial = data.rss_of(data.geometric_columns(frequencies, indices, local_turns, local_cos))
+            i = int(np.argmin(trial))
+            if trial[i] < centre[0]:
+                centre, pole = (float(trial[i]), centre[1], centre[2]), neighbours[i]
+            size /= 2
         best = min(best, centre[0])
     return best
 
@@ -541,10 +570,21 @@ def tumbler_periodogram(
 
     candidates = []
     for f1, f2, _ in lattices[:lattices_kept]:
-        for c in (f2, f1 - f2, f1 + f2, f2 / 2, (f1 - f2) / 2, (f1 + f2) / 2):
+        for c, basis_vector in (
+            (f2, True),
+            (f1 - f2, True),
+            (f1 + f2, False),
+            (f2 / 2, False),
+            ((f1 - f2) / 2, False),
+            ((f1 + f2) / 2, False),
+        ):
             if c <= 2 * resolution:
                 continue
-            for f_psi, f_phi, mode in ((f1 + c, c, "SAM"), (f1, c, "LAM")):
+            readings_of_c = [(f1 + c, c, "SAM"), (f1, c, "LAM")]
+            if basis_vector and f1 - c > 2 * resolution:
+                # The long-axis mode's lattice found through f_psi + f_phi (f1) and f_phi (c).
+                readings_of_c.append((f1 - c, c, "LAM"))
+            for f_psi, f_phi, mode in readings_of_c:
                 near = [r for r in candidates if max(abs(f_psi - r[0]), abs(f_phi - r[1])) < 0.5 * resolution]
                 if not near:
                     candidates.append((f_psi, f_phi, mode))
@@ -596,12 +636,14 @@ def tumbler_periodogram(
         geometric_indices = _reading_indices(*geometric_orders)
         rescored = []
         for f_psi, f_phi, mode, _ in readings:
-            rss = _geometric_fit(data, f_psi, f_phi, geometric_indices, pole_grid, angles, 0.4 * resolution, levels=3)
+            rss = _geometric_fit(
+                data, f_psi, f_phi, geometric_indices, pole_grid, angles, bisector, 0.4 * resolution, levels=3
+            )
             rescored.append((f_psi, f_phi, mode, rss))
         readings = sorted(rescored, key=lambda item: item[3])
         reading_dof = data.dof - 4 * len(geometric_indices)
         single = np.stack([pa_harmonics, 0 * pa_harmonics], -1)
-        rss_pa = _geometric_fit(data, f_pa, 0.0, single, pole_grid, angles, step / 2)
+        rss_pa = _geometric_fit(data, f_pa, 0.0, single, pole_grid, angles, bisector, step / 2)
         pa_dof = data.dof - 4 * len(pa_harmonics)
         extra = 4 * (len(geometric_indices) - len(pa_harmonics))
     noise = (readings[0][3] if readings else rss_pa) / max(reading_dof, 1)
