@@ -323,8 +323,8 @@ def _geometric_fit(
     ``best_poles`` best poles local grids of the frequencies shrinking by 3 each level (of f_psi alone
     for a single-period series, ``indices[:, 1] == 0``), then the pole itself on local grids shrinking
     by 2 from half the poles' spacing (three levels, to about a degree: the grid's 10 degrees limit
-    how well the true reading fits); ``angles``: ``_pole_angles`` of the
-    ``poles``, ``bisector`` (N, 3) the phase-angle bisectors."""
+    how well the true reading fits); ``angles``: ``_pole_angles`` of the ``poles``, ``bisector``
+    (N, 3) the phase-angle bisectors."""
     turns, cos_theta = angles
     here = np.array([[f_psi, f_phi]])
     rss = np.concatenate(
