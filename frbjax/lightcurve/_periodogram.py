@@ -291,14 +291,20 @@ def _fibonacci_sphere(count):
     return np.stack([ring * np.cos(azimuth), ring * np.sin(azimuth), z], -1)
 
 
+def _tangent_frames(poles):
+    """Two unit vectors (G, 3) each, orthogonal to each pole (G, 3) and to each other: the x and y axes
+    of a frame whose z axis is the pole."""
+    helper = np.where(np.abs(poles[:, :1]) < 0.9, np.array([[1.0, 0.0, 0.0]]), np.array([[0.0, 1.0, 0.0]]))
+    first = helper - np.sum(helper * poles, -1, keepdims=True) * poles
+    first /= np.linalg.norm(first, axis=-1, keepdims=True)
+    return first, np.cross(poles, first)
+
+
 def _pole_angles(bisector, poles, harmonics):
     """The turns exp(-i j azimuth) for j = 0..``harmonics`` ((G, harmonics + 1, N): computed once for
     every reading) and cos(theta) ((G, N)) of the unit bisectors (N, 3) in frames whose z axis is each
     pole (G, 3) (the azimuth's origin is arbitrary: a constant phase the coefficients absorb)."""
-    helper = np.where(np.abs(poles[:, :1]) < 0.9, np.array([[1.0, 0.0, 0.0]]), np.array([[0.0, 1.0, 0.0]]))
-    first = helper - np.sum(helper * poles, -1, keepdims=True) * poles
-    first /= np.linalg.norm(first, axis=-1, keepdims=True)
-    second = np.cross(poles, first)
+    first, second = _tangent_frames(poles)
     azimuth = np.arctan2(second @ bisector.T, first @ bisector.T)
     turns = np.exp(-1j * np.arange(harmonics + 1)[:, None, None] * azimuth).transpose(1, 0, 2)
     return turns, poles @ bisector.T
@@ -306,10 +312,7 @@ def _pole_angles(bisector, poles, harmonics):
 
 def _pole_neighbours(pole, size):
     """The pole (3,) and its eight neighbours on a square of half-side ``size`` radians about it: (9, 3)."""
-    helper = np.array([1.0, 0.0, 0.0]) if abs(pole[0]) < 0.9 else np.array([0.0, 1.0, 0.0])
-    first = helper - (helper @ pole) * pole
-    first /= np.linalg.norm(first)
-    second = np.cross(pole, first)
+    first, second = _tangent_frames(pole[None])
     steps = np.array([(a, b) for a in (-1, 0, 1) for b in (-1, 0, 1)], float) * size
     neighbours = pole + steps[:, :1] * first + steps[:, 1:] * second
     return neighbours / np.linalg.norm(neighbours, axis=-1, keepdims=True)
@@ -334,6 +337,7 @@ def _geometric_fit(
         ]
     )
     single = not np.any(indices[:, 1])
+    harmonics = int(indices[:, 0].max())  # the turns the series uses (``angles`` may hold more)
     best = np.inf
     for g in np.argsort(rss)[:best_poles]:
         centre, size = (float(rss[g]), f_psi, f_phi), step
@@ -354,7 +358,7 @@ def _geometric_fit(
         frequencies = np.array([centre[1:]] * 9)
         for _ in range(3):
             neighbours = _pole_neighbours(pole, size)
-            local_turns, local_cos = _pole_angles(bisector, neighbours, turns.shape[-2] - 1)
+            local_turns, local_cos = _pole_angles(bisector, neighbours, harmonics)
             trial = data.rss_of(data.geometric_columns(frequencies, indices, local_turns, local_cos))
             i = int(np.argmin(trial))
             if trial[i] < centre[0]:
