@@ -368,21 +368,6 @@ def _geometric_fit(
     return best
 
 
-def _readings(f1, f2):
-    """Candidate (f_psi, f_phi, mode) of a lattice basis (f1, f2), 0 < f2 < f1, in the order of their
-    rank (module docstring, step 4)."""
-    out = []
-    for half in (False, True):
-        base = f1 / 2 if half else f1
-        vectors = sorted({round(c, 12) for c in (f2 % base, base - f2 % base)})
-        for c in vectors:
-            out.append((base + c, c, "SAM"))
-        for c in vectors:
-            out.append((base, c, "LAM"))
-        out.append((base + base + vectors[0], base + vectors[0], "SAM"))
-    return out
-
-
 def tumbler_periodogram(
     times,
     brightness,
