@@ -72,7 +72,9 @@ The search (all linear least squares, numpy, vectorised over frequencies):
    period's harmonics up to 2 (psi + phi) of ``geometric_orders`` turning with the bisector's azimuth
    like psi's).  When no reading lowers its RMS by more than the noise allows, the period,
    its double and its half are proposed first as a principal-axis rotator's; otherwise the single
-   period takes the last slot.  Each centre becomes a range of +- ``tolerance`` / T in frequency (the
+   period follows the readings, in a full list in the last reading's slot unless it fits worse than
+   that reading by more than the same allowance (a clear tumbler's list keeps its readings; on the
+   family that recovers two truths ranked last).  Each centre becomes a range of +- ``tolerance`` / T in frequency (the
    periods' uncertainty at the full span), at most +- ``max_width`` relative, and the list is cut at
    ``max_proposals``.
 
@@ -428,7 +430,7 @@ def tumbler_periodogram(
     two orders >= 1, a ``period_range`` that is missing or not positive and increasing, fewer samples
     than the series has parameters, counts or orders below 1 (``drift`` below 0), non-positive ``oversampling``
     or ``tolerance``, ``max_width`` outside (0, 1).  numpy
-    only (float64); for a thousand samples on one core 3 to 8 seconds, 14 to 27 with the geometric
+    only (float64); for a thousand samples on one core 3 to 12 seconds, 14 to 29 with the geometric
     ranking (benchmarks/lightcurve_periodogram.py).
     """
     times = checks.real_array("times", times)
@@ -636,7 +638,10 @@ def tumbler_periodogram(
         pa_dof = data.dof - 4 * len(pa_harmonics)
         extra = 4 * (len(geometric_indices) - len(pa_harmonics))
     noise = (readings[0][3] if readings else rss_pa) / max(reading_dof, 1)
-    tumbling = bool(readings) and (rss_pa - readings[0][3]) / noise > 5 * max(extra, 1)
+    # The single period's allowance: the chi-square a tumbling reading's extra coefficients may gain
+    # on a rotator's light curve (five per coefficient).
+    allowance = 5 * max(extra, 1) * noise
+    tumbling = bool(readings) and rss_pa - readings[0][3] > allowance
 
     # ---- 4. ranges: +- tolerance / T in frequency, at most +- max_width relative
     proposals, modes, centres, scores = [], [], [], []
@@ -666,9 +671,12 @@ def tumbler_periodogram(
         add(f_psi, f_phi, mode, rms(rss))
     proposals, modes, centres, scores = (x[:max_proposals] for x in (proposals, modes, centres, scores))
     if tumbling and max_proposals >= 4:
-        # The last slot: the best single period, as a principal-axis rotator's.
-        del proposals[-1], modes[-1], centres[-1], scores[-1]
-        add_principal(f_pa, rms(rss_pa, pa_dof))
+        # The best single period, as a principal-axis rotator's, after the readings; in a full list it
+        # takes the last reading's slot unless it fits worse than that reading by more than the
+        # allowance (the tumbling test's, against the last reading instead of the first).
+        if len(readings) < max_proposals or rss_pa - readings[max_proposals - 1][3] <= allowance:
+            proposals, modes, centres, scores = (x[: max_proposals - 1] for x in (proposals, modes, centres, scores))
+            add_principal(f_pa, rms(rss_pa, pa_dof))
     best = lattices[0] if lattices else (f_pa, f_pa / 2, rss_pa)
     basis_dof = data.dof - basis_terms
     if map_halfwidth > 0:
