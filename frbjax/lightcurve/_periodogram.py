@@ -74,9 +74,9 @@ The search (all linear least squares, numpy, vectorised over frequencies):
    its double and its half are proposed first as a principal-axis rotator's; otherwise the single
    period follows the readings, in a full list in the last reading's slot unless it fits worse than
    that reading by more than the same allowance (a clear tumbler's list keeps its readings; on the
-   family that recovers two truths ranked last).  Each centre becomes a range of +- ``tolerance`` / T in frequency (the
-   periods' uncertainty at the full span), at most +- ``max_width`` relative, and the list is cut at
-   ``max_proposals``.
+   family that recovers two truths ranked last).  Each centre becomes a range of +- ``tolerance`` / T
+   in frequency (the periods' uncertainty at the full span), at most +- ``max_width`` relative, and
+   the list is cut at ``max_proposals``.
 
 The ranges are for :func:`fit_lightcurve`'s ``periods``; ``mode`` tells which mode the reading assumed
 (fit with ``mode="both"`` to let the fit decide).  The lattice the light curves determine is only as
