@@ -199,6 +199,16 @@ def test_family_members_inside_geometric_proposals(index):
     found = rank(result, case.periods)
     print(case.kind, case.periods, "rank", found, result.modes)
     assert found is not None and found <= 1  # measured: rank 0 (both)
+    # The scores are the geometric series' RMS per degree of freedom (its 48 coefficients and the
+    # nights' offsets taken off): the first reading's, recomputed at its centre.
+    data = _Data(case.times, np.log(case.flux), case.night)
+    bisector = case.sun + case.observer
+    bisector /= np.linalg.norm(bisector, axis=-1, keepdims=True)
+    indices, poles = _reading_indices(2, 2), _fibonacci_sphere(400)
+    f_psi, f_phi = 1 / result.centres[0]
+    angles = _pole_angles(bisector, poles, 2)
+    rss = _geometric_fit(data, f_psi, f_phi, indices, poles, angles, bisector, 0.4 / result.span, levels=3)
+    np.testing.assert_allclose(result.scores[0], np.sqrt(rss / (data.dof - 4 * len(indices))), rtol=1e-9)
 
 
 def test_proposals_pass_fit_lightcurve_checks():

@@ -556,7 +556,7 @@ def tumbler_periodogram(
     reading_indices = _reading_indices(psi_order, phi_order)
     reading_dof = rich.dof - 2 * len(reading_indices) * (drift + 1)
 
-    def rms(rss, dof=reading_dof):
+    def rms(rss, dof):
         return float(np.sqrt(rss / max(dof, 1)))
 
     candidates = []
@@ -668,7 +668,7 @@ def tumbler_periodogram(
         if 2 * f_pa <= f_high:
             add_principal(2 * f_pa, rms(rss_pa, pa_dof))
     for f_psi, f_phi, mode, rss in readings:
-        add(f_psi, f_phi, mode, rms(rss))
+        add(f_psi, f_phi, mode, rms(rss, reading_dof))
     proposals, modes, centres, scores = (x[:max_proposals] for x in (proposals, modes, centres, scores))
     if tumbling and max_proposals >= 4:
         # The best single period, as a principal-axis rotator's, after the readings; in a full list it
