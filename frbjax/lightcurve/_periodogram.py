@@ -662,6 +662,14 @@ def tumbler_periodogram(
         centres.append((1 / f, np.inf))
         scores.append(score)
 
+    # A tumbler's list ends with the best single period, as a principal-axis rotator's; in a full list
+    # it takes the last reading's slot unless it fits worse than that reading by more than the
+    # allowance (the tumbling test's, against the last reading instead of the first).
+    principal_last = (
+        tumbling
+        and max_proposals >= 4
+        and (len(readings) < max_proposals or rss_pa - readings[max_proposals - 1][3] <= allowance)
+    )
     if not tumbling:
         add_principal(f_pa, rms(rss_pa, pa_dof))
         add_principal(f_pa / 2, rms(rss_pa, pa_dof))
@@ -669,14 +677,10 @@ def tumbler_periodogram(
             add_principal(2 * f_pa, rms(rss_pa, pa_dof))
     for f_psi, f_phi, mode, rss in readings:
         add(f_psi, f_phi, mode, rms(rss, reading_dof))
-    proposals, modes, centres, scores = (x[:max_proposals] for x in (proposals, modes, centres, scores))
-    if tumbling and max_proposals >= 4:
-        # The best single period, as a principal-axis rotator's, after the readings; in a full list it
-        # takes the last reading's slot unless it fits worse than that reading by more than the
-        # allowance (the tumbling test's, against the last reading instead of the first).
-        if len(readings) < max_proposals or rss_pa - readings[max_proposals - 1][3] <= allowance:
-            proposals, modes, centres, scores = (x[: max_proposals - 1] for x in (proposals, modes, centres, scores))
-            add_principal(f_pa, rms(rss_pa, pa_dof))
+    kept = max_proposals - 1 if principal_last else max_proposals
+    proposals, modes, centres, scores = (x[:kept] for x in (proposals, modes, centres, scores))
+    if principal_last:
+        add_principal(f_pa, rms(rss_pa, pa_dof))
     best = lattices[0] if lattices else (f_pa, f_pa / 2, rss_pa)
     basis_dof = data.dof - basis_terms
     if map_halfwidth > 0:
