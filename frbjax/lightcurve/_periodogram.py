@@ -57,8 +57,11 @@ The search (all linear least squares, numpy, vectorised over frequencies):
    direction of the phase-angle bisector b is B^T Rz(-psi) R_L^T b: in the frame of L its azimuth
    alpha(t) enters only as psi - alpha, so that each psi harmonic j carries exp(-i j alpha(t)) (the
    synodic correction: over months the bisector's azimuth about L moves by tens of degrees), and the
-   coefficients vary with the aspect, cos theta(t) = b . L, to first order.  For a trial pole L the
-   columns are cos and sin of 2 pi (j f_psi + k f_phi) t - j alpha(t), each times 1 and cos theta(t)
+   coefficients vary with the aspect theta(t), cos theta = b . L: the brightness, a function of the
+   bisector's direction in the frame of L, expands in the spherical harmonics Y_l^j(theta, alpha -
+   psi), whose order-j terms all carry sin^|j| theta times a polynomial in cos theta (DLMF 14.30.1
+   with 14.7.10), here of first degree.  For a trial pole L the columns are cos and sin of
+   2 pi (j f_psi + k f_phi) t - j alpha(t), each times sin^|j| theta(t) and sin^|j| theta(t) cos theta(t)
    (|j| <= psi, |k| <= phi of ``geometric_orders``, (2, 2)), fitted by linear least squares as
    above; the reading's score is the best over ``poles`` trial poles spread over the sphere (a
    Fibonacci lattice: 400 are about 10 degrees apart), the frequencies refined locally at the best
@@ -220,12 +223,19 @@ class _Data:
         """Columns of the geometric series (module docstring, step 4 with ``sun`` and ``observer``) for
         the frequencies (G, 2) = (f_psi, f_phi) and a pole's ``turns`` exp(-i j azimuth) (j = 0, 1,
         ..., (G, J, N) or (J, N): ``_pole_angles``) and cos theta ((G, N) or (N,)): cos and sin of
-        2 pi (j f_psi + k f_phi) t - j azimuth for the ``indices`` (j, k) (K, 2), each times 1 and
-        cos theta: (G, 4 K, N)."""
+        2 pi (j f_psi + k f_phi) t - j azimuth for the ``indices`` (j, k) (K, 2), each times
+        sin^|j| theta and sin^|j| theta cos theta: (G, 4 K, N).
+
+        The factor sin^|j| theta is that of every spherical harmonic of order j about L (DLMF 14.30.1,
+        14.7.10): a psi harmonic fades as the bisector nears the pole, and the aspect's changes over
+        months follow it."""
         j, k = indices[:, 0], indices[:, 1]
         rates = frequencies[:, :1] * j + frequencies[:, 1:] * k  # (G, K)
+        cos_theta = np.asarray(cos_theta)
+        sin_theta = np.sqrt(np.maximum(1 - cos_theta**2, 0.0))
         unit = np.exp(2j * np.pi * rates[:, :, None] * self.times) * np.asarray(turns)[..., j, :]
-        unit = np.concatenate([unit, unit * np.asarray(cos_theta)[..., None, :]], 1)
+        unit = unit * sin_theta[..., None, :] ** np.abs(j)[:, None]
+        unit = np.concatenate([unit, unit * cos_theta[..., None, :]], 1)
         return np.concatenate([unit.real, unit.imag], 1)
 
 
@@ -430,7 +440,7 @@ def tumbler_periodogram(
     two orders >= 1, a ``period_range`` that is missing or not positive and increasing, fewer samples
     than the series has parameters, counts or orders below 1 (``drift`` below 0), non-positive ``oversampling``
     or ``tolerance``, ``max_width`` outside (0, 1).  numpy
-    only (float64); for a thousand samples on one core 3 to 12 seconds, 14 to 29 with the geometric
+    only (float64); for a thousand samples on one core 3 to 12 seconds, 15 to 30 with the geometric
     ranking (benchmarks/lightcurve_periodogram.py).
     """
     times = checks.real_array("times", times)
