@@ -145,17 +145,26 @@ def test_principal_axis_rotator_proposed_first():
 
 def test_psi_harmonics_fade_toward_the_pole():
     # Every spherical harmonic of azimuthal order j about L carries sin^|j| theta (DLMF 14.30.1,
-    # 14.7.10): the geometric series' psi harmonic j at aspect theta is its equator-on column times
+    # 14.7.10): the geometric series' psi harmonic j at aspect theta (the pole's turns) is its equator-on column times
     # sin^|j| theta, and seen pole-on only the phi harmonics (j = 0) remain.
     times = np.linspace(0.0, 10.0, 50)
     data = _Data(times, np.zeros_like(times), np.zeros(len(times), int))
     indices = _reading_indices(2, 2)
-    turns = np.exp(-1j * np.arange(3)[:, None] * 0.3 * times)
     frequencies = np.array([[1.3, 0.37]])
     count = len(indices)
-    equator = data.geometric_columns(frequencies, indices, turns, np.zeros_like(times))[0]
+    pole = np.array([[0.0, 0.0, 1.0]])
+
+    def columns_at(theta):
+        # The bisector at the angle theta from the pole, its azimuth about it advancing with time.
+        azimuth = 0.3 * times
+        bisector = np.stack(
+            [np.sin(theta) * np.cos(azimuth), np.sin(theta) * np.sin(azimuth), np.full_like(times, np.cos(theta))], -1
+        )
+        return data.geometric_columns(frequencies, indices, *_pole_angles(bisector, pole, 2))[0]
+
+    equator = columns_at(np.pi / 2)
     for theta in (0.0, 0.4, 2.5):
-        columns = data.geometric_columns(frequencies, indices, turns, np.full_like(times, np.cos(theta)))[0]
+        columns = columns_at(theta)
         fade = np.sin(theta) ** np.abs(indices[:, 0])[:, None]
         for part in (0, 2):  # the real and the imaginary parts' columns times 1 (those times cos theta follow each)
             plain = slice(part * count, (part + 1) * count)

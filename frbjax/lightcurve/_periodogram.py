@@ -221,21 +221,14 @@ class _Data:
 
     def geometric_columns(self, frequencies, indices, turns, cos_theta):
         """Columns of the geometric series (module docstring, step 4 with ``sun`` and ``observer``) for
-        the frequencies (G, 2) = (f_psi, f_phi) and a pole's ``turns`` exp(-i j azimuth) (j = 0, 1,
-        ..., (G, J, N) or (J, N): ``_pole_angles``) and cos theta ((G, N) or (N,)): cos and sin of
-        2 pi (j f_psi + k f_phi) t - j azimuth for the ``indices`` (j, k) (K, 2), each times
-        sin^|j| theta and sin^|j| theta cos theta: (G, 4 K, N).
-
-        The factor sin^|j| theta is that of every spherical harmonic of order j about L (DLMF 14.30.1,
-        14.7.10): a psi harmonic fades as the bisector nears the pole, and the aspect's changes over
-        months follow it."""
+        the frequencies (G, 2) = (f_psi, f_phi) and a pole's ``turns`` sin^j theta exp(-i j azimuth)
+        (j = 0, 1, ..., (G, J, N) or (J, N): ``_pole_angles``) and cos theta ((G, N) or (N,)): cos and
+        sin of 2 pi (j f_psi + k f_phi) t - j azimuth for the ``indices`` (j, k) (K, 2), each times
+        sin^|j| theta and sin^|j| theta cos theta: (G, 4 K, N)."""
         j, k = indices[:, 0], indices[:, 1]
         rates = frequencies[:, :1] * j + frequencies[:, 1:] * k  # (G, K)
-        cos_theta = np.asarray(cos_theta)
-        sin_theta = np.sqrt(np.maximum(1 - cos_theta**2, 0.0))
         unit = np.exp(2j * np.pi * rates[:, :, None] * self.times) * np.asarray(turns)[..., j, :]
-        unit = unit * sin_theta[..., None, :] ** np.abs(j)[:, None]
-        unit = np.concatenate([unit, unit * cos_theta[..., None, :]], 1)
+        unit = np.concatenate([unit, unit * np.asarray(cos_theta)[..., None, :]], 1)
         return np.concatenate([unit.real, unit.imag], 1)
 
 
@@ -313,13 +306,20 @@ def _tangent_frames(poles):
 
 
 def _pole_angles(bisector, poles, harmonics):
-    """The turns exp(-i j azimuth) for j = 0..``harmonics`` ((G, harmonics + 1, N): computed once for
-    every reading) and cos(theta) ((G, N)) of the unit bisectors (N, 3) in frames whose z axis is each
-    pole (G, 3) (the azimuth's origin is arbitrary: a constant phase the coefficients absorb)."""
+    """The turns sin^j theta exp(-i j azimuth) for j = 0..``harmonics`` ((G, harmonics + 1, N): computed
+    once for every reading) and cos(theta) ((G, N)) of the unit bisectors (N, 3) in frames whose z axis
+    is each pole (G, 3) (the azimuth's origin is arbitrary: a constant phase the coefficients absorb).
+
+    The factor sin^j theta is that of every spherical harmonic of order j about the pole (DLMF
+    14.30.1, 14.7.10): a psi harmonic fades as the bisector nears the pole, and the aspect's changes
+    over months follow it.  sin theta exp(-i azimuth) is the bisector's component across the pole,
+    x - i y in the pole's frame: the turns are its powers."""
     first, second = _tangent_frames(poles)
-    azimuth = np.arctan2(second @ bisector.T, first @ bisector.T)
-    turns = np.exp(-1j * np.arange(harmonics + 1)[:, None, None] * azimuth).transpose(1, 0, 2)
-    return turns, poles @ bisector.T
+    across = first @ bisector.T - 1j * (second @ bisector.T)  # (G, N)
+    turns = [np.ones_like(across)]
+    for _ in range(harmonics):
+        turns.append(turns[-1] * across)
+    return np.stack(turns, 1), poles @ bisector.T
 
 
 def _pole_neighbours(pole, size):
