@@ -440,7 +440,7 @@ def tumbler_periodogram(
     two orders >= 1, a ``period_range`` that is missing or not positive and increasing, fewer samples
     than the series has parameters, counts or orders below 1 (``drift`` below 0), non-positive ``oversampling``
     or ``tolerance``, ``max_width`` outside (0, 1).  numpy
-    only (float64); for a thousand samples on one core 3 to 12 seconds, 15 to 30 with the geometric
+    only (float64); for a thousand samples on one core 3 to 12 seconds, 14 to 28 with the geometric
     ranking (benchmarks/lightcurve_periodogram.py).
     """
     times = checks.real_array("times", times)
