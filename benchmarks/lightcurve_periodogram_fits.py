@@ -56,21 +56,22 @@ def truth_refinement(case):
     rotator = case.kind == "PA"
     true_periods = case.periods[:1] if rotator else case.periods
     ranges = tuple((p * 0.9, p * 1.1) for p in true_periods)
-    refined = fit_lightcurve(
-        case.times,
-        case.flux,
-        case.sun,
-        case.observer,
-        lightcurve=case.night,
+    refined = fit(
+        case,
         periods=ranges[0] if rotator else ranges,
         principal_axis=rotator,
         initial=case.body_at(float(np.median(case.times))),
         search_rounds=1,
         mirror_pole=False,
-        throw=False,
-        progress=False,
     )
     return float(refined.cost), lightcurve.problems.held_out_rms(refined, noiseless(case))
+
+
+def fit(case, **options):
+    """``fit_lightcurve`` on the member's data (its nights' scales free), without progress bars."""
+    return fit_lightcurve(
+        case.times, case.flux, case.sun, case.observer, lightcurve=case.night, throw=False, progress=False, **options
+    )
 
 
 def noiseless(case):
@@ -90,16 +91,7 @@ def run_member(index, seed, rank, stored):
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always", MisfitWarning)
         warnings.simplefilter("ignore", AmbiguousFitWarning)
-        fit = fit_lightcurve(
-            case.times,
-            case.flux,
-            case.sun,
-            case.observer,
-            lightcurve=case.night,
-            throw=False,
-            progress=False,
-            **result.fit_options(rank),
-        )
+        found = fit(case, **result.fit_options(rank))
     seconds = time.perf_counter() - start
     rotator = case.kind == "PA"
     centre = result.centres[rank]
@@ -110,16 +102,16 @@ def run_member(index, seed, rank, stored):
         proposal_rank=rank,
         proposal_mode=result.modes[rank],
         proposal_centres=[float(c) if np.isfinite(c) else None for c in centre],
-        periods=[float(p) if np.isfinite(p) else None for p in np.asarray(fit.periods)],
-        long_axis_mode=bool(fit.long_axis_mode),
-        cost=float(fit.cost),
+        periods=[float(p) if np.isfinite(p) else None for p in np.asarray(found.periods)],
+        long_axis_mode=bool(found.long_axis_mode),
+        cost=float(found.cost),
         truth_refined_cost=truth_cost,
-        cost_excess=(float(fit.cost) - truth_cost) / math.sqrt(len(case.times) / 2),
-        held_out_error=lightcurve.problems.held_out_rms(fit, noiseless(case)),
+        cost_excess=(float(found.cost) - truth_cost) / math.sqrt(len(case.times) / 2),
+        held_out_error=lightcurve.problems.held_out_rms(found, noiseless(case)),
         truth_refined_held_out_error=truth_held_out,
-        noise_ratio=float(fit.noise_ratio),
+        noise_ratio=float(found.noise_ratio),
         misfit_warned=any(issubclass(w.category, MisfitWarning) for w in caught),
-        competing_basins=len(fit.competing_basins().cost_excess),
+        competing_basins=len(found.competing_basins().cost_excess),
         seconds=seconds,
     )
 
