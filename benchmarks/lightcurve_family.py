@@ -110,11 +110,8 @@ def invert(case, width, options, stored=None):
     # The true motion, its time counted from the fit's epoch (fit_lightcurve's default: the median time).
     truth = case.body_at(float(np.median(case.times)))
     if stored is None:
-        # The truth's basin: the same data refined from the true motion.
-        # Without the mirror image's solve: the truth's own basin, whatever its mirror's cost.
-        refined = fit_lightcurve(
-            *data, periods=ranges, initial=truth, **common, **{**options, "search_rounds": 1, "mirror_pole": False}
-        )
+        # The truth's basin, without the mirror image's solve: the truth's own basin, whatever its mirror's cost.
+        refined = case.refine_from_truth(width, **{**options, "search_rounds": 1, "mirror_pole": False})
         truth_refined = {
             "truth_refined_period_z": (
                 np.abs(np.asarray(refined.periods)[: len(true_periods)] - true_periods)

@@ -35,7 +35,7 @@ jax.config.update("jax_enable_x64", True)
 
 import numpy as np  # noqa: E402
 
-from frbjax.lightcurve import AmbiguousFitWarning, fit_lightcurve  # noqa: E402
+from frbjax.lightcurve import AmbiguousFitWarning  # noqa: E402
 
 
 sys.path.insert(0, str(pathlib.Path(__file__).parent))
@@ -50,22 +50,8 @@ def member(case):
     """The member's truth refinement and its periods' and moments' |z| under each covariance."""
     rotator = case.kind == "PA"
     true_periods = np.asarray(case.periods[:1] if rotator else case.periods)
-    ranges = tuple((p * 0.9, p * 1.1) for p in true_periods)
-    truth = case.body_at(float(np.median(case.times)))
     start = time.perf_counter()
-    fit = fit_lightcurve(
-        case.times,
-        case.flux,
-        case.sun,
-        case.observer,
-        lightcurve=case.night,
-        periods=ranges[0] if rotator else ranges,
-        principal_axis=rotator,
-        initial=truth,
-        search_rounds=1,
-        throw=False,
-        progress=False,
-    )
+    fit = case.refine_from_truth()
     seconds = time.perf_counter() - start
     record = {"index": case.index, "kind": case.kind, "seconds": seconds, "noise_ratio": float(fit.noise_ratio)}
     for kind, covariance in zip(KINDS, (fit.covariance, fit.robust_covariance, None)):
