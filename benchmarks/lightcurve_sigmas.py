@@ -15,7 +15,17 @@ For a calibrated sigma |z| < 1, 2, 3 hold at 68.3%, 95.4%, 99.7%.  The moments a
 ones (scaled to a largest of 1, matched to the true moments by rank); a principal-axis rotator's
 are fixed.  Writes ``benchmarks/results/lightcurve_sigmas.json`` (updated after every member).
 
-Usage: python benchmarks/lightcurve_sigmas.py [--members 0,5,12] [--output-dir DIR]
+``--convex-subdivisions 3`` refines with the convex shape's 1280 normals instead of the default 320
+(``lightcurve_sigmas_subdivisions3.json``), ``--smoothness-weight W`` with the regularisation
+(10, W) instead of (10, 1) (``..._smoothness2.json`` for W = 2).  Each record also has
+``held_out_error``: the four later nights' prediction against the noiseless truth (as
+``lightcurve_family.py``).
+
+A run split over processes (``--members`` and ``--output-dir`` each) is put together with ``--merge
+A.json B.json`` (the same settings; written to ``--output-dir``, rates recomputed).
+
+Usage: python benchmarks/lightcurve_sigmas.py [--members 0,5,12] [--convex-subdivisions N] [--output-dir DIR]
+       [--smoothness-weight W] [--merge JSON ...]
 """
 
 from __future__ import annotations
@@ -40,20 +50,29 @@ from frbjax.lightcurve import AmbiguousFitWarning  # noqa: E402
 
 sys.path.insert(0, str(pathlib.Path(__file__).parent))
 import _tumbler_family  # noqa: E402
+import lightcurve  # noqa: E402  (its `problems`: tests/test_lightcurve_fit.py's helpers)
 
 
 warnings.filterwarnings("ignore", category=AmbiguousFitWarning)
 KINDS = ("model", "robust", "basin")
 
 
-def member(case):
-    """The member's truth refinement and its periods' and moments' |z| under each covariance."""
+def member(case, **options):
+    """The member's truth refinement (``options`` pass on to the fit) and its periods' and moments' |z|
+    under each covariance."""
     rotator = case.kind == "PA"
     true_periods = np.asarray(case.periods[:1] if rotator else case.periods)
     start = time.perf_counter()
-    fit = case.refine_from_truth()
+    fit = case.refine_from_truth(**options)
     seconds = time.perf_counter() - start
-    record = {"index": case.index, "kind": case.kind, "seconds": seconds, "noise_ratio": float(fit.noise_ratio)}
+    noiseless = tuple(case.held_out[key] for key in ("times", "noiseless", "sun", "observer", "night"))
+    record = {
+        "index": case.index,
+        "kind": case.kind,
+        "seconds": seconds,
+        "noise_ratio": float(fit.noise_ratio),
+        "held_out_error": lightcurve.problems.held_out_rms(fit, noiseless),
+    }
     for kind, covariance in zip(KINDS, (fit.covariance, fit.robust_covariance, None)):
         period_sigma, inertia_sigma = fit.standard_errors(covariance)
         count = len(true_periods)
@@ -82,24 +101,43 @@ def rates(records):
     return out
 
 
+def write(output, records, settings):
+    """The records (sorted by member), the fit's ``settings`` and the rates to ``output``."""
+    records = sorted(records, key=lambda record: record["index"])
+    result = {
+        "description": __doc__.split("\n\n")[0],
+        "machine": {"platform": platform.platform(), "jax": jax.__version__},
+        **settings,
+        "rates": rates(records),
+        "members": records,
+    }
+    output.write_text(json.dumps(result, indent=1) + "\n")
+
+
 def main(argv=None):
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--members", default=",".join(str(k) for k in range(_tumbler_family.SIZE)))
+    parser.add_argument("--convex-subdivisions", type=int, default=2)
+    parser.add_argument("--smoothness-weight", type=float, default=1.0)
     parser.add_argument("--output-dir", default=str(pathlib.Path(__file__).parent / "results"))
+    parser.add_argument("--merge", nargs="+", metavar="JSON", help="write the members of these runs' files instead")
     options = parser.parse_args(argv)
-    output = pathlib.Path(options.output_dir) / "lightcurve_sigmas.json"
+    subdivisions, weight = options.convex_subdivisions, options.smoothness_weight
+    name = "lightcurve_sigmas"
+    name += "" if subdivisions == 2 else f"_subdivisions{subdivisions}"
+    name += "" if weight == 1 else f"_smoothness{weight:g}"
+    output = pathlib.Path(options.output_dir) / f"{name}.json"
+    settings = dict(convex_subdivisions=subdivisions, regularisation=(10.0, weight))
     output.parent.mkdir(parents=True, exist_ok=True)
     records = []
-    for index in (int(x) for x in options.members.split(",")):
-        records.append(member(_tumbler_family.tumbler(index)))
+    if options.merge:
+        for path in options.merge:
+            records += json.loads(pathlib.Path(path).read_text())["members"]
+        write(output, records, settings)
+    for index in [] if options.merge else (int(x) for x in options.members.split(",")):
+        records.append(member(_tumbler_family.tumbler(index), **settings))
         print(json.dumps(records[-1]), flush=True)
-        result = {
-            "description": __doc__.split("\n\n")[0],
-            "machine": {"platform": platform.platform(), "jax": jax.__version__},
-            "rates": rates(records),
-            "members": records,
-        }
-        output.write_text(json.dumps(result, indent=1) + "\n")
+        write(output, records, settings)
     print(json.dumps(rates(records), indent=1))
 
 
