@@ -132,12 +132,21 @@ def main(argv=None):
     records = []
     if options.merge:
         for path in options.merge:
-            records += json.loads(pathlib.Path(path).read_text())["members"]
+            run = json.loads(pathlib.Path(path).read_text())
+            # A file without the settings is a run at the defaults (before the options existed).
+            found = dict(
+                convex_subdivisions=run.get("convex_subdivisions", 2),
+                regularisation=run.get("regularisation", [10.0, 1.0]),
+            )
+            if found != dict(settings, regularisation=list(settings["regularisation"])):
+                parser.error(f"{path} was run with {found}, not {settings}: merge runs of the same settings")
+            records += run["members"]
         write(output, records, settings)
-    for index in [] if options.merge else (int(x) for x in options.members.split(",")):
-        records.append(member(_tumbler_family.tumbler(index), **settings))
-        print(json.dumps(records[-1]), flush=True)
-        write(output, records, settings)
+    else:
+        for index in (int(x) for x in options.members.split(",")):
+            records.append(member(_tumbler_family.tumbler(index), **settings))
+            print(json.dumps(records[-1]), flush=True)
+            write(output, records, settings)
     print(json.dumps(rates(records), indent=1))
 
 
