@@ -87,6 +87,13 @@ class Tumbler:
     def span(self) -> float:
         return float(self.times.max() - self.times.min())
 
+    def held_out_data(self, noiseless: bool = True) -> tuple:
+        """The held-out nights as ``(times, flux, sun, observer, night)`` (the held-out argument of
+        benchmarks/lightcurve.py's ``problems.held_out_rms``), the flux the noiseless truth's or, with
+        ``noiseless=False``, the data's."""
+        flux = "noiseless" if noiseless else "flux"
+        return tuple(self.held_out[key] for key in ("times", flux, "sun", "observer", "night"))
+
     def body_at(self, epoch: float) -> FreeRigidBody:
         """The true motion with its time counted from ``epoch`` (a fit's ``initial=``; fit_lightcurve's
         default epoch is the median time)."""

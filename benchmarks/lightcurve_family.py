@@ -103,10 +103,8 @@ def invert(case, width, options, stored=None):
         warnings.simplefilter("always", MisfitWarning)
         found = fit_lightcurve(*data, periods=ranges, mode="both", **common, **options)
     seconds = time.perf_counter() - start
-    held_out = tuple(case.held_out[key] for key in ("times", "flux", "sun", "observer", "night"))
-    held_out_rms = lambda result: lightcurve.problems.held_out_rms(result, held_out)  # noqa: E731
-    noiseless = tuple(case.held_out[key] for key in ("times", "noiseless", "sun", "observer", "night"))
-    held_out_error = lambda result: lightcurve.problems.held_out_rms(result, noiseless)  # noqa: E731
+    held_out_rms = lambda result: lightcurve.problems.held_out_rms(result, case.held_out_data(noiseless=False))  # noqa: E731
+    held_out_error = lambda result: lightcurve.problems.held_out_rms(result, case.held_out_data())  # noqa: E731
     # The true motion, its time counted from the fit's epoch (fit_lightcurve's default: the median time).
     truth = case.body_at(float(np.median(case.times)))
     if stored is None:

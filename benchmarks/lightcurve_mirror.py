@@ -89,7 +89,7 @@ def member(index):
     ranges = tuple((p * 0.9, p * 1.1) for p in np.asarray(case.periods))
     common = dict(lightcurve=case.night, principal_axis=False, throw=False, progress=False)
     data = (case.times, case.flux, case.sun, case.observer)
-    held_out = tuple(case.held_out[key] for key in ("times", "flux", "sun", "observer", "night"))
+    held_out = case.held_out_data(noiseless=False)
     start = time.perf_counter()
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")

@@ -54,7 +54,7 @@ def truth_refinement(case):
     """The truth's basin (its cost and later nights' error), as benchmarks/lightcurve_family.py has it:
     the data refined from the true motion without the mirror image's solve."""
     refined = case.refine_from_truth(mirror_pole=False)
-    return float(refined.cost), lightcurve.problems.held_out_rms(refined, noiseless(case))
+    return float(refined.cost), lightcurve.problems.held_out_rms(refined, case.held_out_data())
 
 
 def fit(case, **options):
@@ -62,10 +62,6 @@ def fit(case, **options):
     return fit_lightcurve(
         case.times, case.flux, case.sun, case.observer, lightcurve=case.night, throw=False, progress=False, **options
     )
-
-
-def noiseless(case):
-    return tuple(case.held_out[key] for key in ("times", "noiseless", "sun", "observer", "night"))
 
 
 def run_member(index, seed, rank, stored):
@@ -97,7 +93,7 @@ def run_member(index, seed, rank, stored):
         cost=float(found.cost),
         truth_refined_cost=truth_cost,
         cost_excess=(float(found.cost) - truth_cost) / math.sqrt(len(case.times) / 2),
-        held_out_error=lightcurve.problems.held_out_rms(found, noiseless(case)),
+        held_out_error=lightcurve.problems.held_out_rms(found, case.held_out_data()),
         truth_refined_held_out_error=truth_held_out,
         noise_ratio=float(found.noise_ratio),
         misfit_warned=any(issubclass(w.category, MisfitWarning) for w in caught),

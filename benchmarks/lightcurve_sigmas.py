@@ -65,13 +65,12 @@ def member(case, **options):
     start = time.perf_counter()
     fit = case.refine_from_truth(**options)
     seconds = time.perf_counter() - start
-    noiseless = tuple(case.held_out[key] for key in ("times", "noiseless", "sun", "observer", "night"))
     record = {
         "index": case.index,
         "kind": case.kind,
         "seconds": seconds,
         "noise_ratio": float(fit.noise_ratio),
-        "held_out_error": lightcurve.problems.held_out_rms(fit, noiseless),
+        "held_out_error": lightcurve.problems.held_out_rms(fit, case.held_out_data()),
     }
     for kind, covariance in zip(KINDS, (fit.covariance, fit.robust_covariance, None)):
         period_sigma, inertia_sigma = fit.standard_errors(covariance)
@@ -127,7 +126,7 @@ def main(argv=None):
     name += "" if subdivisions == 2 else f"_subdivisions{subdivisions}"
     name += "" if weight == 1 else f"_smoothness{weight:g}"
     output = pathlib.Path(options.output_dir) / f"{name}.json"
-    settings = dict(convex_subdivisions=subdivisions, regularisation=(10.0, weight))
+    settings = dict(convex_subdivisions=subdivisions, regularisation=[10.0, weight])
     output.parent.mkdir(parents=True, exist_ok=True)
     records = []
     if options.merge:
@@ -138,7 +137,7 @@ def main(argv=None):
                 convex_subdivisions=run.get("convex_subdivisions", 2),
                 regularisation=run.get("regularisation", [10.0, 1.0]),
             )
-            if found != dict(settings, regularisation=list(settings["regularisation"])):
+            if found != settings:
                 parser.error(f"{path} was run with {found}, not {settings}: merge runs of the same settings")
             records += run["members"]
         write(output, records, settings)
