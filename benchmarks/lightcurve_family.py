@@ -24,6 +24,9 @@ motion (``initial=`` the true body), which gives the cost the data allow.  Per m
   winner's basin's own sigmas (``period_sigma`` also spans the competing basins);
 - ``inertia_z``: the same for the two smaller moments (scaled to a largest of 1, matched to the true
   moments by rank; a principal-axis rotator's are fixed, none);
+- ``resolution_periods``, ``resolution_inertia`` and their sigmas: the winner solved again on the
+  finer convex shape (``fit_lightcurve``'s ``resolution_error``, from 2026-12-05), whose difference
+  and sigmas the reported sigmas include;
 - ``competing_basins``, ``ambiguous``: the fit's runner-up basins within the noise of its cost at
   other periods (``LightcurveFit.competing_basins``), which ``fit_lightcurve`` warns of;
 - ``noise_ratio``, ``search_rounds``, ``misfit_warned``: the fit's residual level over the noise
@@ -143,6 +146,12 @@ def invert(case, width, options, stored=None):
         "inertia": np.asarray(found.inertia).tolist(),
         "inertia_sigma": np.asarray(found.inertia_sigma).tolist(),
         "inertia_z": inertia_z,
+        # The winner solved on the finer shape (``resolution_error``): its periods and moments and their
+        # sigmas, which the sigmas above include (NaN for the ellipsoid or an unconverged solve).
+        "resolution_periods": np.asarray(found.resolution_periods).tolist(),
+        "resolution_period_sigma": np.asarray(found.resolution_period_sigma).tolist(),
+        "resolution_inertia": np.asarray(found.resolution_inertia).tolist(),
+        "resolution_inertia_sigma": np.asarray(found.resolution_inertia_sigma).tolist(),
         # The same for the refinement from the truth: what the model allows in the truth's basin.
         **truth_refined,
         "long_axis_mode": bool(found.long_axis_mode),

@@ -308,3 +308,72 @@ def test_the_misfit_bound_is_a_chi_square_tail():
     print(f"mean variance {variances.mean():.4f}, bound passed {passed:.4f} (chi-square tail {tail:.4f})")
     assert abs(variances.mean() - 1) < 4 * np.sqrt(2 / dof / draws)
     assert abs(passed - tail) < 4 * np.sqrt(tail * (1 - tail) / draws)
+
+
+def test_the_finer_shape_starts_where_the_coarser_ends():
+    """The shape's resolution error (fit_lightcurve's ``resolution_error``) solves the winner again on
+    the icosphere subdivided once more, each child facet starting at its parent's area per solid angle:
+    a start whose light curves are the coarser shape's to a fraction of the data's 1% noise.  Measured
+    on a bumpy ellipsoid's Gaussian image at 320 normals, 200 random geometries of a tumbler: the
+    log-brightness differs by 0.34% rms (0.023 peak to peak) after the common scale; each parent's
+    four children sum to its area within 0.3% (the flat triangles' solid angles)."""
+    from frbjax.lightcurve._fit import _gaussian_image_areas, _subdivided_log_areas, _unit_normals
+
+    normals, solid_angles, _ = _unit_normals(2)
+    finer_normals, finer_solid_angles, _ = _unit_normals(3)
+    rng = np.random.default_rng(0)
+    log_areas = np.log(_gaussian_image_areas(np.array([1.0, 0.7, 0.5]), normals, solid_angles))
+    log_areas += 0.2 * rng.normal(size=len(normals))
+    finer = _subdivided_log_areas(log_areas, solid_angles, finer_solid_angles)
+    assert finer.shape == (4 * len(normals),) and abs(finer.mean()) < 1e-12
+    ratio = np.exp(finer).reshape(-1, 4).sum(1) / np.exp(log_areas)
+    assert np.ptp(ratio / ratio.mean()) < 0.004
+    body = FreeRigidBody(np.array([0.61, 0.965, 1.0]), np.array([1.0, 0.3, 6.0]), np.array([0.9, 0.2, -0.3, 0.2]))
+    times = np.linspace(0.0, 3.0, 200)
+    sun = rng.normal(size=(200, 3))
+    sun /= np.linalg.norm(sun, axis=-1, keepdims=True)
+    observer = sun + 0.5 * rng.normal(size=(200, 3))
+    observer /= np.linalg.norm(observer, axis=-1, keepdims=True)
+    coarse = brightness(body, ConvexShape(normals, np.exp(log_areas)), times, sun, observer)
+    fine = brightness(body, ConvexShape(finer_normals, np.exp(finer)), times, sun, observer)
+    difference = np.log(np.asarray(fine)) - np.log(np.asarray(coarse))
+    print(f"log-brightness: {np.std(difference):.5f} rms, {np.ptp(difference):.4f} peak to peak")
+    assert np.std(difference) < 0.004
+
+
+def test_the_same_smoothness_weight_is_about_the_same_prior_on_finer_facets():
+    """The finer solve keeps the regularisation weights: on the icosphere's graph the Laplacian's rows of
+    a smooth function shrink about as fast as their number grows (the facets' irregular neighbourhoods
+    leave a first-order term), so that the smoothness rows' sum of squares is nearly the same on 320
+    and 1280 normals: measured ratios 1.08 to 1.83 (coarser over finer) for spherical harmonics of
+    degree 1 to 3, where a second-order stencil (rows as the square of the spacing) would give 4."""
+    from frbjax.lightcurve._fit import _laplacian, _unit_normals
+
+    harmonics = (
+        lambda n: n[:, 2],
+        lambda n: n[:, 0] * n[:, 1],
+        lambda n: 3 * n[:, 2] ** 2 - 1,
+        lambda n: n[:, 0] ** 3 - 3 * n[:, 0] * n[:, 1] ** 2,
+    )
+    sums = []
+    for subdivisions in (2, 3):
+        normals, _, faces = _unit_normals(subdivisions)
+        laplacian = _laplacian(faces)
+        sums.append([np.sum((laplacian @ harmonic(normals)) ** 2) for harmonic in harmonics])
+    ratios = np.array(sums[0]) / np.array(sums[1])
+    print("coarser over finer:", np.round(ratios, 3))
+    assert np.all((ratios > 1.0) & (ratios < 1.9))
+
+
+def test_resolution_error_widens_the_sigmas():
+    """The basin's sigmas with the shape's resolution error: the larger of the two shapes' sigmas and
+    the change of the value in quadrature; where the finer solution is not finite (an unconverged
+    solve, a rotator's second period), the coarser sigma as it is."""
+    from frbjax.lightcurve._fit import _with_resolution_error
+
+    sigma = np.array([1.0, 2.0, 1.0, 1.0])
+    finer_sigma = np.array([3.0, 1.0, np.nan, 1.0])
+    values = np.array([10.0, 10.0, 10.0, np.inf])
+    finer_values = np.array([14.0, 10.0, 11.0, np.inf])
+    widened = _with_resolution_error(sigma, finer_sigma, values, finer_values)
+    np.testing.assert_array_equal(widened, [5.0, 2.0, 1.0, 1.0])

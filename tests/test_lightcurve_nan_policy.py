@@ -244,6 +244,9 @@ def test_all_rounds_whatever_the_misfit():
         one = fit_lightcurve(times, flux, sun, observer, lightcurve=night, search_rounds=2, **rounds_only)
         both = fit_lightcurve(times, flux, sun, observer, lightcurve=night, search_rounds=2, **default_rounds)
     assert one.search_rounds == 1 and both.search_rounds == 2
+    # An ellipsoid has no finer shape to solve (``resolution_error`` is the convex shape's).
+    assert np.all(np.isnan(np.asarray(both.resolution_periods)))
+    assert np.all(np.isnan(np.asarray(both.resolution_inertia)))
     first = np.asarray(one.refine_costs)
     np.testing.assert_allclose(np.asarray(both.refine_costs)[: len(first)], first, rtol=1e-12)
     assert len(both.refine_costs) == 2 * len(first) and both.cost == np.min(np.asarray(both.refine_costs))
@@ -251,6 +254,8 @@ def test_all_rounds_whatever_the_misfit():
         fit_lightcurve(times, flux, sun, observer, lightcurve=night, stop_at_noise="no", **default_rounds)
     with pytest.raises(ValueError, match="mirror_pole must be True or False"):
         fit_lightcurve(times, flux, sun, observer, lightcurve=night, mirror_pole=1, **OPTIONS)
+    with pytest.raises(ValueError, match="resolution_error must be True or False"):
+        fit_lightcurve(times, flux, sun, observer, lightcurve=night, resolution_error="yes", **OPTIONS)
 
 
 def test_a_misfit_searches_again_and_warns():

@@ -73,6 +73,21 @@ them.  On the tumbler family
 periods within three sigmas for 17 of 24 members; these sigmas, for 22 of the same fits, and for all
 24 with every search round (the default).
 
+The shape's resolution
+----------------------
+Both covariances measure the noise's spread about the model's best fit; neither sees the bias of a
+shape that the facets cannot follow (a body that is not a convex polyhedron on the icosphere's
+normals), which moves the moments and the periods by more than their sigmas where the body is bumpy.
+With ``resolution_error`` (the default for the convex shape) the winner is solved once more on all
+the data with each facet split in four (4 F normals, each child starting at its parent's area per
+solid angle, the same regularisation weights), and the basin's sigmas become the larger of the two
+shapes' (the finer shape's freedom, which the coarser holds fixed, widens them where the moments
+or the periods are tied to the shape's detail) with the change of the values between the two shapes
+in quadrature (the error estimate of an embedded pair).  The fit reports the coarser solution, whose
+predictions of new geometry were as good or better on the family (docs/lightcurves.md), and the
+finer one's periods and moments beside it (``resolution_periods``, ``resolution_inertia`` and their
+sigmas).  The finer solve is one Levenberg-Marquardt solve with four times the shape's parameters.
+
 The search runs in rounds (``search_rounds``, default 4): the first draw of the random states on
 the period grid, the same draw on the middles of the grid's cells, a new draw on the grid, then the
 first search's next ``3 n_refine`` best starts refined (what a fourfold ``n_refine`` would add), and
@@ -590,7 +605,8 @@ class LightcurveFit(eqx.Module):
     - ``epoch``: the reference time (model time t - epoch);
     - ``periods`` (2,): (P_psi, P_phi), precession and rotation periods (principal axis: (P, inf));
       ``period_sigma`` (2,): their standard errors: the winner's basin's (``basin_period_sigma``, the
-      larger of ``covariance``'s and ``robust_covariance``'s), widened to span the competing basins
+      larger of ``covariance``'s and ``robust_covariance``'s and the shape's resolution error added
+      in quadrature), widened to span the competing basins
       where there are any (:meth:`competing_basins`; the module docstring's "Uncertainty");
     - ``long_axis_mode``: LAM (True) or SAM; ``energy_ratio``: E / E0 = 2 E I3 / |L|^2 (1 for a
       principal-axis rotation about the largest moment);
@@ -620,6 +636,12 @@ class LightcurveFit(eqx.Module):
       ``sigma`` hold; where (s / sigma)^2 exceeds 1 + 3 sqrt(2 / dof) after the last round,
       :func:`fit_lightcurve` warns: :class:`MisfitWarning`); ``search_rounds``: the rounds it ran
       (fewer than asked only with ``stop_at_noise=True``);
+    - ``resolution_periods`` (2,), ``resolution_inertia`` (3,) and their sigmas
+      ``resolution_period_sigma``, ``resolution_inertia_sigma``: the periods and moments of the
+      winner solved again with each facet of the convex shape split in four (``resolution_error``;
+      NaN without it, for an ellipsoid, or where that solve does not converge): the shape's
+      resolution error, the larger of the two shapes' sigmas and the change of the values in
+      quadrature, is in ``basin_period_sigma`` and the sigmas built on it;
     - ``shape_model`` (``"convex"`` or ``"ellipsoid"``) and ``regularisation`` (the convex shape's
       closure and smoothness weights): the fit's settings, which the posterior's shape prior reuses.
     """
@@ -652,6 +674,10 @@ class LightcurveFit(eqx.Module):
     refine_periods: Float[Array, "K 2"]
     noise_ratio: float
     search_rounds: int
+    resolution_periods: Float[Array, 2]
+    resolution_period_sigma: Float[Array, 2]
+    resolution_inertia: Float[Array, 3]
+    resolution_inertia_sigma: Float[Array, 3]
     # The frame about which ``parameters`` are counted (the winner's start: its attitude, the inertial
     # direction of L and two unit vectors across it): for the posterior (frbjax.posterior).
     _reference: tuple = ()
@@ -692,8 +718,9 @@ class LightcurveFit(eqx.Module):
         """(period sigma (2,), inertia sigma (3,)) of the winner's basin, first order in
         ``covariance`` (P, P) of ``parameters``: ``fit.covariance`` (the model's alone, which a
         posterior under the model's likelihood reproduces: :mod:`frbjax.posterior`) or
-        ``fit.robust_covariance``; by default the larger of the two per quantity, as
-        ``basin_period_sigma``.  No competing basins are spanned (``period_sigma`` spans them)."""
+        ``fit.robust_covariance``; by default the larger of the two per quantity with the shape's
+        resolution error (``resolution_periods`` and the rest: the module docstring's "The shape's
+        resolution"), as ``basin_period_sigma``.  No competing basins are spanned (``period_sigma`` spans them)."""
         covariances = (self.covariance, self.robust_covariance) if covariance is None else (covariance,)
         covariances = tuple(np.asarray(cov, float) for cov in covariances)
         size = np.asarray(self.parameters).size
@@ -704,7 +731,15 @@ class LightcurveFit(eqx.Module):
         reference = tuple(jnp.asarray(r) for r in self._reference)
         _, _, _, period_jacobian = _fitted_motion(jnp.asarray(self.parameters[:8]), reference, principal_axis)
         period_jacobian = np.nan_to_num(np.asarray(period_jacobian), posinf=0.0, neginf=0.0)
-        return _standard_errors(period_jacobian, np.asarray(self.parameters, float), covariances)
+        period_sigma, inertia_sigma = _standard_errors(period_jacobian, np.asarray(self.parameters, float), covariances)
+        if covariance is None:
+            period_sigma = _with_resolution_error(
+                period_sigma, np.asarray(self.resolution_period_sigma), self.periods, self.resolution_periods
+            )
+            inertia_sigma = _with_resolution_error(
+                inertia_sigma, np.asarray(self.resolution_inertia_sigma), self.inertia, self.resolution_inertia
+            )
+        return period_sigma, inertia_sigma
 
     @property
     def ambiguous(self) -> bool:
@@ -903,6 +938,20 @@ def _cluster_robust_covariance(residual, jacobian, curves, inverse_normal):
     return inverse_normal @ meat @ inverse_normal
 
 
+def _covariances(residual, jacobian, free, curves, misfit):
+    """(model covariance, cluster-robust covariance) (P, P) of a solution's parameters from its
+    residual and Jacobian rows and its ``misfit`` (:func:`_misfit` over the ``free`` parameters' columns);
+    zero rows and columns for the fixed parameters, and a zero robust covariance with too few light
+    curves."""
+    covariance = np.zeros((free.size, free.size))
+    covariance[np.ix_(free > 0, free > 0)] = misfit.inverse_normal * misfit.variance
+    robust = _cluster_robust_covariance(residual, jacobian[:, free > 0], curves, misfit.inverse_normal)
+    robust_covariance = np.zeros_like(covariance)
+    if robust is not None:
+        robust_covariance[np.ix_(free > 0, free > 0)] = robust
+    return covariance, robust_covariance
+
+
 def _basins(costs, periods, winner_periods, sigma, samples, cost, within):
     """(indices into ``costs``, cost excess, distance) of the competing basins, best first: the
     starts within ``within`` noise units of the winner's cost at periods more than 3 ``sigma`` away
@@ -952,6 +1001,29 @@ def _mixture_sigma(sigma, values):
     centres = np.where(finite, values, 0.0)
     offsets = centres - centres[:1]
     return np.sqrt(sigma**2 + np.mean(offsets**2, 0))
+
+
+def _subdivided_log_areas(log_areas, solid_angles, finer_solid_angles):
+    """A convex shape's log-areas carried to the icosphere subdivided once more (:func:`icosphere`
+    orders the four children of facet f as 4 f .. 4 f + 3): each child keeps its parent's area per
+    solid angle (the Gaussian image's density, 1 / K), the mean log-area set to 0 as the
+    regularisation's mean row holds it."""
+    parents = np.arange(len(finer_solid_angles)) // 4
+    finer = np.asarray(log_areas, float)[parents] + np.log(finer_solid_angles / np.asarray(solid_angles)[parents])
+    return finer - finer.mean()
+
+
+def _with_resolution_error(sigma, finer_sigma, values, finer_values):
+    """The standard errors of ``values`` (their ``sigma``) with the shape's resolution error: the larger
+    of ``sigma`` and the finer shape's ``finer_sigma`` (the finer shape's freedom, which the coarser one
+    holds fixed), and the change of the values on the finer shape (``finer_values``: an embedded
+    pair's estimate of the coarser one's error), in quadrature; ``sigma`` as it is where the finer
+    solution is not finite (an unconverged solve, a rotator's second period)."""
+    with np.errstate(invalid="ignore"):  # inf - inf: a rotator's second period
+        change = np.asarray(finer_values, float) - np.asarray(values, float)
+    finite = np.isfinite(change) & np.isfinite(finer_sigma)
+    widened = np.sqrt(np.maximum(sigma, np.where(finite, finer_sigma, 0.0)) ** 2 + np.where(finite, change, 0.0) ** 2)
+    return np.where(finite, widened, sigma)
 
 
 def _round_plan(round_index, n_refine):
@@ -1046,6 +1118,7 @@ def _check_options(
     search_rounds,
     stop_at_noise,
     mirror_pole,
+    resolution_error,
     seed,
     rtol,
     atol,
@@ -1094,7 +1167,11 @@ def _check_options(
     checks.integer("starts_per_period", starts_per_period, minimum=1)
     checks.integer("n_refine", n_refine, minimum=1)
     checks.integer("search_rounds", search_rounds, minimum=1)
-    for name, flag in (("stop_at_noise", stop_at_noise), ("mirror_pole", mirror_pole)):
+    for name, flag in (
+        ("stop_at_noise", stop_at_noise),
+        ("mirror_pole", mirror_pole),
+        ("resolution_error", resolution_error),
+    ):
         if not isinstance(flag, (bool, np.bool_)):
             raise ValueError(f"{name} must be True or False, got {flag!r}")
     checks.integer("seed", seed, minimum=0)
@@ -1137,6 +1214,7 @@ def fit_lightcurve(
     search_rounds: int = 4,
     stop_at_noise: bool = False,
     mirror_pole: bool = True,
+    resolution_error: bool = True,
     seed: int = 0,
     rtol: float = 1e-8,
     atol: float = 1e-8,
@@ -1228,6 +1306,7 @@ def fit_lightcurve(
         search_rounds=search_rounds,
         stop_at_noise=stop_at_noise,
         mirror_pole=mirror_pole,
+        resolution_error=resolution_error,
         seed=seed,
         rtol=rtol,
         atol=atol,
@@ -1554,30 +1633,61 @@ def fit_lightcurve(
             start_periods, costs = start_periods[:0], costs[:0]
         return out, tuple(r[alive] for r in refs), start_periods, costs
 
-    def mirror_round(parameters, reference):
-        """The start ``parameters`` (with its ``reference``) mirrored through the plane of the
-        observations (:func:`_mirror_image`) and solved on all the data as the last stage solves its
-        starts (continued from where it stops, as the leader is): a round of one refined start."""
-        final_data, final_config = (data, config) if shape == "convex" else (ellipsoid_data, ellipsoid_config)
-        normal_index = _mirrored_normals(normals) if shape == "convex" else None
-        mirrored, mirrored_reference = _mirror_image(parameters, reference, _plane_normal(sun, observer), normal_index)
-        references = tuple(r[None] for r in mirrored_reference)
+    def solve_on_all_data(start, references, solve_data, solve_config):
+        """One start (with its ``references``, each with a leading axis of 1) solved on all the data as
+        the last stage solves its starts: continued from where it stops, as the leader is."""
         out = None
         for _ in range(1 + _CONTINUATIONS):
             if out is not None and (out[2][0] or not np.isfinite(out[1][0])):
                 break
             out = _refine(
-                as_jax(mirrored[None] if out is None else out[0]),
+                as_jax(start[None] if out is None else out[0]),
                 as_jax(references),
                 None,
-                final_data,
+                solve_data,
                 jnp.asarray(masks[-1][None, None], dtype),
                 None,
-                final_config,
+                solve_config,
                 **solver_settings,
             )
             out = [np.asarray(x) for x in out]
+        return out
+
+    def mirror_round(parameters, reference):
+        """The start ``parameters`` (with its ``reference``) mirrored through the plane of the
+        observations (:func:`_mirror_image`) and solved on all the data: a round of one refined start."""
+        final_data, final_config = (data, config) if shape == "convex" else (ellipsoid_data, ellipsoid_config)
+        normal_index = _mirrored_normals(normals) if shape == "convex" else None
+        mirrored, mirrored_reference = _mirror_image(parameters, reference, _plane_normal(sun, observer), normal_index)
+        references = tuple(r[None] for r in mirrored_reference)
+        out = solve_on_all_data(mirrored, references, final_data, final_config)
         return out, references, np.zeros((0, 2)), np.zeros(0)
+
+    def finer_solution(parameters, reference):
+        """The winner solved again on all the data with each facet of its convex shape split in four
+        (module docstring, "The shape's resolution"): its periods and its moments, or NaN where the
+        solve does not converge."""
+        finer_normals, finer_solid_angles, finer_faces = _unit_normals(convex_subdivisions + 1)
+        finer_free = np.ones(8 + len(finer_normals))
+        finer_free[:8] = free[:8]
+        finer_data = dict(
+            data,
+            normals=jnp.asarray(finer_normals, dtype),
+            laplacian=jnp.asarray(_laplacian(finer_faces), dtype),
+            free=jnp.asarray(finer_free, dtype),
+        )
+        finer_areas = _subdivided_log_areas(parameters[8:], solid_angles, finer_solid_angles)
+        start = np.concatenate([parameters[:8], finer_areas])
+        out = solve_on_all_data(start, tuple(np.asarray(r)[None] for r in reference), finer_data, config)
+        if not (out[2][0] and np.isfinite(out[1][0])):
+            return (np.full(2, np.nan), np.full(3, np.nan)), (np.full(2, np.nan), np.full(3, np.nan))
+        finer, residual, jacobian = out[0][0], out[3][0], out[4][0]
+        _, finer_periods, _, period_derivatives = _fitted_motion(as_jax(finer[:8]), as_jax(reference), principal_axis)
+        period_derivatives = np.nan_to_num(np.asarray(period_derivatives), posinf=0.0, neginf=0.0)
+        misfit = _misfit(residual, jacobian[:, finer_free > 0], n, curves.shape[1])
+        covariances = _covariances(residual, jacobian, finer_free, curves, misfit)
+        sigmas = _standard_errors(period_derivatives, finer, covariances)
+        return (np.asarray(finer_periods), _scaled_moments(finer)), sigmas
 
     # ---- the search's rounds: all of them, or (stop_at_noise) while the winner misses the noise
     def best(rounds):
@@ -1620,12 +1730,7 @@ def fit_lightcurve(
     refine_periods = np.stack([np.asarray(motion[1]) for motion in motions])
     p = fitted[winner].astype(float)
     reference = tuple(jnp.asarray(r[winner], dtype) for r in candidate_references)
-    covariance = np.zeros((free.size, free.size))
-    covariance[np.ix_(free > 0, free > 0)] = misfit.inverse_normal * misfit.variance
-    robust = _cluster_robust_covariance(outs[3][winner], outs[4][winner][:, free > 0], curves, misfit.inverse_normal)
-    robust_covariance = np.zeros_like(covariance)
-    if robust is not None:
-        robust_covariance[np.ix_(free > 0, free > 0)] = robust
+    covariance, robust_covariance = _covariances(outs[3][winner], outs[4][winner], free, curves, misfit)
 
     body, period_values, lam, period_jacobian = motions[winner]
     if shape == "convex":
@@ -1639,6 +1744,22 @@ def fit_lightcurve(
     # The larger of the model's and the cluster-robust variances (module docstring, "Uncertainty").
     basin_period_sigma, basin_inertia_sigma = _standard_errors(period_jacobian, p, (covariance, robust_covariance))
     moments = _scaled_moments(p)
+    # The shape's resolution error (module docstring, "The shape's resolution"): the larger of the two
+    # shapes' sigmas, and the change of the periods and moments on the finer shape in quadrature.
+    resolution_periods, resolution_inertia = np.full(2, np.nan), np.full(3, np.nan)
+    resolution_period_sigma, resolution_inertia_sigma = np.full(2, np.nan), np.full(3, np.nan)
+    if resolution_error and shape == "convex":
+        (resolution_periods, finer_moments), (resolution_period_sigma, finer_inertia_sigma) = finer_solution(
+            p, tuple(r[winner] for r in candidate_references)
+        )
+        finer_order = np.argsort(finer_moments)[np.argsort(np.argsort(moments))]
+        resolution_inertia, resolution_inertia_sigma = finer_moments[finer_order], finer_inertia_sigma[finer_order]
+        basin_period_sigma = _with_resolution_error(
+            basin_period_sigma, resolution_period_sigma, period_values, resolution_periods
+        )
+        basin_inertia_sigma = _with_resolution_error(
+            basin_inertia_sigma, resolution_inertia_sigma, moments, resolution_inertia
+        )
     # Competing basins widen the sigmas to their equal-weight mixture's spread about the winner; a
     # basin's moments are matched to the winner's by rank (its axes may be labelled otherwise).
     order, _, _ = _basins(
@@ -1700,6 +1821,10 @@ def fit_lightcurve(
         refine_periods=jnp.asarray(refine_periods, dtype),
         noise_ratio=math.sqrt(misfit.variance),
         search_rounds=len(rounds) - (mirror_row is not None),
+        resolution_periods=jnp.asarray(resolution_periods, dtype),
+        resolution_period_sigma=jnp.asarray(resolution_period_sigma, dtype),
+        resolution_inertia=jnp.asarray(resolution_inertia, dtype),
+        resolution_inertia_sigma=jnp.asarray(resolution_inertia_sigma, dtype),
         _reference=reference,
         shape_model=shape,
         regularisation=tuple(float(w) for w in regularisation),
