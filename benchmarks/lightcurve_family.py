@@ -50,11 +50,13 @@ Rates over the members run are printed and written with the members to
 ``benchmarks/results/lightcurve_family.json`` (among them ``sigma_coverage``: the shares of all the
 periods' and of all the smaller moments' |z| within 1, 2 and 3 sigmas; ``--rates-only`` recomputes
 them from the stored members); the file is updated after every member, and members already in it are
-skipped (``--resume``), so that a long run can be continued.
+skipped (``--resume``), so that a long run can be continued.  A run split over processes (``--members``
+and ``--output-dir`` each) is put together with ``--merge A.json B.json`` (``--earlier-name NAME``:
+the file's run so far kept under ``earlier_runs.NAME``).
 
 Usage: python benchmarks/lightcurve_family.py [--members 0,5,12] [--width 0.1] [--resume] [--truth-from PATH]
        [--starts-per-period 16] [--period-grid 16,16] [--refine 8] [--convex-subdivisions 1] [--stop-at-noise]
-       [--output-dir DIR] [--plot-only] [--basins-only]
+       [--output-dir DIR] [--plot-only] [--basins-only] [--merge JSON ... [--earlier-name NAME]]
 (the figure: lightcurve_family.png beside the JSON, redrawn after each run or with --plot-only)
 """
 
@@ -252,11 +254,15 @@ def rates(members):
     }
 
 
+# The run drawn in grey beside the present one: the same fits before the shape's resolution error
+# entered the sigmas (``fit_lightcurve``'s ``resolution_error``, 2026-12-05).
+EARLIER_RUN = ("before_resolution_error_2026_12_04", "2026-12-04, sigmas without the resolution error")
+
+
 def plot(result, path):
-    """Per member: the cost's excess over the truth's refinement (noise units), the later nights' RMS
-    and the periods' largest |z|, against the issue's thresholds; the family's run of the same
-    defaults on 2026-12-03 (``earlier_runs.mirror_2026_12_03``, when the file has it, its later nights
-    measured against the data) in grey; ringed in red, the fits that warn of two poles
+    """Per member: the cost's excess over the truth's refinement (noise units), the later nights' RMS,
+    the periods' and the moments' largest |z|, against the issue's thresholds; the run
+    ``EARLIER_RUN`` (when the file has it) in grey; ringed in red, the fits that warn of two poles
     (``pole_ambiguous``)."""
     import matplotlib
 
@@ -264,23 +270,24 @@ def plot(result, path):
     import matplotlib.pyplot as plt
 
     runs = [("now", result["members"], "C0")]
-    earlier = result.get("earlier_runs", {}).get("mirror_2026_12_03")
+    earlier = result.get("earlier_runs", {}).get(EARLIER_RUN[0])
     if earlier:
-        runs.insert(0, ("2026-12-03, the same defaults", earlier["members"], "0.6"))
+        runs.insert(0, (EARLIER_RUN[1], earlier["members"], "0.6"))
     panels = [
         (
             "cost excess over the truth's refinement\n(noise units, sqrt(N/2); below 0.01 at 0.01)",
             lambda m: max(m["cost_excess"], 1e-2),
             1,
         ),
-        (
-            "later nights' RMS vs the noiseless truth\n(grey: vs the data, its 1% noise included)",
-            later_nights,
-            1.5 * NOISE,
-        ),
+        ("later nights' RMS vs the noiseless truth", later_nights, 1.5 * NOISE),
         ("periods' largest |P - P_true| / sigma\n(below 0.01 at 0.01)", lambda m: max(max(m["period_z"]), 1e-2), 3),
+        (
+            "moments' largest |I - I_true| / sigma\n(below 0.01 at 0.01; rotators: fixed)",
+            lambda m: max(max(m["inertia_z"]), 1e-2) if m.get("inertia_z") else np.nan,
+            3,
+        ),
     ]
-    figure, axes = plt.subplots(3, 1, figsize=(10, 8), sharex=True)
+    figure, axes = plt.subplots(4, 1, figsize=(10, 10), sharex=True)
     for axis, (label, value, threshold) in zip(axes, panels):
         for offset, (name, members, colour) in zip((-0.15, 0.15) if len(runs) == 2 else (0.0,), runs):
             index = np.array([m["index"] for m in members])
@@ -315,13 +322,41 @@ def plot(result, path):
     figure.suptitle(
         "fit_lightcurve on the tumbler family (+-10% period ranges): within the noise "
         f"{rates_now['cost_within_noise']:.0%}, later nights {rates_now['held_out_within_1.5_noise']:.0%}, "
-        f"periods {rates_now['periods_within_3_sigma']:.0%}"
+        f"periods {rates_now['periods_within_3_sigma']:.0%}, moments {rates_now['inertia_within_3_sigma']:.0%}"
         + (f"; two poles warned {rates_now['pole_ambiguous']:.0%}" if "pole_ambiguous" in rates_now else ""),
         fontsize=9,
     )
     figure.tight_layout()
     figure.savefig(path, dpi=110)
     plt.close(figure)
+
+
+def merge(paths, output, earlier_name, description=None):
+    """The members of the runs in ``paths`` (parts of one run: the same seed, width and options) written
+    as the run of ``output``; the run it held is kept under ``earlier_runs[earlier_name]`` (with its
+    own earlier runs left where they were), or replaced without ``earlier_name``; ``description``, how
+    the run was made (by default the module docstring's first paragraph)."""
+    runs = [json.loads(pathlib.Path(path).read_text()) for path in paths]
+    settings = [{key: run.get(key) for key in ("seed", "width", "fit_options")} for run in runs]
+    if any(setting != settings[0] for setting in settings):
+        raise SystemExit(f"--merge: the runs' settings differ: {settings}")
+    members = sorted((m for run in runs for m in run["members"]), key=lambda m: m["index"])
+    if len({m["index"] for m in members}) != len(members):
+        raise SystemExit("--merge: a member is in more than one run")
+    stored = json.loads(output.read_text()) if output.exists() else {}
+    earlier_runs = dict(stored.get("earlier_runs", {}))
+    if earlier_name:
+        earlier_runs[earlier_name] = {key: value for key, value in stored.items() if key != "earlier_runs"}
+    result = {
+        "description": description or __doc__.split("\n\n")[0],
+        **{key: value for key, value in runs[0].items() if key not in ("description", "rates", "members")},
+        "rates": rates(members),
+        "earlier_runs": earlier_runs,
+        "members": members,
+    }
+    output.write_text(json.dumps(result, indent=1) + "\n")
+    plot(result, output.with_suffix(".png"))
+    print(json.dumps(result["rates"], indent=1))
 
 
 def main(argv=None):
@@ -344,8 +379,14 @@ def main(argv=None):
         "--basins-only", action="store_true", help="add the competing basins to the JSON's members and its rates"
     )
     parser.add_argument("--rates-only", action="store_true", help="recompute the JSON's rates from its members")
+    parser.add_argument("--merge", nargs="+", metavar="JSON", help="put a run split over processes together")
+    parser.add_argument("--earlier-name", help="with --merge: keep the file's run so far under earlier_runs.NAME")
+    parser.add_argument("--description", help="with --merge: how the run was made (the JSON's description)")
     options = parser.parse_args(argv)
     output = pathlib.Path(options.output_dir) / "lightcurve_family.json"
+    if options.merge:
+        merge(options.merge, output, options.earlier_name, options.description)
+        return
     if options.basins_only or options.rates_only:
         stored = json.loads(output.read_text())
         if options.basins_only:

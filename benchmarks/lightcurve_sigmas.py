@@ -8,7 +8,9 @@ periods and moments from the fit's is measured in the sigmas of three covariance
 - ``model``: ``LightcurveFit.covariance``, (J^T J)^+ s^2: right for independent noise and a model
   that describes the body;
 - ``robust``: ``LightcurveFit.robust_covariance``, the cluster jackknife over the nights (CR3);
-- ``basin``: the larger of the two per quantity, the fit's ``basin_period_sigma`` (what
+- ``basin``: the larger of the two per quantity with the shape's resolution error (from 2026-12-05,
+  ``fit_lightcurve``'s ``resolution_error``: the larger of the two shapes' sigmas and the change of
+  the values on the finer shape in quadrature), the fit's ``basin_period_sigma`` (what
   ``period_sigma`` reports where there are no competing basins).
 
 For a calibrated sigma |z| < 1, 2, 3 hold at 68.3%, 95.4%, 99.7%.  The moments are the two smaller
@@ -17,7 +19,9 @@ are fixed.  Writes ``benchmarks/results/lightcurve_sigmas.json`` (updated after 
 
 ``--convex-subdivisions 3`` refines with the convex shape's 1280 normals instead of the default 320
 (``lightcurve_sigmas_subdivisions3.json``), ``--smoothness-weight W`` with the regularisation
-(10, W) instead of (10, 1) (``..._smoothness2.json`` for W = 2).  Each record also has
+(10, W) instead of (10, 1) (``..._smoothness2.json`` for W = 2), ``--no-resolution-error`` without
+the shape's resolution error (``resolution_error=False``; the files written before 2026-12-05 were
+run before it existed, and at 1280 normals its finer shape has 5120).  Each record also has
 ``held_out_error``: the four later nights' prediction against the noiseless truth (as
 ``lightcurve_family.py``).
 
@@ -25,7 +29,7 @@ A run split over processes (``--members`` and ``--output-dir`` each) is put toge
 A.json B.json`` (the same settings; written to ``--output-dir``, rates recomputed).
 
 Usage: python benchmarks/lightcurve_sigmas.py [--members 0,5,12] [--convex-subdivisions N] [--output-dir DIR]
-       [--smoothness-weight W] [--merge JSON ...]
+       [--smoothness-weight W] [--no-resolution-error] [--merge JSON ...]
 """
 
 from __future__ import annotations
@@ -118,6 +122,9 @@ def main(argv=None):
     parser.add_argument("--members", default=",".join(str(k) for k in range(_tumbler_family.SIZE)))
     parser.add_argument("--convex-subdivisions", type=int, default=2)
     parser.add_argument("--smoothness-weight", type=float, default=1.0)
+    parser.add_argument(
+        "--no-resolution-error", action="store_true", help="fit_lightcurve(..., resolution_error=False)"
+    )
     parser.add_argument("--output-dir", default=str(pathlib.Path(__file__).parent / "results"))
     parser.add_argument("--merge", nargs="+", metavar="JSON", help="write the members of these runs' files instead")
     options = parser.parse_args(argv)
@@ -126,16 +133,22 @@ def main(argv=None):
     name += "" if subdivisions == 2 else f"_subdivisions{subdivisions}"
     name += "" if weight == 1 else f"_smoothness{weight:g}"
     output = pathlib.Path(options.output_dir) / f"{name}.json"
-    settings = dict(convex_subdivisions=subdivisions, regularisation=[10.0, weight])
+    settings = dict(
+        convex_subdivisions=subdivisions,
+        regularisation=[10.0, weight],
+        resolution_error=not options.no_resolution_error,
+    )
     output.parent.mkdir(parents=True, exist_ok=True)
     records = []
     if options.merge:
         for path in options.merge:
             run = json.loads(pathlib.Path(path).read_text())
-            # A file without the settings is a run at the defaults (before the options existed).
+            # A file without the settings is a run at the defaults (before the options existed; before
+            # 2026-12-05, without the resolution error).
             found = dict(
                 convex_subdivisions=run.get("convex_subdivisions", 2),
                 regularisation=run.get("regularisation", [10.0, 1.0]),
+                resolution_error=run.get("resolution_error", False),
             )
             if found != settings:
                 parser.error(f"{path} was run with {found}, not {settings}: merge runs of the same settings")
