@@ -605,9 +605,10 @@ class LightcurveFit(eqx.Module):
     - ``epoch``: the reference time (model time t - epoch);
     - ``periods`` (2,): (P_psi, P_phi), precession and rotation periods (principal axis: (P, inf));
       ``period_sigma`` (2,): their standard errors: the winner's basin's (``basin_period_sigma``, the
-      larger of ``covariance``'s and ``robust_covariance``'s and the shape's resolution error added
-      in quadrature), widened to span the competing basins
-      where there are any (:meth:`competing_basins`; the module docstring's "Uncertainty");
+      larger of ``covariance``'s, ``robust_covariance``'s and the finer shape's, with the change of
+      the value between the two shapes in quadrature: ``resolution_error``), widened to span the
+      competing basins where there are any (:meth:`competing_basins`; the module docstring's
+      "Uncertainty");
     - ``long_axis_mode``: LAM (True) or SAM; ``energy_ratio``: E / E0 = 2 E I3 / |L|^2 (1 for a
       principal-axis rotation about the largest moment);
     - ``inertia`` (3,): fitted moments scaled to a largest of 1; ``inertia_sigma`` (3,), as
@@ -1256,7 +1257,11 @@ def fit_lightcurve(
     light curves taken near one plane nearly as well (module docstring), is solved too, and the
     lower cost wins; the other pole is reported (:attr:`LightcurveFit.mirror_momentum_direction`)
     and a warning names it where the data do not tell the two apart.  One more Levenberg-Marquardt
-    solve on all the data.
+    solve on all the data.  ``resolution_error`` (convex shape): the winner solved once more with each
+    facet split in four, and the sigmas widened to the larger of the two shapes' with the change of
+    the periods and moments between them in quadrature, the bias of a shape the facets cannot follow
+    (module docstring, "The shape's resolution"; :attr:`LightcurveFit.resolution_periods`); one more
+    solve with four times the shape's parameters (about 50 s on one core on the tumbler family).
     ``shape``: "convex" (log-areas on the facet normals of an icosphere of
     ``convex_subdivisions``, with ``regularisation`` = (closure weight, smoothness weight)) or
     "ellipsoid".  The defaults (``n_refine=32``, 320 normals) are the settings measured on the
@@ -1665,8 +1670,9 @@ def fit_lightcurve(
 
     def finer_solution(parameters, reference):
         """The winner solved again on all the data with each facet of its convex shape split in four
-        (module docstring, "The shape's resolution"): its periods and its moments, or NaN where the
-        solve does not converge."""
+        (module docstring, "The shape's resolution"): ((its periods, its moments), (their sigmas, as the
+        winner's: the larger of the model's and the cluster-robust)), NaN where the solve does not
+        converge."""
         finer_normals, finer_solid_angles, finer_faces = _unit_normals(convex_subdivisions + 1)
         finer_free = np.ones(8 + len(finer_normals))
         finer_free[:8] = free[:8]
