@@ -56,7 +56,7 @@ the file's run so far kept under ``earlier_runs.NAME``).
 
 Usage: python benchmarks/lightcurve_family.py [--members 0,5,12] [--width 0.1] [--resume] [--truth-from PATH]
        [--starts-per-period 16] [--period-grid 16,16] [--refine 8] [--convex-subdivisions 1] [--stop-at-noise]
-       [--output-dir DIR] [--plot-only] [--basins-only] [--merge JSON ... [--earlier-name NAME]]
+       [--output-dir DIR] [--plot-only] [--basins-only] [--merge JSON ... [--earlier-name NAME] [--description D]]
 (the figure: lightcurve_family.png beside the JSON, redrawn after each run or with --plot-only)
 """
 
