@@ -20,8 +20,9 @@ are fixed.  Writes ``benchmarks/results/lightcurve_sigmas.json`` (updated after 
 ``--convex-subdivisions 3`` refines with the convex shape's 1280 normals instead of the default 320
 (``lightcurve_sigmas_subdivisions3.json``), ``--smoothness-weight W`` with the regularisation
 (10, W) instead of (10, 1) (``..._smoothness2.json`` for W = 2), ``--no-resolution-error`` without
-the shape's resolution error (``resolution_error=False``; the files written before 2026-12-05 were
-run before it existed, and at 1280 normals its finer shape has 5120).  Each record also has
+the shape's resolution error (``resolution_error=False``: ``..._without_resolution_error.json``, the
+name of the files written before 2026-12-05, when it did not exist; at 1280 normals its finer shape
+has 5120).  Each record also has
 ``held_out_error``: the four later nights' prediction against the noiseless truth (as
 ``lightcurve_family.py``).
 
@@ -132,6 +133,7 @@ def main(argv=None):
     name = "lightcurve_sigmas"
     name += "" if subdivisions == 2 else f"_subdivisions{subdivisions}"
     name += "" if weight == 1 else f"_smoothness{weight:g}"
+    name += "" if not options.no_resolution_error else "_without_resolution_error"
     output = pathlib.Path(options.output_dir) / f"{name}.json"
     settings = dict(
         convex_subdivisions=subdivisions,
