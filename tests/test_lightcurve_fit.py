@@ -196,7 +196,7 @@ def test_tumbler_recovered(energy_ratio, long_axis):
             f"(the model's {result.standard_errors(result.covariance)[0]}); moments' |z| {inertia_z}"
         )
         # Measured (2026-12-05): the finer shape's periods 1.3e-5 and 4.3e-5 relative from the coarser's,
-        # sigmas 4.2e-6 and 2.7e-4 days (the model's 2.7e-6 and 2.2e-4), the moments 0.02 and 0.84
+        # sigmas 4.2e-6 and 2.7e-4 days (the model's 2.7e-6 and 2.2e-4), the moments 0.02 and 0.84 to 0.85
         # of their sigmas from the truth.
         assert np.all(np.isfinite(np.asarray(result.resolution_periods)))
         assert np.all(np.asarray(result.basin_period_sigma) >= np.asarray(result.resolution_period_sigma))

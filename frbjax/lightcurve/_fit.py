@@ -1750,15 +1750,17 @@ def fit_lightcurve(
     # The larger of the model's and the cluster-robust variances (module docstring, "Uncertainty").
     basin_period_sigma, basin_inertia_sigma = _standard_errors(period_jacobian, p, (covariance, robust_covariance))
     moments = _scaled_moments(p)
+    # Another solution's moments are matched to the winner's by rank (its axes may be labelled otherwise).
+    rank = np.argsort(np.argsort(moments))
     # The shape's resolution error (module docstring, "The shape's resolution"): the larger of the two
     # shapes' sigmas, and the change of the periods and moments on the finer shape in quadrature.
     resolution_periods, resolution_inertia = np.full(2, np.nan), np.full(3, np.nan)
     resolution_period_sigma, resolution_inertia_sigma = np.full(2, np.nan), np.full(3, np.nan)
     if resolution_error and shape == "convex":
         (resolution_periods, finer_moments), (resolution_period_sigma, finer_inertia_sigma) = finer_solution(
-            p, tuple(r[winner] for r in candidate_references)
+            p, reference
         )
-        finer_order = np.argsort(finer_moments)[np.argsort(np.argsort(moments))]
+        finer_order = np.argsort(finer_moments)[rank]
         resolution_inertia, resolution_inertia_sigma = finer_moments[finer_order], finer_inertia_sigma[finer_order]
         basin_period_sigma = _with_resolution_error(
             basin_period_sigma, resolution_period_sigma, period_values, resolution_periods
@@ -1766,12 +1768,10 @@ def fit_lightcurve(
         basin_inertia_sigma = _with_resolution_error(
             basin_inertia_sigma, resolution_inertia_sigma, moments, resolution_inertia
         )
-    # Competing basins widen the sigmas to their equal-weight mixture's spread about the winner; a
-    # basin's moments are matched to the winner's by rank (its axes may be labelled otherwise).
+    # Competing basins widen the sigmas to their equal-weight mixture's spread about the winner.
     order, _, _ = _basins(
         refine_costs, refine_periods, period_values, basin_period_sigma, n, refine_costs[winner], within=1.0
     )
-    rank = np.argsort(np.argsort(moments))
     basin_moments = np.stack([moments] + [np.sort(_scaled_moments(fitted[k]))[rank] for k in order])
     period_sigma = _mixture_sigma(basin_period_sigma, np.concatenate([period_values[None], refine_periods[order]]))
     inertia_sigma = _mixture_sigma(basin_inertia_sigma, basin_moments)
