@@ -19,9 +19,11 @@ one member with the truth's basis marked, the one-period scan, and the family's 
 The periodogram gets the Sun's and the observer's directions (``sun=``, ``observer=``: the geometric
 ranking, as a user with the data for ``fit_lightcurve`` calls it); ``--no-geometry``: the light
 curves alone (the Fourier ranking; files ``lightcurve_periodogram_fourier*``).
-``--quick``: four members (a smoke test).
+``--quick``: four members (a smoke test); ``--options '{"peaks": 16}'``: keyword arguments of
+``tumbler_periodogram`` other than its defaults (a trial; with ``--output-dir`` to keep the stored results).
 
-    OPENBLAS_NUM_THREADS=1 .venv/bin/python benchmarks/lightcurve_periodogram.py [--quick] [--no-geometry] [--seed S]
+    OPENBLAS_NUM_THREADS=1 .venv/bin/python benchmarks/lightcurve_periodogram.py [--quick] [--no-geometry] [--seed S] \
+        [--options JSON --output-dir D]
 """
 
 from __future__ import annotations
@@ -98,11 +100,13 @@ def holds(proposal, mode, periods):
     return bool(psi_low <= p_psi <= psi_high and phi_low <= p_phi <= phi_high)
 
 
-def run_case(index, band, seed=0, geometry=True):
+def run_case(index, band, seed=0, geometry=True, options=None):
     case = tumbler(index, seed)
     directions = dict(sun=case.sun, observer=case.observer) if geometry else {}
     start = time.perf_counter()
-    result = tumbler_periodogram(case.times, case.flux, lightcurve=case.night, period_range=band, **directions)
+    result = tumbler_periodogram(
+        case.times, case.flux, lightcurve=case.night, period_range=band, **directions, **(options or {})
+    )
     elapsed = time.perf_counter() - start
     rank = next((k for k, (p, m) in enumerate(zip(result.proposals, result.modes)) if holds(p, m, case.periods)), None)
     record = dict(
@@ -194,12 +198,20 @@ def main():
     parser.add_argument("--seed", type=int, default=0, help="the family's seed (s != 0: _seed<s> files)")
     parser.add_argument("--example", type=int, default=8, help="the member whose map is drawn")
     parser.add_argument("--no-geometry", action="store_true", help="without sun and observer (Fourier ranking)")
+    parser.add_argument(
+        "--options",
+        type=json.loads,
+        default={},
+        help="tumbler_periodogram keyword arguments as JSON, e.g. '{\"peaks\": 16}' (a trial: give --output-dir)",
+    )
     parser.add_argument("--output-dir", type=pathlib.Path, default=ROOT / "benchmarks" / "results")
     args = parser.parse_args()
     indices = [0, 8, 13, 19] if args.quick else list(range(SIZE))
     records, example = [], None
     for index in indices:
-        case, result, record = run_case(index, tuple(args.band), args.seed, geometry=not args.no_geometry)
+        case, result, record = run_case(
+            index, tuple(args.band), args.seed, geometry=not args.no_geometry, options=args.options
+        )
         records.append(record)
         if index == args.example or example is None:
             example = (case, result) if index == args.example or example is None else example
@@ -229,6 +241,7 @@ def main():
         band_days=list(args.band),
         seed=args.seed,
         geometry=not args.no_geometry,
+        options=args.options,
         machine=dict(platform=platform.platform(), processor=platform.processor(), jax=jax.__version__),
         summary=summary,
         cases=records,
