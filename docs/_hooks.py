@@ -34,6 +34,7 @@ FIGURES = (
     "lightcurve.png",
     "lightcurve_periodogram.png",
     "lightcurve_family.png",
+    "lightcurve_family_seed1.png",
     "torques_basilisk.png",
     "torques_energy.png",
     "torques_debris.png",
