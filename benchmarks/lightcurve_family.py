@@ -322,8 +322,8 @@ def plot(result, path):
     axes[-1].set_xticks(range(len(kinds)))
     rates_now = result["rates"]
     figure.suptitle(
-        f"fit_lightcurve on the tumbler family{' of seed ' + str(result['seed']) if result.get('seed') else ''} "
-        "(+-10% period ranges): within the noise "
+        f"fit_lightcurve, tumbler family{', seed ' + str(result['seed']) if result.get('seed') else ''} "
+        "(+-10% ranges): within the noise "
         f"{rates_now['cost_within_noise']:.0%}, later nights {rates_now['held_out_within_1.5_noise']:.0%}, "
         f"periods {rates_now['periods_within_3_sigma']:.0%}, moments {rates_now['inertia_within_3_sigma']:.0%}"
         + (f"; two poles warned {rates_now['pole_ambiguous']:.0%}" if "pole_ambiguous" in rates_now else ""),
