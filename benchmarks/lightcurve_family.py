@@ -54,7 +54,7 @@ skipped (``--resume``), so that a long run can be continued.  A run split over p
 and ``--output-dir`` each) is put together with ``--merge A.json B.json`` (``--earlier-name NAME``:
 the file's run so far kept under ``earlier_runs.NAME``).  ``--seed s``: a second family drawn the same way
 (``_tumbler_family.tumbler(index, s)``), to check that the defaults chosen on the first hold on members
-they were not chosen on; stored as ``lightcurve_family_seed<s>.json`` (give ``--seed`` to ``--merge`` too).
+they were not chosen on; stored as ``lightcurve_family_seed<s>.json`` (``--merge`` writes the runs' own seed's file).
 
 Usage: python benchmarks/lightcurve_family.py [--members 0,5,12] [--seed 0] [--width 0.1] [--resume] [--truth-from PATH]
        [--starts-per-period 16] [--period-grid 16,16] [--refine 8] [--convex-subdivisions 1] [--stop-at-noise]
@@ -334,17 +334,22 @@ def plot(result, path):
     plt.close(figure)
 
 
-def merge(paths, output, earlier_name, description=None, seed=0):
+def output_path(output_dir, seed):
+    """The run's JSON: lightcurve_family.json, a second family's (seed s != 0) lightcurve_family_seed<s>.json."""
+    return pathlib.Path(output_dir) / f"lightcurve_family{f'_seed{seed}' if seed else ''}.json"
+
+
+def merge(paths, output_dir, earlier_name, description=None):
     """The members of the runs in ``paths`` (parts of one run: the same seed, width and options) written
-    as the run of ``output``; the run it held is kept under ``earlier_runs[earlier_name]`` (with its
-    own earlier runs left where they were), or replaced without ``earlier_name``; ``description``, how
-    the run was made (by default the module docstring's first paragraph)."""
+    as the run of their seed's file in ``output_dir`` (:func:`output_path`); the run it held is kept
+    under ``earlier_runs[earlier_name]`` (with its own earlier runs left where they were), or replaced
+    without ``earlier_name``; ``description``, how the run was made (by default the module docstring's
+    first paragraph)."""
     runs = [json.loads(pathlib.Path(path).read_text()) for path in paths]
     settings = [{key: run.get(key) for key in ("seed", "width", "fit_options")} for run in runs]
     if any(setting != settings[0] for setting in settings):
         raise SystemExit(f"--merge: the runs' settings differ: {settings}")
-    if settings[0]["seed"] != seed:
-        raise SystemExit(f"--merge: the runs are of seed {settings[0]['seed']}: give --seed {settings[0]['seed']}")
+    output = output_path(output_dir, settings[0]["seed"] or 0)
     members = sorted((m for run in runs for m in run["members"]), key=lambda m: m["index"])
     if len({m["index"] for m in members}) != len(members):
         raise SystemExit("--merge: a member is in more than one run")
@@ -388,11 +393,9 @@ def main(argv=None):
     parser.add_argument("--earlier-name", help="with --merge: keep the file's run so far under earlier_runs.NAME")
     parser.add_argument("--description", help="with --merge: how the run was made (the JSON's description)")
     options = parser.parse_args(argv)
-    # A second family (``--seed s``) is stored beside the first: lightcurve_family_seed<s>.json.
-    suffix = f"_seed{options.seed}" if options.seed else ""
-    output = pathlib.Path(options.output_dir) / f"lightcurve_family{suffix}.json"
+    output = output_path(options.output_dir, options.seed)
     if options.merge:
-        merge(options.merge, output, options.earlier_name, options.description, options.seed)
+        merge(options.merge, options.output_dir, options.earlier_name, options.description)
         return
     if options.basins_only or options.rates_only:
         stored = json.loads(output.read_text())
