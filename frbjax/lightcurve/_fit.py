@@ -46,14 +46,7 @@ areas), as a population: after each window the better half of the starts (by the
 to the next, down to eight, and before each wider window each start's periods are moved to the best
 of their shifts by quarter cycles (up to a cycle) at the new window's edge, costed on it as the search
 costs its starts, so that Levenberg-Marquardt starts in the cycle count that fits the new samples
-rather than in the nearest basin of a wrong one.  Among the same trials are the whole motion's turns
-by eighths of a turn about the last window's line of sight (the mean bisector of the directions to
-the Sun and to the observer): nights seen from nearly one direction hardly fix the pole's angle about
-it (at zero phase angle not at all: a turn about the common direction leaves every light curve as it
-is), so a start can fit the first windows with its pole turned away from the truth's and stall when
-the geometry changes; on the tumbler family such starts at the true periods ended 88 noise units of
-cost above the truth's refinement, 90 degrees off, until the turns were tried.  For
-``shape="convex"`` the convex shape, started
+rather than in the nearest basin of a wrong one.  For ``shape="convex"`` the convex shape, started
 from the Gaussian image of the fitted ellipsoid, is then solved with the motion on all the data for
 the best four.  The lowest cost wins.
 
@@ -184,8 +177,6 @@ _CONVEX_STARTS = 4
 # steps of 1 / _SHIFTS_PER_CYCLE, for each period.
 _SHIFT_CYCLES = 1
 _SHIFTS_PER_CYCLE = 4
-# Turns of the whole motion about the line of sight tried with them: k / _POLE_TURNS of a turn.
-_POLE_TURNS = 8
 # The winner's and its mirror image's poles are two answers (``LightcurveFit.pole_ambiguous``) when
 # they fit within a noise unit of each other and lie more than this many degrees apart; nearer, the
 # mirror image is the winner's pole found again (a pole near the plane's normal is its own image).
@@ -889,26 +880,6 @@ def _period_shifts(parameters, reference, radius, log_ranges, principal_axis):
     return trials
 
 
-def _line_of_sight(sun, observer, mask):
-    """The unit mean of the bisectors of the directions to the Sun and to the observer over the samples
-    of ``mask`` (N,)."""
-    bisector = sun + observer
-    bisector = bisector / np.linalg.norm(bisector, axis=-1, keepdims=True)
-    mean = np.sum(bisector[np.asarray(mask) > 0], 0)
-    return mean / np.linalg.norm(mean)
-
-
-def _turned_attitudes(attitude, axis, turns):
-    """The attitude (4,) turned about the inertial ``axis`` by k / turns of a turn, 0 < k < turns:
-    (turns - 1, 4), the quaternions exp(a k / turns) ⊗ q."""
-    half = np.pi * np.arange(1, turns) / turns
-    turn = np.concatenate([np.cos(half)[:, None], np.sin(half)[:, None] * axis[None]], -1)
-    w, v = turn[:, :1], turn[:, 1:]
-    return np.concatenate(
-        [w * attitude[:1] - v @ attitude[1:, None], w * attitude[1:] + attitude[0] * v + np.cross(v, attitude[1:])], -1
-    )
-
-
 class _Misfit(typing.NamedTuple):
     variance: float  # s^2 / sigma^2: the data rows' residual variance over their degrees of freedom
     threshold: float  # its chi-square bound, 1 + 3 sqrt(2 / dof)
@@ -1268,11 +1239,10 @@ def fit_lightcurve(
     ``inertia_range``, ``mode`` "SAM", "LAM" or "both", polhode phase, attitude); ``n_refine`` of the
     best are refined by Levenberg-Marquardt on growing windows around ``epoch`` (default: the median
     time), each start held to its cell of the period grid by a prior until the last window, the better
-    half going on to each next window with its periods moved to their best cycle count there and the
-    motion to its best turn about the line of sight (module docstring): choose the grid fine enough
-    that a cell's phase drift over the first nights is well under a cycle.  Without prior periods,
-    :func:`tumbler_periodogram` proposes ranked ranges from the light curves themselves
-    (``periods=result.proposals[i]``, or ``**result.fit_options(i)``).
+    half going on to each next window with its periods moved to their best cycle count there (module
+    docstring): choose the grid fine enough that a cell's phase drift over the first nights is well
+    under a cycle.  Without prior periods, :func:`tumbler_periodogram` proposes ranked ranges from the
+    light curves themselves (``periods=result.proposals[i]``, or ``**result.fit_options(i)``).
     ``search_rounds``: the search's rounds: the first, the same random states on the middles of the
     grid's cells, new random states on the grid, the first search's next ``3 n_refine`` starts
     refined (and so on: four rounds to two draws); the lowest cost over all rounds wins, and a fit
@@ -1563,23 +1533,18 @@ def fit_lightcurve(
             return [np.concatenate([np.asarray(piece) for piece in pieces]) for pieces in zip(*parts)]
 
         def shifted(rows, parameters, window):
-            """Each start moved to the best of its period shifts and of its turns about the last window's
-            line of sight on the window (a costing, as the search's); a turn changes the start's
-            reference attitude in ``refs``."""
-            axis = _line_of_sight(sun, observer, masks[window - 1])
-            trials, owners, attitudes = [], [], []
+            """Each start moved to the best of its period shifts on the window (a costing, as the search's)."""
+            trials, owners = [], []
             for row, p in zip(rows, parameters):
                 reference = as_jax(tuple(r[row] for r in refs))
                 trial = _period_shifts(p, reference, radii[window], log_ranges, principal_axis)
-                turned = _turned_attitudes(refs[0][row], axis, _POLE_TURNS)
-                trials.append(np.concatenate([trial, np.repeat(p[None], len(turned), 0)]))
-                attitudes.append(np.concatenate([np.repeat(refs[0][row][None], len(trial), 0), turned]))
-                owners.append(np.full(len(trial) + len(turned), row))
-            trials, owners, attitudes = np.concatenate(trials), np.concatenate(owners), np.concatenate(attitudes)
+                trials.append(trial)
+                owners.append(np.full(len(trial), row))
+            trials, owners = np.concatenate(trials), np.concatenate(owners)
             trial_axes = np.concatenate([np.ones((len(trials), 1)), np.exp(trials[:, 8:])], 1)
             trial_costs = _search(
                 trials[:, :8],
-                (attitudes,) + tuple(r[owners] for r in refs[1:]),
+                tuple(r[owners] for r in refs),
                 _gaussian_image_areas(trial_axes, search_normals, search_solid),
                 data,
                 jnp.asarray(masks[window], dtype),
@@ -1590,9 +1555,7 @@ def fit_lightcurve(
             moved = parameters.copy()
             for k, row in enumerate(rows):
                 own = np.flatnonzero(owners == row)
-                choice = own[np.argmin(np.where(np.isfinite(trial_costs[own]), trial_costs[own], np.inf))]
-                moved[k] = trials[choice]
-                refs[0][row] = attitudes[choice]
+                moved[k] = trials[own[np.argmin(np.where(np.isfinite(trial_costs[own]), trial_costs[own], np.inf))]]
             return moved
 
         def best_of(rows, row_costs, count):
