@@ -94,13 +94,15 @@ first search's next ``3 n_refine`` best starts refined (what a fourfold ``n_refi
 so on with further draws (:func:`_round_plan`).  By default all of them run: a wrong basin whose
 residuals pass the noise (an alias the data nearly allow) would otherwise stop the search before the
 truth's basin is among the refined starts, where it is a competing basin that the warning names and
-the sigmas span.  With ``stop_at_noise=True`` the rounds stop at the first whose winner's residuals
-are within the stated noise, s^2 / sigma^2 at most 1 + 3 sqrt(2 / dof) (the sum of squares of a fit
-in the data's basin is chi-square with dof degrees of freedom: three of its standard deviations), in
-about a quarter of the time where that is the first.  The lowest cost of all the rounds' refined
-starts wins; a winner above the bound warns: the search has missed the data's basin, or sigma
-understates the noise (docs/lightcurves.md: the rounds on the tumbler family of
-benchmarks/lightcurve_family.py).
+the sigmas span.  Where the winner's residuals are still above the stated noise, s^2 / sigma^2 above
+1 + 3 sqrt(2 / dof) (the sum of squares of a fit in the data's basin is chi-square with dof degrees
+of freedom: three of its standard deviations), the rounds go on, new draws, until one is within it or
+``max_search_rounds`` (default twice ``search_rounds``) have run: on the second tumbler family an
+Apophis-like tumbler's truth's basin was first found in the fifth round.  With ``stop_at_noise=True``
+the rounds stop at the first whose winner is within the bound, in about a quarter of the time where
+that is the first.  The lowest cost of all the rounds' refined starts wins; a winner above the bound
+after the last round warns: the search has missed the data's basin, or sigma understates the noise
+(docs/lightcurves.md: the rounds on the tumbler family of benchmarks/lightcurve_family.py).
 
 The pole's mirror image
 -----------------------
@@ -582,7 +584,7 @@ def _warn_of_misfit(result, bound, sigma, stacklevel=3):
     warnings.warn(
         f"fit_lightcurve: the best fit's residuals are {result.noise_ratio:.3g} times the stated noise "
         f"sigma={sigma:g} (bound {bound:.3g}) after {result.search_rounds} search round(s): the search may have "
-        "missed the data's basin (more search_rounds, a finer period_grid or narrower period ranges), or sigma "
+        "missed the data's basin (a larger max_search_rounds, a finer period_grid or narrower period ranges), or sigma "
         "understates the noise.  The reported sigmas assume the residuals' own level.",
         MisfitWarning,
         stacklevel=stacklevel,
@@ -636,7 +638,8 @@ class LightcurveFit(eqx.Module):
     - ``noise_ratio``: s / sigma, the residuals' level over the stated noise (1 where the model and
       ``sigma`` hold; where (s / sigma)^2 exceeds 1 + 3 sqrt(2 / dof) after the last round,
       :func:`fit_lightcurve` warns: :class:`MisfitWarning`); ``search_rounds``: the rounds it ran
-      (fewer than asked only with ``stop_at_noise=True``);
+      (fewer than ``search_rounds`` only with ``stop_at_noise=True``; more, up to
+      ``max_search_rounds``, where the winner missed the noise);
     - ``resolution_periods`` (2,), ``resolution_inertia`` (3,) and their sigmas
       ``resolution_period_sigma``, ``resolution_inertia_sigma``: the periods and moments of the
       winner solved again with each facet of the convex shape split in four (``resolution_error``;
@@ -1117,6 +1120,7 @@ def _check_options(
     starts_per_period,
     n_refine,
     search_rounds,
+    max_search_rounds,
     stop_at_noise,
     mirror_pole,
     resolution_error,
@@ -1168,6 +1172,8 @@ def _check_options(
     checks.integer("starts_per_period", starts_per_period, minimum=1)
     checks.integer("n_refine", n_refine, minimum=1)
     checks.integer("search_rounds", search_rounds, minimum=1)
+    if max_search_rounds is not None and checks.integer("max_search_rounds", max_search_rounds) < search_rounds:
+        raise ValueError(f"max_search_rounds must be >= search_rounds ({search_rounds}), got {max_search_rounds}")
     for name, flag in (
         ("stop_at_noise", stop_at_noise),
         ("mirror_pole", mirror_pole),
@@ -1213,6 +1219,7 @@ def fit_lightcurve(
     starts_per_period: int = 16,
     n_refine: int = 32,
     search_rounds: int = 4,
+    max_search_rounds: int | None = None,
     stop_at_noise: bool = False,
     mirror_pole: bool = True,
     resolution_error: bool = True,
@@ -1250,9 +1257,12 @@ def fit_lightcurve(
     deviations of a chi-square: :attr:`LightcurveFit.noise_ratio`) warns (:class:`MisfitWarning`).
     All rounds run by default, so that a wrong basin whose residuals pass the bound (an alias the
     data nearly allow) has the truth's basin among the refined starts, as a competing basin that the
-    warning names and the sigmas span; ``stop_at_noise=True`` stops at the first round whose winner
-    is within the bound, about ``search_rounds`` times faster where that is the first, at the risk of
-    a confident answer in such an alias (measured on the tumbler family: docs/lightcurves.md).
+    warning names and the sigmas span; while the winner is above the bound, further rounds run (new
+    draws), up to ``max_search_rounds`` (default ``2 * search_rounds``; the misfit then warns), so that
+    a search that missed the data's basin takes longer rather than answering wrong.
+    ``stop_at_noise=True`` stops at the first round whose winner is within the bound, about
+    ``search_rounds`` times faster where that is the first, at the risk of a confident answer in such
+    an alias (measured on the tumbler family: docs/lightcurves.md).
     ``mirror_pole``: the winner's mirror image through the plane of the observations, which fits
     light curves taken near one plane nearly as well (module docstring), is solved too, and the
     lower cost wins; the other pole is reported (:attr:`LightcurveFit.mirror_momentum_direction`)
@@ -1309,6 +1319,7 @@ def fit_lightcurve(
         starts_per_period=starts_per_period,
         n_refine=n_refine,
         search_rounds=search_rounds,
+        max_search_rounds=max_search_rounds,
         stop_at_noise=stop_at_noise,
         mirror_pole=mirror_pole,
         resolution_error=resolution_error,
@@ -1708,13 +1719,17 @@ def fit_lightcurve(
         winner = int(np.argmin(np.where(np.isfinite(outs[1]), outs[1], np.inf)))
         return outs, winner, _misfit(outs[3][winner], outs[4][winner][:, free > 0], n, curves.shape[1])
 
+    # ---- past search_rounds, more rounds while the winner misses the noise, up to max_search_rounds
+    round_limit = 2 * search_rounds if max_search_rounds is None else max_search_rounds
     rounds = []
-    for round_index in range(search_rounds):
+    for round_index in range(round_limit):
         rounds.append(search_round(round_index))
-        last = round_index + 1 == search_rounds
-        if last or stop_at_noise:
+        done = len(rounds)
+        if done >= search_rounds or stop_at_noise:
             outs, winner, misfit = best(rounds)
-            if last or misfit.variance <= misfit.threshold:
+            if done == round_limit or (
+                misfit.variance <= misfit.threshold and (stop_at_noise or done >= search_rounds)
+            ):
                 break
     mirror_row = None
     if mirror_pole:
