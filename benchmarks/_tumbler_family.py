@@ -102,12 +102,15 @@ class Tumbler:
 
     def refine_from_truth(self, width: float = 0.1, **options):
         """The same data refined from the true motion: ``fit_lightcurve`` from ``initial=`` the truth
-        (its time from the fit's default epoch, the median time), one search round, the periods'
+        (its time from the fit's default epoch, the median time), one search round (and no more where
+        the truth's own residuals are above the noise bound: ``max_search_rounds`` as many), the periods'
         ranges +-``width`` around the true ones, the principal-axis model for a rotator; ``options``
         (e.g. ``mirror_pole=False``: the truth's own basin, whatever its mirror's cost) pass on.  The
         reference cost the data allow in the truth's basin, for the benchmarks that compare a search
         with it."""
         rotator = self.kind == "PA"
+        rounds = options.pop("search_rounds", 1)
+        max_rounds = options.pop("max_search_rounds", rounds)
         ranges = tuple((p * (1 - width), p * (1 + width)) for p in (self.periods[:1] if rotator else self.periods))
         return fit_lightcurve(
             self.times,
@@ -120,7 +123,9 @@ class Tumbler:
             initial=self.body_at(float(np.median(self.times))),
             throw=False,
             progress=False,
-            **{"search_rounds": 1, **options},
+            search_rounds=rounds,
+            max_search_rounds=max_rounds,
+            **options,
         )
 
     def moments_z(self, moments, sigma) -> list:
