@@ -1724,12 +1724,9 @@ def fit_lightcurve(
     rounds = []
     for round_index in range(round_limit):
         rounds.append(search_round(round_index))
-        done = len(rounds)
-        if done >= search_rounds or stop_at_noise:
+        if stop_at_noise or len(rounds) >= search_rounds:
             outs, winner, misfit = best(rounds)
-            if done == round_limit or (
-                misfit.variance <= misfit.threshold and (stop_at_noise or done >= search_rounds)
-            ):
+            if len(rounds) == round_limit or misfit.variance <= misfit.threshold:
                 break
     mirror_row = None
     if mirror_pole:
