@@ -97,7 +97,7 @@ truth's basin is among the refined starts, where it is a competing basin that th
 the sigmas span.  Where the winner's residuals are still above the stated noise, s^2 / sigma^2 above
 1 + 3 sqrt(2 / dof) (the sum of squares of a fit in the data's basin is chi-square with dof degrees
 of freedom: three of its standard deviations), the rounds go on, new draws, until one is within it or
-``max_search_rounds`` (default twice ``search_rounds``) have run: on the second tumbler family an
+``max_search_rounds`` (default three times ``search_rounds``) have run: on the second tumbler family an
 Apophis-like tumbler's truth's basin was first found in the fifth round.  With ``stop_at_noise=True``
 the rounds stop at the first whose winner is within the bound, in about a quarter of the time where
 that is the first.  The lowest cost of all the rounds' refined starts wins; a winner above the bound
@@ -1258,7 +1258,7 @@ def fit_lightcurve(
     All rounds run by default, so that a wrong basin whose residuals pass the bound (an alias the
     data nearly allow) has the truth's basin among the refined starts, as a competing basin that the
     warning names and the sigmas span; while the winner is above the bound, further rounds run (new
-    draws), up to ``max_search_rounds`` (default ``2 * search_rounds``; the misfit then warns), so that
+    draws), up to ``max_search_rounds`` (default ``3 * search_rounds``; the misfit then warns), so that
     a search that missed the data's basin takes longer rather than answering wrong.
     ``stop_at_noise=True`` stops at the first round whose winner is within the bound, about
     ``search_rounds`` times faster where that is the first, at the risk of a confident answer in such
@@ -1720,7 +1720,7 @@ def fit_lightcurve(
         return outs, winner, _misfit(outs[3][winner], outs[4][winner][:, free > 0], n, curves.shape[1])
 
     # ---- past search_rounds, more rounds while the winner misses the noise, up to max_search_rounds
-    round_limit = 2 * search_rounds if max_search_rounds is None else max_search_rounds
+    round_limit = 3 * search_rounds if max_search_rounds is None else max_search_rounds
     rounds = []
     for round_index in range(round_limit):
         rounds.append(search_round(round_index))
