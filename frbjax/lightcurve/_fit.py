@@ -97,13 +97,13 @@ truth's basin is among the refined starts, where it is a competing basin that th
 the sigmas span.  Where the winner's residuals are still above the stated noise, s^2 / sigma^2 above
 1 + 3 sqrt(2 / dof) (the sum of squares of a fit in the data's basin is chi-square with dof degrees
 of freedom: three of its standard deviations), the rounds go on, new draws, until one is within it or
-``max_search_rounds`` (default three times ``search_rounds``) have run: on the second tumbler family an
-Apophis-like tumbler's truth's basin was first found in the fifth round, and a short-axis tumbler's near
-principal-axis rotation in the tenth.  With ``stop_at_noise=True``
-the rounds stop at the first whose winner is within the bound, in about a quarter of the time where
-that is the first.  The lowest cost of all the rounds' refined starts wins; a winner above the bound
-after the last round warns: the search has missed the data's basin, or sigma understates the noise
-(docs/lightcurves.md: the rounds on the tumbler family of benchmarks/lightcurve_family.py).
+``max_search_rounds`` (default three times ``search_rounds``) have run: on the second tumbler family the
+truth's basin of an Apophis-like tumbler was first found in the fifth round, and that of a short-axis
+tumbler near principal-axis rotation in the tenth.  With ``stop_at_noise=True`` the rounds stop at the
+first whose winner is within the bound, in about a quarter of the time where that is the first.  The
+lowest cost of all the rounds' refined starts wins; a winner above the bound after the last round
+warns: the search has missed the data's basin, or sigma understates the noise (docs/lightcurves.md:
+the rounds on the tumbler family of benchmarks/lightcurve_family.py).
 
 The pole's mirror image
 -----------------------
