@@ -69,7 +69,7 @@ lists them, the fit warns, and the reported ``period_sigma`` and ``inertia_sigma
 root-mean-square distances from the winner of the equal-weight mixture of the winner's and their
 basins (each with the winner's basin's spread): the data cannot rank them, so the answer is any of
 them.  On the tumbler family
-(benchmarks/lightcurve_family.py, docs/lightcurves.md) the model's covariance alone put the true
+(benchmarks/lightcurve_family.py, docs/lightcurve-search.md) the model's covariance alone put the true
 periods within three sigmas for 17 of 24 members; these sigmas, for 22 of the same fits, and for all
 24 with every search round (the default).
 
@@ -84,7 +84,7 @@ solid angle, the same regularisation weights), and the basin's sigmas become the
 shapes' (the finer shape's freedom, which the coarser holds fixed, widens them where the moments
 or the periods are tied to the shape's detail) with the change of the values between the two shapes
 in quadrature (the error estimate of an embedded pair).  The fit reports the coarser solution, whose
-predictions of new geometry were as good or better on the family (docs/lightcurves.md), and the
+predictions of new geometry were as good or better on the family (docs/lightcurve-search.md), and the
 finer one's periods and moments beside it (``resolution_periods``, ``resolution_inertia`` and their
 sigmas).  The finer solve is one Levenberg-Marquardt solve with four times the shape's parameters.
 
@@ -102,7 +102,7 @@ truth's basin of an Apophis-like tumbler was first found in the fifth round, and
 tumbler near principal-axis rotation in the tenth.  With ``stop_at_noise=True`` the rounds stop at the
 first whose winner is within the bound, in about a quarter of the time where that is the first.  The
 lowest cost of all the rounds' refined starts wins; a winner above the bound after the last round
-warns: the search has missed the data's basin, or sigma understates the noise (docs/lightcurves.md:
+warns: the search has missed the data's basin, or sigma understates the noise (docs/lightcurve-search.md:
 the rounds on the tumbler family of benchmarks/lightcurve_family.py).
 
 The pole's mirror image
@@ -117,7 +117,7 @@ being symmetric under D) then gives exactly the same light curves for every dire
 Off the plane they differ, and the data decide as far as they reach. So the winner's mirror image
 (through the plane nearest the observations' directions) is solved on all the data too, the lower
 cost wins, and the other pole is reported with its cost above the winner's; within a noise unit and
-more than 10 degrees away, the fit warns of two poles. On the tumbler family (docs/lightcurves.md)
+more than 10 degrees away, the fit warns of two poles. On the tumbler family (docs/lightcurve-search.md)
 three of the six members whose later nights were predicted worst had been won by the mirror image
 of the truth's pole, within 0.36 noise units of the truth's.
 
@@ -1036,7 +1036,7 @@ def _round_plan(round_index, n_refine):
     c, from ``seed + draw``): the first draw on the period grid, its best ``n_refine`` refined; the same
     draw on the middles of the grid's cells; the second draw on the grid; then the first search
     again, its next ``3 n_refine`` best starts refined (the starts a fourfold ``n_refine`` would have
-    refined besides).  Measured on the tumbler family (docs/lightcurves.md): member 6 is found on the
+    refined besides).  Measured on the tumbler family (docs/lightcurve-search.md): member 6 is found on the
     middles, member 13 by the second draw, members 11 and 12 among the first search's next best
     starts (with that round third, member 13 stopped there in a wrong basin whose residuals pass the
     misfit bound).  Returns (draw, middles, how many starts to refine)."""
@@ -1263,7 +1263,7 @@ def fit_lightcurve(
     a search that missed the data's basin takes longer rather than answering wrong.
     ``stop_at_noise=True`` stops at the first round whose winner is within the bound, about
     ``search_rounds`` times faster where that is the first, at the risk of a confident answer in such
-    an alias (measured on the tumbler family: docs/lightcurves.md).
+    an alias (measured on the tumbler family: docs/lightcurve-search.md).
     ``mirror_pole``: the winner's mirror image through the plane of the observations, which fits
     light curves taken near one plane nearly as well (module docstring), is solved too, and the
     lower cost wins; the other pole is reported (:attr:`LightcurveFit.mirror_momentum_direction`)
@@ -1276,7 +1276,7 @@ def fit_lightcurve(
     ``shape``: "convex" (log-areas on the facet normals of an icosphere of
     ``convex_subdivisions``, with ``regularisation`` = (closure weight, smoothness weight)) or
     "ellipsoid".  The defaults (``n_refine=32``, 320 normals) are the settings measured on the
-    tumbler family of benchmarks/lightcurve_family.py (docs/lightcurves.md): fewer normals bias
+    tumbler family of benchmarks/lightcurve_family.py (docs/lightcurve-search.md): fewer normals bias
     the periods where the body is not smooth (3 to 8 sigmas with 80), fewer refined starts find
     the truth's basin less often.  ``initial``: a :class:`frbjax.FreeRigidBody` (time from the epoch), e.g. an earlier
     fit, refined beside the search's best on all the data from the first window (its shape starts as

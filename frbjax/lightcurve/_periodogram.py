@@ -68,7 +68,7 @@ The search (all linear least squares, numpy, vectorised over frequencies):
    three, then each of those poles to about a degree.  The sense of rotation is the pole's: L and -L
    differ.  Fewer free coefficients than the drifting series (48 against 68), and a drift the
    geometry fixes: on the family the truth's own reading ranks higher among the aliases
-   (docs/lightcurves.md).
+   (docs/lightcurve-search.md).
 5. Principal-axis comparison: the best single period with 2 (psi_order + phi_order) harmonics,
    drifting alike, moved to its double while that fits within the noise's allowance (a period's
    half fits as well; with the geometry the comparison is then made in the geometric series, the
