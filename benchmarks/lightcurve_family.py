@@ -309,17 +309,19 @@ def plot(result, path):
         axis.set_yscale("log")
         axis.set_ylabel(label, fontsize=8)
         axis.grid(alpha=0.3, which="major")
+    # Placed by the members' indices, not their positions: a run may hold only some members.
     kinds = [m["kind"] for m in result["members"]]
+    indices = [m["index"] for m in result["members"]]
     for axis in axes:
         for k in range(1, len(kinds)):
             if kinds[k] != kinds[k - 1]:
-                axis.axvline(k - 0.5, color="0.8", lw=0.8)
+                axis.axvline(indices[k] - 0.5, color="0.8", lw=0.8)
     for k, kind in enumerate(kinds):
         if k == 0 or kinds[k - 1] != kind:
-            axes[0].text(k - 0.4, axes[0].get_ylim()[1], kind, fontsize=7, va="bottom")
+            axes[0].text(indices[k] - 0.4, axes[0].get_ylim()[1], kind, fontsize=7, va="bottom")
     axes[0].legend(fontsize=7, loc="upper right")
     axes[-1].set_xlabel("member")
-    axes[-1].set_xticks(range(len(kinds)))
+    axes[-1].set_xticks(indices)
     rates_now = result["rates"]
     figure.suptitle(
         f"fit_lightcurve, tumbler family{', seed ' + str(result['seed']) if result.get('seed') else ''} "

@@ -35,6 +35,7 @@ FIGURES = (
     "lightcurve_periodogram.png",
     "lightcurve_family.png",
     "lightcurve_family_seed1.png",
+    "lightcurve_family_seed2.png",
     "torques_basilisk.png",
     "torques_energy.png",
     "torques_debris.png",
