@@ -10,8 +10,6 @@ time, flux, Sun or observer direction, or an infinite flux).
 
 from __future__ import annotations
 
-import warnings
-
 import jax
 import jax.numpy as jnp
 import numpy as np
@@ -309,49 +307,3 @@ def test_a_misfit_searches_again_and_warns():
         fit_lightcurve(times, flux, sun, observer, lightcurve=night, search_rounds=0, **OPTIONS)
     with pytest.raises(ValueError, match=r"max_search_rounds must be >= search_rounds \(4\), got 3"):
         fit_lightcurve(times, flux, sun, observer, lightcurve=night, search_rounds=4, max_search_rounds=3, **OPTIONS)
-
-
-def test_further_rounds_zoom_on_the_winners_periods():
-    """Past ``search_rounds``, while the winner misses the noise, the next two rounds search the
-    winner's P_psi and then the winner's P_phi on the grid over exp(+-cell / 8) around it (cell: the
-    given grid's), the other period over its given range (the first draw's random states).  The
-    rotator's data fitted as a short-axis tumbler, ``sigma`` five times below the noise so that every
-    round misses it."""
-    from frbjax.lightcurve import _fit, MisfitWarning
-
-    times, flux, sun, observer, night = observations()
-    ranges = np.array([[0.297, 0.303], [3.0, 6.0]])
-    size, per_period, refined = 3, 2, 2
-    options = dict(OPTIONS, periods=ranges, principal_axis=False, mode="SAM", period_grid=(size, size))
-    options.update(starts_per_period=per_period, n_refine=refined, stop_at_noise=False, mirror_pole=False)
-    # Its winner has an alias within the noise (AmbiguousFitWarning), which is not what this test is about.
-    with pytest.warns(MisfitWarning), warnings.catch_warnings():
-        warnings.simplefilter("ignore", AmbiguousFitWarning)
-        fit = fit_lightcurve(
-            times, flux, sun, observer, lightcurve=night, sigma=0.002, search_rounds=1, max_search_rounds=3, **options
-        )
-    assert fit.search_rounds == 3
-    searched = np.asarray(fit.search_periods)
-    starts = size * size * per_period
-    assert searched.shape == (3 * starts, 2)
-    # The last stage of each round holds its n_refine starts (all survive one more window).
-    costs, periods = np.asarray(fit.refine_costs), np.asarray(fit.refine_periods)
-    assert len(costs) == 3 * refined
-    cell = np.log(ranges[:, 1] / ranges[:, 0]) / (size - 1)
-    for index in range(2):
-        winner = np.argmin(costs[: (1 + index) * refined])
-        centre = np.clip(
-            np.log(periods[winner, index]),
-            np.log(ranges[index, 0]) + cell[index] / 8,
-            np.log(ranges[index, 1]) - cell[index] / 8,
-        )
-        focused = np.exp(np.linspace(centre - cell[index] / 8, centre + cell[index] / 8, size))
-        given = np.exp(np.linspace(*np.log(ranges[1 - index]), size))
-        rows = searched[(1 + index) * starts : (2 + index) * starts]
-        np.testing.assert_allclose(np.unique(rows[:, index]), focused, rtol=1e-12)
-        np.testing.assert_allclose(np.unique(rows[:, 1 - index]), given, rtol=1e-12)
-    assert fit.cost == costs.min()
-    # Where the refined winner's period leaves its range, the focused window is moved inside it.
-    focused = _fit._focused_ranges(ranges, cell, 0.31, 0)
-    np.testing.assert_allclose(focused[0], [0.303 * np.exp(-cell[0] / 4), 0.303], rtol=1e-12)
-    np.testing.assert_array_equal(focused[1], ranges[1])

@@ -184,11 +184,6 @@ _SHIFTS_PER_CYCLE = 4
 # they fit within a noise unit of each other and lie more than this many degrees apart; nearer, the
 # mirror image is the winner's pole found again (a pole near the plane's normal is its own image).
 _POLE_SEPARATION = 10.0
-# Past ``search_rounds``, while the winner misses the noise, the next rounds zoom on the winner's
-# periods, one a round: that period's range narrowed to the winner's times exp(+-cell /
-# _FOCUS_NARROWING) (cell: the given grid's), so that its grid and each start's prior are 7.5 times
-# finer than the given cell over a quarter of it (module docstring, the search's rounds).
-_FOCUS_NARROWING = 8
 
 
 # ------------------------------------------------------------------------------------ the model
@@ -1050,23 +1045,6 @@ def _round_plan(round_index, n_refine):
     return draw, step == 1, 3 * n_refine if step == 3 else n_refine
 
 
-def _focused_ranges(ranges, cells, period, index):
-    """The period ranges of a round that zooms on the winner's ``period`` (number ``index``):
-    ``ranges`` (2, 2) with that period's narrowed to the window of log-width 2 cells[index] /
-    _FOCUS_NARROWING centred on ``period``, moved inside its range where it would leave it (a refined
-    start may end outside the searched ranges), the other period's range unchanged."""
-    focused = np.array(ranges, float)
-    log_low, log_high = np.log(focused[index])
-    half_width = min(cells[index] / _FOCUS_NARROWING, 0.5 * (log_high - log_low))
-    centre = np.clip(
-        np.log(period) if np.isfinite(period) else 0.5 * (log_low + log_high),
-        log_low + half_width,
-        log_high - half_width,
-    )
-    focused[index] = np.exp([centre - half_width, centre + half_width])
-    return focused
-
-
 def _continuation_windows(distance):
     """Masks (W, N) of the continuation windows: the samples within a radius of the epoch, the first
     radius holding a tenth of them (at least ``_MIN_WINDOW``), each next ``_WINDOW_GROWTH`` times the
@@ -1402,21 +1380,13 @@ def fit_lightcurve(
     solver_settings = dict(rtol=float(rtol), atol=float(atol), max_steps=int(max_steps))
     radii = [float(np.max(np.abs(times - epoch)[mask > 0])) for mask in masks]
     period_ranges = np.atleast_2d(np.asarray(periods, float))
-    grid_sizes = np.atleast_1d(period_grid).astype(int)[: len(period_ranges)]
-
-    def grid_cells(ranges):
-        """The log-width of a cell of the period grid over ``ranges`` (one per period)."""
-        return np.log(ranges[:, 1] / ranges[:, 0]) / np.maximum(grid_sizes - 1, 1)
-
-    def round_limits(ranges):
-        """A round's log-ranges (where its period shifts may go) and its period prior's inverse width:
-        each start keeps its grid cell, log P ~ N(log P_start, (cell / 2)^2)."""
-        log_ranges = np.array([[-np.inf, np.inf]] * 2)
-        log_ranges[: len(ranges)] = np.log(ranges)
-        prior_inverse_width = np.zeros(2)
-        prior_inverse_width[: len(ranges)] = 2 / np.maximum(grid_cells(ranges), 1e-6)
-        return log_ranges, prior_inverse_width
-
+    log_ranges = np.array([[-np.inf, np.inf]] * 2)
+    log_ranges[: len(period_ranges)] = np.log(period_ranges)
+    # The period prior of each start: its grid cell, log P ~ N(log P_start, (cell / 2)^2).
+    grid_sizes = np.atleast_1d(period_grid).astype(int)
+    cell = np.log(period_ranges[:, 1] / period_ranges[:, 0]) / np.maximum(grid_sizes[: len(period_ranges)] - 1, 1)
+    prior_inverse_width = np.zeros(2)
+    prior_inverse_width[: len(cell)] = 2 / np.maximum(cell, 1e-6)
     prior_weights = np.concatenate([np.ones(len(masks) - 1), [0.0]])
     as_jax = lambda tree: jax.tree.map(lambda x: jnp.asarray(x, dtype), tree)  # noqa: E731
     # The search's chunks are taken in numpy (eagerly, JAX would compile each gather).
@@ -1431,15 +1401,14 @@ def fit_lightcurve(
             points = 0.5 * (points[1:] + points[:-1])
         return np.exp(points)
 
-    def starts(draw, middles, ranges):
-        """A draw's starts: a grid of the periods over ``ranges`` (or its cells' middles) times random
-        states drawn from ``seed + draw``, and the given motion first in the first draw on the user's
-        grid.  Returns (theta
+    def starts(draw, middles):
+        """A draw's starts: a grid of the periods (or its cells' middles) times random states drawn from
+        ``seed + draw``, and the given motion first in the first draw on the grid.  Returns (theta
         (S, 8), references, the periods (S, 2) of each, valid (S,), the ellipsoid's axes of each start's
         inertia (S, 3), whether it is the given motion (S,))."""
         rng = np.random.default_rng(seed + draw)
         if principal_axis:
-            grid = period_axis(*(float(p) for p in ranges[0]), int(grid_sizes[0]), middles)
+            grid = period_axis(*(float(p) for p in periods), int(np.atleast_1d(period_grid)[0]), middles)
             period_psi = np.repeat(grid, starts_per_period)
             count = len(period_psi)
             period_phi = np.full(count, np.inf)
@@ -1448,8 +1417,8 @@ def fit_lightcurve(
             momentum[:, 2] = 2 * np.pi * inertia[:, 2] / period_psi
             valid = np.ones(count, bool)
         else:
-            (psi_low, psi_high), (phi_low, phi_high) = ranges
-            n_psi, n_phi = grid_sizes
+            (psi_low, psi_high), (phi_low, phi_high) = periods
+            n_psi, n_phi = period_grid
             psi_grid = period_axis(psi_low, psi_high, n_psi, middles)
             phi_grid = period_axis(phi_low, phi_high, n_phi, middles)
             period_psi, period_phi = (
@@ -1477,7 +1446,7 @@ def fit_lightcurve(
             momentum = np.where(valid[:, None], momentum, np.array([0.0, 0.0, 1.0]))
         attitudes = _random_rotations(rng, count)
         given = np.zeros(count, bool)
-        if initial is not None and draw == 0 and not middles and ranges is period_ranges:
+        if initial is not None and draw == 0 and not middles:
             # The given motion as one more start, placed first; its cost is not searched but refined.
             scale = float(np.max(np.asarray(initial.inertia)))
             inertia = np.concatenate([np.asarray(initial.inertia)[None] / scale, inertia])
@@ -1507,28 +1476,19 @@ def fit_lightcurve(
         references = (attitudes, direction, _tangent_basis(direction))
         return theta, references, np.stack([period_psi, period_phi], -1), valid, _ellipsoid_axes(inertia), given
 
-    # (draw, middles, focused period ranges or None) -> the starts, their search costs and which have
-    # been refined (mask)
-    searched = {}
+    searched = {}  # (draw, middles) -> the starts, their search costs and which have been refined (mask)
 
-    def search_round(round_index, focus=None):
-        """One round (:func:`_round_plan`), or with ``focus`` (the period ranges of
-        :func:`_focused_ranges`) the first draw's random states on the focused grid: its starts
-        costed on the first window (once a draw), the best ``count`` not yet refined then refined
-        through the windows as a population (module docstring).  Returns the last stage's starts (the
-        refinement's (parameters, costs, converged, residuals, Jacobians) and their references) and the
-        search's periods and costs (empty where the round reuses an earlier round's search)."""
+    def search_round(round_index):
+        """One round (:func:`_round_plan`): its draw's starts costed on the first window (once a draw),
+        the best ``count`` not yet refined then refined through the windows as a population (module
+        docstring).  Returns the last stage's starts (the refinement's (parameters, costs, converged,
+        residuals, Jacobians) and their references) and the search's periods and costs (empty where
+        the round reuses an earlier round's search)."""
         nonlocal chunk
-        if focus is None:
-            draw, middles, count = _round_plan(round_index, n_refine)
-            ranges = period_ranges
-        else:
-            draw, middles, count, ranges = 0, False, n_refine, focus
-        log_ranges, prior_inverse_width = round_limits(ranges)
-        key = (draw, middles, None if focus is None else tuple(map(tuple, focus)))
-        new_search = key not in searched
+        draw, middles, count = _round_plan(round_index, n_refine)
+        new_search = (draw, middles) not in searched
         if new_search:
-            theta, references, start_periods, valid, axes, given_start = starts(draw, middles, ranges)
+            theta, references, start_periods, valid, axes, given_start = starts(draw, middles)
             if chunk is None:
                 chunk = min(int(search_chunk), len(theta))
             costs = _search(
@@ -1543,8 +1503,8 @@ def fit_lightcurve(
             )
             costs = np.where(valid, costs, np.inf)
             refined = np.zeros(len(costs), bool)
-            searched[key] = (theta, references, start_periods, axes, given_start, costs, refined)
-        theta, references, start_periods, axes, given_start, costs, refined = searched[key]
+            searched[draw, middles] = (theta, references, start_periods, axes, given_start, costs, refined)
+        theta, references, start_periods, axes, given_start, costs, refined = searched[draw, middles]
         ranking = np.argsort(costs, kind="stable")
         best = ranking[~refined[ranking]][:count]
         if new_search and given_start.any() and not given_start[best].any():
@@ -1762,21 +1722,9 @@ def fit_lightcurve(
 
     # ---- past search_rounds, more rounds while the winner misses the noise, up to max_search_rounds
     round_limit = 3 * search_rounds if max_search_rounds is None else max_search_rounds
-    # The first further rounds zoom on the winner's periods, one a round (_FOCUS_NARROWING); a
-    # rotator's one period has no other to search beside it.
-    focused_rounds = 0 if principal_axis else 2
     rounds = []
     for round_index in range(round_limit):
-        extra = round_index - search_rounds
-        if 0 <= extra < focused_rounds:
-            leaders, leader, _ = best(rounds)
-            references = tuple(np.concatenate(parts) for parts in zip(*(r[1] for r in rounds)))
-            reference = as_jax(tuple(r[leader] for r in references))
-            winner_periods = np.asarray(_fitted_motion(as_jax(leaders[0][leader][:8]), reference, principal_axis)[1])
-            focus = _focused_ranges(period_ranges, grid_cells(period_ranges), float(winner_periods[extra]), extra)
-            rounds.append(search_round(None, focus))
-        else:
-            rounds.append(search_round(round_index - focused_rounds * (extra >= focused_rounds)))
+        rounds.append(search_round(round_index))
         if stop_at_noise or len(rounds) >= search_rounds:
             outs, winner, misfit = best(rounds)
             if len(rounds) == round_limit or misfit.variance <= misfit.threshold:
