@@ -10,6 +10,8 @@ time, flux, Sun or observer direction, or an infinite flux).
 
 from __future__ import annotations
 
+import warnings
+
 import jax
 import jax.numpy as jnp
 import numpy as np
@@ -307,3 +309,70 @@ def test_a_misfit_searches_again_and_warns():
         fit_lightcurve(times, flux, sun, observer, lightcurve=night, search_rounds=0, **OPTIONS)
     with pytest.raises(ValueError, match=r"max_search_rounds must be >= search_rounds \(4\), got 3"):
         fit_lightcurve(times, flux, sun, observer, lightcurve=night, search_rounds=4, max_search_rounds=3, **OPTIONS)
+
+
+def test_further_rounds_take_turns_zooming_on_the_winners_rotation_period(monkeypatch):
+    """Past ``search_rounds``, while the winner misses the noise, the further rounds take turns: one
+    searches the grid over exp(+-cell / 8) around the winner's P_psi so far (cell: the given grid's)
+    and P_phi over its given range with the next draw of the random states, the next goes on with the
+    plan's rounds (here the first draw on the middles of the given grid's cells).  The rotator's data
+    fitted as a short-axis tumbler, ``sigma`` five times below the noise so that every round misses it."""
+    from frbjax.lightcurve import _fit, MisfitWarning
+
+    times, flux, sun, observer, night = observations()
+    ranges = np.array([[0.297, 0.303], [3.0, 6.0]])
+    size, per_period, refined = 3, 2, 2
+    options = dict(OPTIONS, periods=ranges, principal_axis=False, mode="SAM", period_grid=(size, size))
+    options.update(starts_per_period=per_period, n_refine=refined, stop_at_noise=False, mirror_pole=False)
+    # The seeds of the random states' draws, one a search.
+    draws = []
+    default_rng = np.random.default_rng
+    monkeypatch.setattr(_fit.np.random, "default_rng", lambda seed: draws.append(seed) or default_rng(seed))
+    # Its winner has an alias within the noise (AmbiguousFitWarning), which is not what this test is about.
+    with pytest.warns(MisfitWarning), warnings.catch_warnings():
+        warnings.simplefilter("ignore", AmbiguousFitWarning)
+        fit = fit_lightcurve(
+            times,
+            flux,
+            sun,
+            observer,
+            lightcurve=night,
+            sigma=0.002,
+            search_rounds=1,
+            max_search_rounds=4,
+            seed=5,
+            **options,
+        )
+    monkeypatch.undo()
+    # The first round's draw; the focused grid with draw 0; the middles with draw 0; the focused with 1.
+    assert draws == [5, 5, 5, 6]
+    assert fit.search_rounds == 4
+    searched = np.asarray(fit.search_periods)
+    grid_starts, middle_starts = size * size * per_period, (size - 1) ** 2 * per_period
+    bounds = np.cumsum([0, grid_starts, grid_starts, middle_starts, grid_starts])
+    assert searched.shape == (bounds[-1], 2)
+    # The last stage of each round holds its n_refine starts (all survive one more window).
+    costs, periods = np.asarray(fit.refine_costs), np.asarray(fit.refine_periods)
+    assert len(costs) == 4 * refined
+    cell = np.log(ranges[:, 1] / ranges[:, 0]) / (size - 1)
+    given = np.exp(np.linspace(*np.log(ranges[1]), size))
+    for round_index in (1, 3):
+        winner = np.argmin(costs[: round_index * refined])
+        centre = np.clip(
+            np.log(periods[winner, 0]), np.log(ranges[0, 0]) + cell[0] / 8, np.log(ranges[0, 1]) - cell[0] / 8
+        )
+        focused = np.exp(np.linspace(centre - cell[0] / 8, centre + cell[0] / 8, size))
+        rows = searched[bounds[round_index] : bounds[round_index + 1]]
+        np.testing.assert_allclose(np.unique(rows[:, 0]), focused, rtol=1e-12)
+        np.testing.assert_allclose(np.unique(rows[:, 1]), given, rtol=1e-12)
+    middles = [
+        np.exp(0.5 * (np.log(r[0]) + np.log(r[1]) + np.array([-1, 1]) * 0.5 * np.log(r[1] / r[0]))) for r in ranges
+    ]
+    rows = searched[bounds[2] : bounds[3]]
+    for index in range(2):
+        np.testing.assert_allclose(np.unique(rows[:, index]), middles[index], rtol=1e-12)
+    assert fit.cost == costs.min()
+    # Where the refined winner's period leaves its range, the focused window is moved inside it.
+    focused = _fit._focused_ranges(ranges, cell, 0.31, 0)
+    np.testing.assert_allclose(focused[0], [0.303 * np.exp(-cell[0] / 4), 0.303], rtol=1e-12)
+    np.testing.assert_array_equal(focused[1], ranges[1])

@@ -96,14 +96,24 @@ residuals pass the noise (an alias the data nearly allow) would otherwise stop t
 truth's basin is among the refined starts, where it is a competing basin that the warning names and
 the sigmas span.  Where the winner's residuals are still above the stated noise, s^2 / sigma^2 above
 1 + 3 sqrt(2 / dof) (the sum of squares of a fit in the data's basin is chi-square with dof degrees
-of freedom: three of its standard deviations), the rounds go on, new draws, until one is within it or
-``max_search_rounds`` (default three times ``search_rounds``) have run: on the second tumbler family the
-truth's basin of an Apophis-like tumbler was first found in the fifth round, and that of a short-axis
-tumbler near principal-axis rotation in the tenth.  With ``stop_at_noise=True`` the rounds stop at the
-first whose winner is within the bound, in about a quarter of the time where that is the first.  The
-lowest cost of all the rounds' refined starts wins; a winner above the bound after the last round
-warns: the search has missed the data's basin, or sigma understates the noise (docs/lightcurve-search.md:
-the rounds on the tumbler family of benchmarks/lightcurve_family.py).
+of freedom: three of its standard deviations), the rounds go on until one is within it or
+``max_search_rounds`` (default three times ``search_rounds``) have run, taking turns: a round on the
+grid over the winner's P_psi times exp(+-cell / 8) (cell: the given grid's, the prior of each start as
+fine) and P_phi over its given range, with a new draw, then the plan's next round over the given
+ranges.  A wrong basin often shares the truth's P_psi, the period that dominates the light curve, and
+the truth's basin is then reached from a start whose P_psi is held to a small fraction of a cell
+while the other states are drawn; where the winner's P_psi is itself off, the plan's rounds go on.  On
+the tumbler families, of the five members whose first four rounds miss the noise, an Apophis-like
+tumbler of large amplitude that twelve of the plan's rounds missed is found in the seventh (the
+second focused), three found in the plan's fifth, fifth and tenth rounds are found in the fifth (the
+first focused), and a short-axis tumbler near principal-axis rotation whose winner's P_psi was 0.37%
+off (the focused grid spans 0.17%) in the tenth, the plan's seventh, as before; with every further
+round focused that one was missed (docs/lightcurve-search.md, "Rounds past four that take turns").
+With ``stop_at_noise=True`` the rounds stop at the first whose winner is within the bound, in about a
+quarter of the time where that is the first.  The lowest cost of all the rounds' refined starts wins;
+a winner above the bound after the last round warns: the search has missed the data's basin, or sigma
+understates the noise (docs/lightcurve-search.md: the rounds on the tumbler family of
+benchmarks/lightcurve_family.py).
 
 The pole's mirror image
 -----------------------
@@ -184,6 +194,11 @@ _SHIFTS_PER_CYCLE = 4
 # they fit within a noise unit of each other and lie more than this many degrees apart; nearer, the
 # mirror image is the winner's pole found again (a pole near the plane's normal is its own image).
 _POLE_SEPARATION = 10.0
+# Past ``search_rounds``, while the winner misses the noise, every other round zooms on the winner's
+# P_psi: its range narrowed to the winner's times exp(+-cell / _FOCUS_NARROWING) (cell: the given
+# grid's), so that its grid and each start's prior are 7.5 times finer than the given cell over a
+# quarter of it, P_phi over its given range (module docstring, the search's rounds).
+_FOCUS_NARROWING = 8
 
 
 # ------------------------------------------------------------------------------------ the model
@@ -1045,6 +1060,23 @@ def _round_plan(round_index, n_refine):
     return draw, step == 1, 3 * n_refine if step == 3 else n_refine
 
 
+def _focused_ranges(ranges, cells, period, index):
+    """The period ranges of a round that zooms on the winner's ``period`` (number ``index``):
+    ``ranges`` (2, 2) with that period's narrowed to the window of log-width 2 cells[index] /
+    _FOCUS_NARROWING centred on ``period``, moved inside its range where it would leave it (a refined
+    start may end outside the searched ranges), the other period's range unchanged."""
+    focused = np.array(ranges, float)
+    log_low, log_high = np.log(focused[index])
+    half_width = min(cells[index] / _FOCUS_NARROWING, 0.5 * (log_high - log_low))
+    centre = np.clip(
+        np.log(period) if np.isfinite(period) else 0.5 * (log_low + log_high),
+        log_low + half_width,
+        log_high - half_width,
+    )
+    focused[index] = np.exp([centre - half_width, centre + half_width])
+    return focused
+
+
 def _continuation_windows(distance):
     """Masks (W, N) of the continuation windows: the samples within a radius of the epoch, the first
     radius holding a tenth of them (at least ``_MIN_WINDOW``), each next ``_WINDOW_GROWTH`` times the
@@ -1258,9 +1290,10 @@ def fit_lightcurve(
     deviations of a chi-square: :attr:`LightcurveFit.noise_ratio`) warns (:class:`MisfitWarning`).
     All rounds run by default, so that a wrong basin whose residuals pass the bound (an alias the
     data nearly allow) has the truth's basin among the refined starts, as a competing basin that the
-    warning names and the sigmas span; while the winner is above the bound, further rounds run (new
-    draws), up to ``max_search_rounds`` (default ``3 * search_rounds``; the misfit then warns), so that
-    a search that missed the data's basin takes longer rather than answering wrong.
+    warning names and the sigmas span; while the winner is above the bound, further rounds run, up
+    to ``max_search_rounds`` (default ``3 * search_rounds``; the misfit then warns), so that a search
+    that missed the data's basin takes longer rather than answering wrong: every other one a new draw
+    on a grid over the winner's P_psi +-cell / 8 (the given P_phi range), the others the plan's.
     ``stop_at_noise=True`` stops at the first round whose winner is within the bound, about
     ``search_rounds`` times faster where that is the first, at the risk of a confident answer in such
     an alias (measured on the tumbler family: docs/lightcurve-search.md).
@@ -1380,13 +1413,21 @@ def fit_lightcurve(
     solver_settings = dict(rtol=float(rtol), atol=float(atol), max_steps=int(max_steps))
     radii = [float(np.max(np.abs(times - epoch)[mask > 0])) for mask in masks]
     period_ranges = np.atleast_2d(np.asarray(periods, float))
-    log_ranges = np.array([[-np.inf, np.inf]] * 2)
-    log_ranges[: len(period_ranges)] = np.log(period_ranges)
-    # The period prior of each start: its grid cell, log P ~ N(log P_start, (cell / 2)^2).
-    grid_sizes = np.atleast_1d(period_grid).astype(int)
-    cell = np.log(period_ranges[:, 1] / period_ranges[:, 0]) / np.maximum(grid_sizes[: len(period_ranges)] - 1, 1)
-    prior_inverse_width = np.zeros(2)
-    prior_inverse_width[: len(cell)] = 2 / np.maximum(cell, 1e-6)
+    grid_sizes = np.atleast_1d(period_grid).astype(int)[: len(period_ranges)]
+
+    def grid_cells(ranges):
+        """The log-width of a cell of the period grid over ``ranges`` (one per period)."""
+        return np.log(ranges[:, 1] / ranges[:, 0]) / np.maximum(grid_sizes - 1, 1)
+
+    def round_limits(ranges):
+        """A round's log-ranges (where its period shifts may go) and its period prior's inverse width:
+        each start keeps its grid cell, log P ~ N(log P_start, (cell / 2)^2)."""
+        log_ranges = np.array([[-np.inf, np.inf]] * 2)
+        log_ranges[: len(ranges)] = np.log(ranges)
+        prior_inverse_width = np.zeros(2)
+        prior_inverse_width[: len(ranges)] = 2 / np.maximum(grid_cells(ranges), 1e-6)
+        return log_ranges, prior_inverse_width
+
     prior_weights = np.concatenate([np.ones(len(masks) - 1), [0.0]])
     as_jax = lambda tree: jax.tree.map(lambda x: jnp.asarray(x, dtype), tree)  # noqa: E731
     # The search's chunks are taken in numpy (eagerly, JAX would compile each gather).
@@ -1401,14 +1442,14 @@ def fit_lightcurve(
             points = 0.5 * (points[1:] + points[:-1])
         return np.exp(points)
 
-    def starts(draw, middles):
-        """A draw's starts: a grid of the periods (or its cells' middles) times random states drawn from
-        ``seed + draw``, and the given motion first in the first draw on the grid.  Returns (theta
-        (S, 8), references, the periods (S, 2) of each, valid (S,), the ellipsoid's axes of each start's
-        inertia (S, 3), whether it is the given motion (S,))."""
+    def starts(draw, middles, ranges):
+        """A draw's starts: a grid of the periods over ``ranges`` (or its cells' middles) times random
+        states drawn from ``seed + draw``, and the given motion first in the first draw on the user's
+        grid.  Returns (theta (S, 8), references, the periods (S, 2) of each, valid (S,), the
+        ellipsoid's axes of each start's inertia (S, 3), whether it is the given motion (S,))."""
         rng = np.random.default_rng(seed + draw)
         if principal_axis:
-            grid = period_axis(*(float(p) for p in periods), int(np.atleast_1d(period_grid)[0]), middles)
+            grid = period_axis(*(float(p) for p in ranges[0]), int(grid_sizes[0]), middles)
             period_psi = np.repeat(grid, starts_per_period)
             count = len(period_psi)
             period_phi = np.full(count, np.inf)
@@ -1417,8 +1458,8 @@ def fit_lightcurve(
             momentum[:, 2] = 2 * np.pi * inertia[:, 2] / period_psi
             valid = np.ones(count, bool)
         else:
-            (psi_low, psi_high), (phi_low, phi_high) = periods
-            n_psi, n_phi = period_grid
+            (psi_low, psi_high), (phi_low, phi_high) = ranges
+            n_psi, n_phi = grid_sizes
             psi_grid = period_axis(psi_low, psi_high, n_psi, middles)
             phi_grid = period_axis(phi_low, phi_high, n_phi, middles)
             period_psi, period_phi = (
@@ -1446,7 +1487,7 @@ def fit_lightcurve(
             momentum = np.where(valid[:, None], momentum, np.array([0.0, 0.0, 1.0]))
         attitudes = _random_rotations(rng, count)
         given = np.zeros(count, bool)
-        if initial is not None and draw == 0 and not middles:
+        if initial is not None and draw == 0 and not middles and ranges is period_ranges:
             # The given motion as one more start, placed first; its cost is not searched but refined.
             scale = float(np.max(np.asarray(initial.inertia)))
             inertia = np.concatenate([np.asarray(initial.inertia)[None] / scale, inertia])
@@ -1476,19 +1517,28 @@ def fit_lightcurve(
         references = (attitudes, direction, _tangent_basis(direction))
         return theta, references, np.stack([period_psi, period_phi], -1), valid, _ellipsoid_axes(inertia), given
 
-    searched = {}  # (draw, middles) -> the starts, their search costs and which have been refined (mask)
+    # (draw, middles, focused period ranges or None) -> the starts, their search costs and which have
+    # been refined (mask)
+    searched = {}
 
-    def search_round(round_index):
-        """One round (:func:`_round_plan`): its draw's starts costed on the first window (once a draw),
-        the best ``count`` not yet refined then refined through the windows as a population (module
-        docstring).  Returns the last stage's starts (the refinement's (parameters, costs, converged,
-        residuals, Jacobians) and their references) and the search's periods and costs (empty where
-        the round reuses an earlier round's search)."""
+    def search_round(round_index, focus=None, draw=0):
+        """One round (:func:`_round_plan`), or with ``focus`` (the period ranges of
+        :func:`_focused_ranges`) the random states of ``draw`` on the focused grid: its starts
+        costed on the first window (once a draw), the best ``count`` not yet refined then refined
+        through the windows as a population (module docstring).  Returns the last stage's starts (the
+        refinement's (parameters, costs, converged, residuals, Jacobians) and their references) and the
+        search's periods and costs (empty where the round reuses an earlier round's search)."""
         nonlocal chunk
-        draw, middles, count = _round_plan(round_index, n_refine)
-        new_search = (draw, middles) not in searched
+        if focus is None:
+            draw, middles, count = _round_plan(round_index, n_refine)
+            ranges = period_ranges
+        else:
+            middles, count, ranges = False, n_refine, focus
+        log_ranges, prior_inverse_width = round_limits(ranges)
+        key = (draw, middles, None if focus is None else tuple(map(tuple, focus)))
+        new_search = key not in searched
         if new_search:
-            theta, references, start_periods, valid, axes, given_start = starts(draw, middles)
+            theta, references, start_periods, valid, axes, given_start = starts(draw, middles, ranges)
             if chunk is None:
                 chunk = min(int(search_chunk), len(theta))
             costs = _search(
@@ -1503,8 +1553,8 @@ def fit_lightcurve(
             )
             costs = np.where(valid, costs, np.inf)
             refined = np.zeros(len(costs), bool)
-            searched[draw, middles] = (theta, references, start_periods, axes, given_start, costs, refined)
-        theta, references, start_periods, axes, given_start, costs, refined = searched[draw, middles]
+            searched[key] = (theta, references, start_periods, axes, given_start, costs, refined)
+        theta, references, start_periods, axes, given_start, costs, refined = searched[key]
         ranking = np.argsort(costs, kind="stable")
         best = ranking[~refined[ranking]][:count]
         if new_search and given_start.any() and not given_start[best].any():
@@ -1722,9 +1772,21 @@ def fit_lightcurve(
 
     # ---- past search_rounds, more rounds while the winner misses the noise, up to max_search_rounds
     round_limit = 3 * search_rounds if max_search_rounds is None else max_search_rounds
+    # The further rounds take turns: one zooms on the winner's P_psi (_FOCUS_NARROWING) with the next
+    # draw, one goes on with the plan's rounds over the given ranges (a rotator's all go on with them).
     rounds = []
     for round_index in range(round_limit):
-        rounds.append(search_round(round_index))
+        extra = round_index - search_rounds
+        if extra >= 0 and extra % 2 == 0 and not principal_axis:
+            leaders, leader, _ = best(rounds)
+            references = tuple(np.concatenate(parts) for parts in zip(*(r[1] for r in rounds)))
+            reference = as_jax(tuple(r[leader] for r in references))
+            winner_periods = np.asarray(_fitted_motion(as_jax(leaders[0][leader][:8]), reference, principal_axis)[1])
+            focus = _focused_ranges(period_ranges, grid_cells(period_ranges), float(winner_periods[0]), 0)
+            rounds.append(search_round(None, focus, draw=extra // 2))
+        else:
+            plan_index = round_index if extra < 0 or principal_axis else search_rounds + extra // 2
+            rounds.append(search_round(plan_index))
         if stop_at_noise or len(rounds) >= search_rounds:
             outs, winner, misfit = best(rounds)
             if len(rounds) == round_limit or misfit.variance <= misfit.threshold:
