@@ -324,6 +324,7 @@ def test_further_rounds_take_turns_zooming_on_the_winners_rotation_period(monkey
     size, per_period, refined = 3, 2, 2
     options = dict(OPTIONS, periods=ranges, principal_axis=False, mode="SAM", period_grid=(size, size))
     options.update(starts_per_period=per_period, n_refine=refined, stop_at_noise=False, mirror_pole=False)
+    options.update(sigma=0.002, search_rounds=1, max_search_rounds=4, seed=5)
     # The seeds of the random states' draws, one a search.
     draws = []
     default_rng = np.random.default_rng
@@ -331,18 +332,7 @@ def test_further_rounds_take_turns_zooming_on_the_winners_rotation_period(monkey
     # Its winner has an alias within the noise (AmbiguousFitWarning), which is not what this test is about.
     with pytest.warns(MisfitWarning), warnings.catch_warnings():
         warnings.simplefilter("ignore", AmbiguousFitWarning)
-        fit = fit_lightcurve(
-            times,
-            flux,
-            sun,
-            observer,
-            lightcurve=night,
-            sigma=0.002,
-            search_rounds=1,
-            max_search_rounds=4,
-            seed=5,
-            **options,
-        )
+        fit = fit_lightcurve(times, flux, sun, observer, lightcurve=night, **options)
     monkeypatch.undo()
     # The first round's draw; the focused grid with draw 0; the middles with draw 0; the focused with 1.
     assert draws == [5, 5, 5, 6]
