@@ -363,6 +363,6 @@ def test_further_rounds_take_turns_zooming_on_the_winners_rotation_period(monkey
         np.testing.assert_allclose(np.unique(rows[:, index]), middles[index], rtol=1e-12)
     assert fit.cost == costs.min()
     # Where the refined winner's period leaves its range, the focused window is moved inside it.
-    focused = _fit._focused_ranges(ranges, cell, 0.31, 0)
+    focused = _fit._focused_ranges(ranges, cell[0], 0.31)
     np.testing.assert_allclose(focused[0], [0.303 * np.exp(-cell[0] / 4), 0.303], rtol=1e-12)
     np.testing.assert_array_equal(focused[1], ranges[1])

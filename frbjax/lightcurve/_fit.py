@@ -1060,20 +1060,18 @@ def _round_plan(round_index, n_refine):
     return draw, step == 1, 3 * n_refine if step == 3 else n_refine
 
 
-def _focused_ranges(ranges, cells, period, index):
-    """The period ranges of a round that zooms on the winner's ``period`` (number ``index``):
-    ``ranges`` (2, 2) with that period's narrowed to the window of log-width 2 cells[index] /
-    _FOCUS_NARROWING centred on ``period``, moved inside its range where it would leave it (a refined
-    start may end outside the searched ranges), the other period's range unchanged."""
+def _focused_ranges(ranges, cell, period_psi):
+    """The period ranges of a round that zooms on the winner's ``period_psi``: ``ranges`` (2, 2) with
+    P_psi's narrowed to the window of log-width 2 cell / _FOCUS_NARROWING (``cell``: the log-width of
+    the given grid's P_psi cell) centred on ``period_psi``, moved inside its range where it would leave
+    it (a refined start may end outside the searched ranges), P_phi's unchanged."""
     focused = np.array(ranges, float)
-    log_low, log_high = np.log(focused[index])
-    half_width = min(cells[index] / _FOCUS_NARROWING, 0.5 * (log_high - log_low))
-    centre = np.clip(
-        np.log(period) if np.isfinite(period) else 0.5 * (log_low + log_high),
-        log_low + half_width,
-        log_high - half_width,
-    )
-    focused[index] = np.exp([centre - half_width, centre + half_width])
+    log_low, log_high = np.log(focused[0])
+    half_width = min(cell / _FOCUS_NARROWING, 0.5 * (log_high - log_low))
+    # A winner without a finite P_psi (no start converged) leaves the window at the range's middle.
+    centre = np.log(period_psi) if np.isfinite(period_psi) else 0.5 * (log_low + log_high)
+    centre = np.clip(centre, log_low + half_width, log_high - half_width)
+    focused[0] = np.exp([centre - half_width, centre + half_width])
     return focused
 
 
@@ -1517,25 +1515,19 @@ def fit_lightcurve(
         references = (attitudes, direction, _tangent_basis(direction))
         return theta, references, np.stack([period_psi, period_phi], -1), valid, _ellipsoid_axes(inertia), given
 
-    # (draw, middles, focused period ranges or None) -> the starts, their search costs and which have
-    # been refined (mask)
+    # (draw, middles, period ranges) -> the starts, their search costs and which have been refined (mask)
     searched = {}
 
-    def search_round(round_index, focus=None, draw=0):
-        """One round (:func:`_round_plan`), or with ``focus`` (the period ranges of
-        :func:`_focused_ranges`) the random states of ``draw`` on the focused grid: its starts
-        costed on the first window (once a draw), the best ``count`` not yet refined then refined
-        through the windows as a population (module docstring).  Returns the last stage's starts (the
-        refinement's (parameters, costs, converged, residuals, Jacobians) and their references) and the
-        search's periods and costs (empty where the round reuses an earlier round's search)."""
+    def search_round(draw, middles, count, ranges=period_ranges):
+        """One round: the random states of ``draw`` on the period grid over ``ranges`` (or its cells'
+        middles; :func:`_round_plan`, or a round on :func:`_focused_ranges`) costed on the first
+        window (once a draw), the best ``count`` not yet refined then refined through the windows as a
+        population (module docstring).  Returns the last stage's starts (the refinement's (parameters,
+        costs, converged, residuals, Jacobians) and their references) and the search's periods and
+        costs (empty where the round reuses an earlier round's search)."""
         nonlocal chunk
-        if focus is None:
-            draw, middles, count = _round_plan(round_index, n_refine)
-            ranges = period_ranges
-        else:
-            middles, count, ranges = False, n_refine, focus
         log_ranges, prior_inverse_width = round_limits(ranges)
-        key = (draw, middles, None if focus is None else tuple(map(tuple, focus)))
+        key = (draw, middles, tuple(map(tuple, ranges)))
         new_search = key not in searched
         if new_search:
             theta, references, start_periods, valid, axes, given_start = starts(draw, middles, ranges)
@@ -1772,29 +1764,32 @@ def fit_lightcurve(
 
     # ---- past search_rounds, more rounds while the winner misses the noise, up to max_search_rounds
     round_limit = 3 * search_rounds if max_search_rounds is None else max_search_rounds
+
     # The further rounds take turns: one zooms on the winner's P_psi (_FOCUS_NARROWING) with the next
     # draw, one goes on with the plan's rounds over the given ranges (a rotator's all go on with them).
-    rounds = []
-    for round_index in range(round_limit):
-        extra = round_index - search_rounds
-        if extra >= 0 and extra % 2 == 0 and not principal_axis:
-            leaders, leader, _ = best(rounds)
-            references = tuple(np.concatenate(parts) for parts in zip(*(r[1] for r in rounds)))
-            reference = as_jax(tuple(r[leader] for r in references))
-            winner_periods = np.asarray(_fitted_motion(as_jax(leaders[0][leader][:8]), reference, principal_axis)[1])
-            focus = _focused_ranges(period_ranges, grid_cells(period_ranges), float(winner_periods[0]), 0)
-            rounds.append(search_round(None, focus, draw=extra // 2))
+    def winner_reference(rounds, winner):
+        """The reference frame (attitude, direction, tangent basis) of the refined start ``winner``."""
+        return tuple(np.concatenate(parts)[winner] for parts in zip(*(r[1] for r in rounds)))
+
+    rounds, plan_rounds, focused_draws = [], 0, 0
+    outs = winner = None  # best(rounds) after each round from search_rounds on
+    for _ in range(round_limit):
+        if len(rounds) >= search_rounds and (len(rounds) - search_rounds) % 2 == 0 and not principal_axis:
+            reference = as_jax(winner_reference(rounds, winner))
+            period_psi = float(_fitted_motion(as_jax(outs[0][winner][:8]), reference, principal_axis)[1][0])
+            focus = _focused_ranges(period_ranges, grid_cells(period_ranges)[0], period_psi)
+            rounds.append(search_round(focused_draws, False, n_refine, focus))
+            focused_draws += 1
         else:
-            plan_index = round_index if extra < 0 or principal_axis else search_rounds + extra // 2
-            rounds.append(search_round(plan_index))
+            rounds.append(search_round(*_round_plan(plan_rounds, n_refine)))
+            plan_rounds += 1
         if stop_at_noise or len(rounds) >= search_rounds:
             outs, winner, misfit = best(rounds)
             if len(rounds) == round_limit or misfit.variance <= misfit.threshold:
                 break
     mirror_row = None
     if mirror_pole:
-        references = tuple(np.concatenate(parts) for parts in zip(*(r[1] for r in rounds)))
-        rounds.append(mirror_round(outs[0][winner], tuple(r[winner] for r in references)))
+        rounds.append(mirror_round(outs[0][winner], winner_reference(rounds, winner)))
         # The mirror image's row, and the winner's before it: whichever is not the winner is the other pole.
         mirror_row, searched_winner = len(outs[0]), winner
         outs, winner, misfit = best(rounds)
