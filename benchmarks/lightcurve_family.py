@@ -55,10 +55,15 @@ and ``--output-dir`` each) is put together with ``--merge A.json B.json`` (``--e
 the file's run so far kept under ``earlier_runs.NAME``).  ``--seed s``: a second family drawn the same way
 (``_tumbler_family.tumbler(index, s)``), to check that the defaults chosen on the first hold on members
 they were not chosen on; stored as ``lightcurve_family_seed<s>.json`` (``--merge`` writes the runs' own seed's file).
+``--truth-only``: only the refinements from the truth (without the finer shape's solve), at the options given
+(e.g. ``--regularisation 100,4``: the convex shape's closure and smoothness weights), written to
+``lightcurve_family_truth[_seed<s>].json``: what the options allow in the truth's basin, a minute and a
+half a member instead of the search's seven.
 
 Usage: python benchmarks/lightcurve_family.py [--members 0,5,12] [--seed 0] [--width 0.1] [--resume] [--truth-from PATH]
-       [--starts-per-period 16] [--period-grid 16,16] [--refine 8] [--convex-subdivisions 1] [--stop-at-noise]
-       [--output-dir DIR] [--plot-only] [--basins-only] [--merge JSON ... [--earlier-name NAME] [--description D]]
+       [--starts-per-period 16] [--period-grid 16,16] [--refine 8] [--convex-subdivisions 1] [--regularisation 10,4]
+       [--stop-at-noise] [--truth-only] [--output-dir DIR] [--plot-only] [--basins-only]
+       [--merge JSON ... [--earlier-name NAME] [--description D]]
 (the figure: lightcurve_family.png beside the JSON, redrawn after each run or with --plot-only)
 """
 
@@ -336,6 +341,24 @@ def plot(result, path):
     plt.close(figure)
 
 
+def truth_refinement(case, width, options):
+    """The refinement from the truth alone (``--truth-only``): the reference of :func:`invert` without
+    the search and without the finer shape's solve, for comparing fit options (e.g. the shape's weights)
+    by what they allow in the truth's basin: its later nights, residuals and cost."""
+    start = time.perf_counter()
+    refined = case.refine_from_truth(
+        width, **{**options, "search_rounds": 1, "mirror_pole": False, "resolution_error": False}
+    )
+    return {
+        "index": case.index,
+        "kind": case.kind,
+        "truth_refined_cost": float(refined.cost),
+        "truth_refined_held_out_error": lightcurve.problems.held_out_rms(refined, case.held_out_data()),
+        "truth_refined_noise_ratio": float(refined.noise_ratio),
+        "seconds": time.perf_counter() - start,
+    }
+
+
 def output_path(output_dir, seed):
     """The run's JSON: lightcurve_family.json, a second family's (seed s != 0) lightcurve_family_seed<s>.json."""
     return pathlib.Path(output_dir) / f"lightcurve_family{f'_seed{seed}' if seed else ''}.json"
@@ -381,6 +404,9 @@ def main(argv=None):
     parser.add_argument("--refine", type=int, default=None)
     parser.add_argument("--convex-subdivisions", type=int, default=None, help="fit_lightcurve's default: 2")
     parser.add_argument(
+        "--regularisation", default=None, help="the convex shape's closure,smoothness weights, e.g. 10,4 (default 10,1)"
+    )
+    parser.add_argument(
         "--stop-at-noise", action="store_true", help="rounds only while the fit misses the noise (stop_at_noise=True)"
     )
     parser.add_argument("--resume", action="store_true")
@@ -391,6 +417,9 @@ def main(argv=None):
         "--basins-only", action="store_true", help="add the competing basins to the JSON's members and its rates"
     )
     parser.add_argument("--rates-only", action="store_true", help="recompute the JSON's rates from its members")
+    parser.add_argument(
+        "--truth-only", action="store_true", help="only the refinements from the truth (lightcurve_family_truth*.json)"
+    )
     parser.add_argument("--merge", nargs="+", metavar="JSON", help="put a run split over processes together")
     parser.add_argument("--earlier-name", help="with --merge: keep the file's run so far under earlier_runs.NAME")
     parser.add_argument("--description", help="with --merge: how the run was made (the JSON's description)")
@@ -419,9 +448,13 @@ def main(argv=None):
         fit_options["n_refine"] = options.refine
     if options.convex_subdivisions is not None:
         fit_options["convex_subdivisions"] = options.convex_subdivisions
+    if options.regularisation:
+        fit_options["regularisation"] = tuple(float(x) for x in options.regularisation.split(","))
     if options.stop_at_noise:
         fit_options["stop_at_noise"] = True
     output.parent.mkdir(parents=True, exist_ok=True)
+    if options.truth_only:
+        output = output.with_name(output.name.replace("lightcurve_family", "lightcurve_family_truth"))
     # A resumed run keeps what the file holds besides its members (e.g. a run at other settings).
     previous = json.loads(output.read_text()) if options.resume and output.exists() else {}
     members = previous.get("members", [])
@@ -433,7 +466,10 @@ def main(argv=None):
         if index in done:
             continue
         case = _tumbler_family.tumbler(index, options.seed)
-        member = invert(case, options.width, fit_options, stored.get(index))
+        if options.truth_only:
+            member = truth_refinement(case, options.width, fit_options)
+        else:
+            member = invert(case, options.width, fit_options, stored.get(index))
         members.append(member)
         print(json.dumps(member), flush=True)
         result = {
@@ -442,10 +478,13 @@ def main(argv=None):
             "width": options.width,
             "fit_options": {k: list(v) if isinstance(v, tuple) else v for k, v in fit_options.items()},
             "machine": {"platform": platform.platform(), "backend": jax.default_backend(), "jax": jax.__version__},
-            "rates": rates(members),
             "members": members,
         }
+        if not options.truth_only:
+            result["rates"] = rates(members)
         output.write_text(json.dumps(result, indent=1) + "\n")
+    if options.truth_only:
+        return
     if members:
         plot(json.loads(output.read_text()), output.with_suffix(".png"))
     print(json.dumps(rates(members), indent=1))
