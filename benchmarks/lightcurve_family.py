@@ -478,10 +478,9 @@ def main(argv=None):
             "width": options.width,
             "fit_options": {k: list(v) if isinstance(v, tuple) else v for k, v in fit_options.items()},
             "machine": {"platform": platform.platform(), "backend": jax.default_backend(), "jax": jax.__version__},
+            **({} if options.truth_only else {"rates": rates(members)}),
             "members": members,
         }
-        if not options.truth_only:
-            result["rates"] = rates(members)
         output.write_text(json.dumps(result, indent=1) + "\n")
     if options.truth_only:
         return
