@@ -1440,11 +1440,12 @@ def fit_lightcurve(
             points = 0.5 * (points[1:] + points[:-1])
         return np.exp(points)
 
-    def starts(draw, middles, ranges):
+    def starts(draw, middles, ranges, on_user_grid):
         """A draw's starts: a grid of the periods over ``ranges`` (or its cells' middles) times random
         states drawn from ``seed + draw``, and the given motion first in the first draw on the user's
-        grid.  Returns (theta (S, 8), references, the periods (S, 2) of each, valid (S,), the
-        ellipsoid's axes of each start's inertia (S, 3), whether it is the given motion (S,))."""
+        grid (``on_user_grid``; a focused round's grid never holds it).  Returns (theta (S, 8),
+        references, the periods (S, 2) of each, valid (S,), the ellipsoid's axes of each start's
+        inertia (S, 3), whether it is the given motion (S,))."""
         rng = np.random.default_rng(seed + draw)
         if principal_axis:
             grid = period_axis(*(float(p) for p in ranges[0]), int(grid_sizes[0]), middles)
@@ -1485,7 +1486,7 @@ def fit_lightcurve(
             momentum = np.where(valid[:, None], momentum, np.array([0.0, 0.0, 1.0]))
         attitudes = _random_rotations(rng, count)
         given = np.zeros(count, bool)
-        if initial is not None and draw == 0 and not middles and ranges is period_ranges:
+        if initial is not None and draw == 0 and not middles and on_user_grid:
             # The given motion as one more start, placed first; its cost is not searched but refined.
             scale = float(np.max(np.asarray(initial.inertia)))
             inertia = np.concatenate([np.asarray(initial.inertia)[None] / scale, inertia])
@@ -1518,19 +1519,20 @@ def fit_lightcurve(
     # (draw, middles, period ranges) -> the starts, their search costs and which have been refined (mask)
     searched = {}
 
-    def search_round(draw, middles, count, ranges=period_ranges):
-        """One round: the random states of ``draw`` on the period grid over ``ranges`` (or its cells'
-        middles; :func:`_round_plan`, or a round on :func:`_focused_ranges`) costed on the first
-        window (once a draw), the best ``count`` not yet refined then refined through the windows as a
-        population (module docstring).  Returns the last stage's starts (the refinement's (parameters,
-        costs, converged, residuals, Jacobians) and their references) and the search's periods and
-        costs (empty where the round reuses an earlier round's search)."""
+    def search_round(draw, middles, count, focus=None):
+        """One round: the random states of ``draw`` on the period grid over the user's ranges (or its
+        cells' middles; :func:`_round_plan`), or over ``focus`` (a round on :func:`_focused_ranges`),
+        costed on the first window (once a draw), the best ``count`` not yet refined then refined
+        through the windows as a population (module docstring).  Returns the last stage's starts (the
+        refinement's (parameters, costs, converged, residuals, Jacobians) and their references) and
+        the search's periods and costs (empty where the round reuses an earlier round's search)."""
         nonlocal chunk
+        ranges = period_ranges if focus is None else focus
         log_ranges, prior_inverse_width = round_limits(ranges)
         key = (draw, middles, tuple(map(tuple, ranges)))
         new_search = key not in searched
         if new_search:
-            theta, references, start_periods, valid, axes, given_start = starts(draw, middles, ranges)
+            theta, references, start_periods, valid, axes, given_start = starts(draw, middles, ranges, focus is None)
             if chunk is None:
                 chunk = min(int(search_chunk), len(theta))
             costs = _search(
