@@ -58,11 +58,12 @@ they were not chosen on; stored as ``lightcurve_family_seed<s>.json`` (``--merge
 ``--truth-only``: only the refinements from the truth (without the finer shape's solve), at the options given
 (e.g. ``--regularisation 100,4``: the convex shape's closure and smoothness weights), written to
 ``lightcurve_family_truth[_seed<s>].json``: what the options allow in the truth's basin, a minute and a
-half a member instead of the search's seven.
+half a member instead of the search's seven.  ``--x-scale jac``: the convex solves with Marquardt's scaling
+(``fit_lightcurve``'s ``x_scale``), the truth's refinements too.
 
 Usage: python benchmarks/lightcurve_family.py [--members 0,5,12] [--seed 0] [--width 0.1] [--resume] [--truth-from PATH]
        [--starts-per-period 16] [--period-grid 16,16] [--refine 8] [--convex-subdivisions 1] [--regularisation 10,4]
-       [--stop-at-noise] [--truth-only] [--output-dir DIR] [--plot-only] [--basins-only]
+       [--x-scale jac] [--stop-at-noise] [--truth-only] [--output-dir DIR] [--plot-only] [--basins-only]
        [--merge JSON ... [--earlier-name NAME] [--description D]]
 (the figure: lightcurve_family.png beside the JSON, redrawn after each run or with --plot-only)
 """
@@ -406,6 +407,7 @@ def main(argv=None):
     parser.add_argument(
         "--regularisation", default=None, help="the convex shape's closure,smoothness weights, e.g. 10,4 (default 10,1)"
     )
+    parser.add_argument("--x-scale", default=None, help="jac: fit_lightcurve's x_scale (Marquardt's scaling)")
     parser.add_argument(
         "--stop-at-noise", action="store_true", help="rounds only while the fit misses the noise (stop_at_noise=True)"
     )
@@ -452,6 +454,8 @@ def main(argv=None):
         fit_options["regularisation"] = tuple(float(x) for x in options.regularisation.split(","))
     if options.stop_at_noise:
         fit_options["stop_at_noise"] = True
+    if options.x_scale:
+        fit_options["x_scale"] = options.x_scale
     output.parent.mkdir(parents=True, exist_ok=True)
     if options.truth_only:
         output = output.with_name(output.name.replace("lightcurve_family", "lightcurve_family_truth"))

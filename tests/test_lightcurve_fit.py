@@ -298,6 +298,8 @@ def test_bad_input_names_the_argument():
         fit_lightcurve(times, flux, sun, observer, lightcurve=night[:-1], periods=ranges)
     with pytest.raises(ValueError, match="periods"):
         fit_lightcurve(times, flux, sun, observer)
+    with pytest.raises(ValueError, match="x_scale must be 1.0"):
+        fit_lightcurve(times, flux, sun, observer, periods=ranges, x_scale="jacobian")
     assert jax.config.jax_enable_x64  # the tests run in float64 (conftest.py)
 
 
