@@ -416,20 +416,22 @@ def _solve_start(parameters, reference, prior, data, masks, prior_weights, confi
     weighted by ``prior_weights`` (one per window; ``prior`` and ``prior_weights`` None: no prior,
     an empty pytree that the scan carries as it is).
 
-    ``x_scale="jac"``: each window solved for the parameters times the Jacobian's column norms at
-    its start (Marquardt 1963; Moré 1978, the scaling of MINPACK's lmder; scipy's
-    ``least_squares(x_scale="jac")``), so that the damping, a multiple of the identity in optimistix's
-    Levenberg-Marquardt, acts alike on every parameter: unscaled, a convex shape's hundreds of
-    log-areas (columns of norm about 1 to 100) and the motion's (1e3 to 1e5, their lever arm the
-    record's length) share one damping, which the steps' failures raise until the motion is frozen,
-    and the solve stops far above its minimum with its steps below ``rtol`` (docs/lightcurve-search.md,
+    ``x_scale="jac"``: each window's solve continued from its end for the parameters times the
+    Jacobian's column norms there (Marquardt 1963; Moré 1978, the scaling of MINPACK's lmder;
+    scipy's ``least_squares(x_scale="jac")``), so that the damping, a multiple of the identity in
+    optimistix's Levenberg-Marquardt, acts alike on every parameter.  Unscaled, a convex shape's
+    hundreds of log-areas (columns of norm about 1 to 100) and the motion's (1e3 to 1e5, their lever
+    arm the record's length) share one damping, which the steps' failures raise until the motion is
+    frozen: the solve fits the shape to the motion it started from, then stops, often well above its
+    minimum, its steps below ``rtol``.  Scaled from the start instead, the motion's first steps,
+    taken while the shape is still the ellipsoid's, left good basins (docs/lightcurve-search.md,
     "Levenberg-Marquardt's scaling")."""
     solver = optx.LevenbergMarquardt(rtol=rtol, atol=atol)
+    fn = lambda p, args: _least_squares_fn(p, args, config)  # noqa: E731
 
     def stage(current, window):
         mask, prior_weight = window
         args = (reference, data, (mask, prior, prior_weight))
-        fn = lambda p, args: _least_squares_fn(p, args, config)  # noqa: E731
         solution = optx.least_squares(fn, solver, current, args=args, has_aux=True, max_steps=max_steps, throw=False)
         finite = jnp.all(jnp.isfinite(solution.value))
         value = jnp.where(finite, solution.value, current)
@@ -441,8 +443,7 @@ def _solve_start(parameters, reference, prior, data, masks, prior_weights, confi
         (residual, jacobian), converged = solution.state.aux, solution.result == optx.RESULTS.successful
         if x_scale == "jac":
             # Continued, scaled, from the unscaled solve's end, where the shape has been fitted to the
-            # motion it started from: scaled from the start, the motion's first steps, taken while the
-            # shape is still the ellipsoid's, can leave a good basin (docstring).
+            # motion it started from (docstring).
             scale = _column_scale(jacobian)
             scaled_fn = lambda scaled, args: _least_squares_fn(scaled / scale, args, config)  # noqa: E731
             continued = optx.least_squares(
