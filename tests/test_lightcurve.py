@@ -433,25 +433,19 @@ def test_momentum_from_periods_round_trip():
     np.testing.assert_array_equal(np.asarray(long_axis), [False, True])
 
 
-def test_convex_fit_jacobian_against_finite_differences():
-    """The convex model's hand-assembled Jacobian (forward mode through the motion, the areas'
-    columns, the regularisation and period-prior rows written out) against central differences of
-    its residuals."""
+def convex_fit_data(times, sun, observer, log_brightness, curves, subdivisions):
+    """fit_lightcurve's data of the convex model (sigma 0.01, the default weights (10, 1)) on the
+    normals of the icosphere of ``subdivisions``, and those normals' solid angles."""
     from frbjax.lightcurve import _fit
 
-    rng = np.random.default_rng(8)
-    normals, solid_angles, faces = _fit._unit_normals(0)
-    times = np.linspace(-2.0, 2.0, 12)
-    sun = unit(np.tile([1.0, 0.1, 0.0], (12, 1)) + 0.1 * rng.normal(size=(12, 3)))
-    observer = unit(sun + np.array([0.0, 0.4, 0.1]))
-    curves = np.repeat(np.eye(2), 6, axis=0)
+    normals, solid_angles, faces = _fit._unit_normals(subdivisions)
     data = {
         key: jnp.asarray(value, float)
         for key, value in dict(
             times=times,
             sun=sun,
             observer=observer,
-            log_brightness=rng.normal(scale=0.1, size=12),
+            log_brightness=log_brightness,
             curves=curves,
             sigma=0.01,
             normals=normals,
@@ -460,6 +454,22 @@ def test_convex_fit_jacobian_against_finite_differences():
             free=np.ones(8 + len(normals)),
         ).items()
     }
+    return data, solid_angles
+
+
+def test_convex_fit_jacobian_against_finite_differences():
+    """The convex model's hand-assembled Jacobian (forward mode through the motion, the areas'
+    columns, the regularisation and period-prior rows written out) against central differences of
+    its residuals."""
+    from frbjax.lightcurve import _fit
+
+    rng = np.random.default_rng(8)
+    times = np.linspace(-2.0, 2.0, 12)
+    sun = unit(np.tile([1.0, 0.1, 0.0], (12, 1)) + 0.1 * rng.normal(size=(12, 3)))
+    observer = unit(sun + np.array([0.0, 0.4, 0.1]))
+    curves = np.repeat(np.eye(2), 6, axis=0)
+    data, _ = convex_fit_data(times, sun, observer, rng.normal(scale=0.1, size=12), curves, 0)
+    normals = data["normals"]
     direction = unit([0.2, 0.1, 0.95])
     reference = tuple(jnp.asarray(x) for x in (ATTITUDE, direction, _fit._tangent_basis(direction)))
     parameters = np.concatenate(
@@ -514,22 +524,9 @@ def test_marquardt_scaling_lets_the_convex_solve_reach_its_minimum():
     body = FreeRigidBody(np.array([0.61, 0.965, 1.0]), momentum, ATTITUDE)
     flux = np.asarray(brightness(body, ConvexShape.ellipsoid(1.35, 1.0, 0.8, subdivisions=3), times, sun, observer))
     flux = flux * np.exp(0.01 * rng.normal(size=times.size))
-    normals, solid_angles, faces = _fit._unit_normals(1)
-    data = {
-        key: jnp.asarray(value, float)
-        for key, value in dict(
-            times=times,
-            sun=sun,
-            observer=observer,
-            log_brightness=np.log(flux),
-            curves=np.eye(nights)[np.repeat(np.arange(nights), per_night)],
-            sigma=0.01,
-            normals=normals,
-            laplacian=_fit._laplacian(faces),
-            regularisation=(10.0, 1.0),
-            free=np.ones(8 + len(normals)),
-        ).items()
-    }
+    curves = np.eye(nights)[np.repeat(np.arange(nights), per_night)]
+    data, solid_angles = convex_fit_data(times, sun, observer, np.log(flux), curves, 1)
+    normals = np.asarray(data["normals"])
     direction = unit(momentum)
     reference = tuple(jnp.asarray(x)[None] for x in (ATTITUDE, direction, _fit._tangent_basis(direction)))
     areas = _fit._gaussian_image_areas(np.array([1.2, 1.0, 0.9]), normals, solid_angles)
