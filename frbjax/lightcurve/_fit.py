@@ -1201,7 +1201,7 @@ def _check_options(
     initial,
 ):
     """The search's options, as (periods, period_grid) arrays; ValueError naming a bad option."""
-    if not (isinstance(x_scale, str) and x_scale == "jac") and (isinstance(x_scale, (str, bool)) or x_scale != 1):
+    if x_scale != "jac" and (isinstance(x_scale, (str, bool)) or x_scale != 1):
         raise ValueError(f"x_scale must be 1.0 (the parameters as they are) or 'jac' (Marquardt's), got {x_scale!r}")
     checks.choice("shape", shape, ("convex", "ellipsoid"))
     checks.choice("law", law, LAWS)
