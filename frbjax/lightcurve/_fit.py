@@ -1368,9 +1368,11 @@ def fit_lightcurve(
     scipy's ``least_squares(x_scale="jac")``); 1.0 (default): the parameters as they are, with which
     those solves can stop well above their minimum, reporting convergence.  Continued, a solve ends
     lower or where it was (the steps are only taken where they lower the cost), at twice the solve's
-    time at most; on thirteen measured solves 0.02% to 78% lower.  The default stays until the tumbler
-    families have been measured with it and the shape's weights chosen for it: docs/lightcurve-search.md,
-    "Levenberg-Marquardt's scaling".
+    time at most; on thirteen measured solves 0.02% to 78% lower.  A fit takes 1.3 to 2.1 times as
+    long, and the finer shape's solve (1288 parameters) often ends unconverged, which leaves the
+    shape's resolution error out of the sigmas (``resolution_periods`` NaN): six of eight of a tumbler
+    family's members.  Hence not the default: docs/lightcurve-search.md, "Levenberg-Marquardt's
+    scaling" and "``x_scale="jac"`` on seed 1".
 
     ``progress``: progress bars (tqdm) for the search (starts costed, a chunk of ``search_chunk`` at a
     time) and the refinement (windows solved); by default shown in a terminal or an IPython/Jupyter
