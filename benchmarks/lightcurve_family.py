@@ -62,7 +62,7 @@ half a member instead of the search's seven.  ``--x-scale jac``: the convex solv
 (``fit_lightcurve``'s ``x_scale``), the truth's refinements too.
 
 Usage: python benchmarks/lightcurve_family.py [--members 0,5,12] [--seed 0] [--width 0.1] [--resume] [--truth-from PATH]
-       [--starts-per-period 16] [--period-grid 16,16] [--refine 8] [--convex-subdivisions 1] [--regularisation 10,4]
+       [--starts-per-period 16] [--period-grid 16,16] [--refine 8] [--convex-subdivisions 1] [--regularisation 10,1]
        [--x-scale jac] [--stop-at-noise] [--truth-only] [--output-dir DIR] [--plot-only] [--basins-only]
        [--merge JSON ... [--earlier-name NAME] [--description D]]
 (the figure: lightcurve_family.png beside the JSON, redrawn after each run or with --plot-only)
@@ -262,9 +262,9 @@ def rates(members):
     }
 
 
-# The run drawn in grey beside the present one: the same fits before the shape's resolution error
-# entered the sigmas (``fit_lightcurve``'s ``resolution_error``, 2026-12-05).
-EARLIER_RUN = ("before_resolution_error_2026_12_04", "2026-12-04, sigmas without the resolution error")
+# The run drawn in grey beside the present one: the same family at the convex shape's former default
+# weights (``fit_lightcurve``'s ``regularisation`` (10, 1), until 2026-12-07).
+EARLIER_RUN = ("shape_weights_10_1", "the former shape weights (10, 1)")
 
 
 def plot(result, path):
@@ -405,7 +405,9 @@ def main(argv=None):
     parser.add_argument("--refine", type=int, default=None)
     parser.add_argument("--convex-subdivisions", type=int, default=None, help="fit_lightcurve's default: 2")
     parser.add_argument(
-        "--regularisation", default=None, help="the convex shape's closure,smoothness weights, e.g. 10,4 (default 10,1)"
+        "--regularisation",
+        default=None,
+        help="the convex shape's closure,smoothness weights, e.g. 10,1 (fit_lightcurve's default: 100,4)",
     )
     parser.add_argument("--x-scale", default=None, help="jac: fit_lightcurve's x_scale (Marquardt's scaling)")
     parser.add_argument(

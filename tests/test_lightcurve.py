@@ -434,7 +434,7 @@ def test_momentum_from_periods_round_trip():
 
 
 def convex_fit_data(times, sun, observer, log_brightness, curves, subdivisions):
-    """fit_lightcurve's data of the convex model (sigma 0.01, the default weights (10, 1)) on the
+    """fit_lightcurve's data of the convex model (sigma 0.01, the former default weights (10, 1)) on the
     normals of the icosphere of ``subdivisions``, and those normals' solid angles."""
     from frbjax.lightcurve import _fit
 

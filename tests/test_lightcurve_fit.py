@@ -122,17 +122,19 @@ SIZES = {
 }
 
 
-# Measured at the sizes above (relative errors; the issue asks periods to 1e-4; 2026-11-29): SAM P_psi
-# 8.1e-6, P_phi 8.0e-5 (relative standard errors 1.4e-4, 1.2e-3), moments 0.005% and 0.16%, held-out nights
-# 1.11% rms, the fitted shape's uniform-density moments against the true hull's (0.582 : 0.873 : 1),
-# in the fitted body's axes, 4.0% and 0.58%.  LAM: P_psi 2.6e-6, P_phi 3.9e-6 (standard errors 5.9e-6,
-# 3.0e-5), moments 2.1% and 1.9%, held-out 1.04% rms, shape 0.52% and 0.13%.  The true motion and
-# shape give 0.90% on the same held-out nights (the noise).  The search's random states are seed 0
-# (fit_lightcurve's default); benchmarks/lightcurve.py recovers both tumblers with four seeds each
-# over wider ranges.
+# Measured at the sizes above and the default shape weights (100, 4) (relative errors; the issue asks
+# periods to 1e-4; 2026-12-07): SAM P_psi 3.6e-6, P_phi 9.3e-6 (relative standard errors 1.6e-5,
+# 1.2e-4), moments 0.12% and 0.15%, held-out nights 1.09% rms, the fitted shape's uniform-density
+# moments against the true hull's (0.582 : 0.873 : 1), in the fitted body's axes, 2.8% and 0.63%.  LAM:
+# P_psi 2.1e-6, P_phi 4.0e-6 (standard errors 2.5e-6, 1.3e-5), moments 1.9% and 1.8%, held-out 0.97%
+# rms, shape 0.41% and 0.14%.  The true motion and shape give 0.90% on the same held-out nights (the
+# noise).  (At the former weights (10, 1), 2026-11-29: SAM periods 8.1e-6 and 8.0e-5, moments 0.005%
+# and 0.16%, held-out 1.11%, shape 4.0%; LAM periods 2.6e-6 and 3.9e-6, moments 2.1% and 1.9%,
+# held-out 1.04%, shape 0.52%.)  The search's random states are seed 0 (fit_lightcurve's default);
+# benchmarks/lightcurve.py recovers both tumblers with four seeds each over wider ranges.
 BOUNDS = {
-    "SAM": dict(periods=(9e-6, 9.5e-5), inertia=0.002, held_out=0.0115, shape=0.045),
-    "LAM": dict(periods=(3e-6, 4.5e-6), inertia=0.0225, held_out=0.0106, shape=0.009),
+    "SAM": dict(periods=(4.5e-6, 1.2e-5), inertia=0.0018, held_out=0.0115, shape=0.032),
+    "LAM": dict(periods=(2.6e-6, 4.6e-6), inertia=0.022, held_out=0.0103, shape=0.005),
 }
 
 
@@ -195,13 +197,13 @@ def test_tumbler_recovered(energy_ratio, long_axis):
             f"moments {np.asarray(result.resolution_inertia)}; sigmas {np.asarray(result.basin_period_sigma)} "
             f"(the model's {result.standard_errors(result.covariance)[0]}); moments' |z| {inertia_z}"
         )
-        # Measured (2026-12-05): the finer shape's periods 1.3e-5 and 4.3e-5 relative from the coarser's,
-        # sigmas 4.2e-6 and 2.7e-4 days (the model's 2.7e-6 and 2.2e-4), the moments 0.02 and 0.84 to 0.85
-        # of their sigmas from the truth.
+        # Measured (2026-12-07, weights (100, 4)): the finer shape's periods 7.5e-6 and 2.7e-5 relative
+        # from the coarser's, sigmas 3.2e-6 and 2.3e-4 days (the model's 2.4e-6 and 2.0e-4), the moments
+        # 0.06 and 1.06 of their sigmas from the truth (at (10, 1): 0.02 and 0.85).
         assert np.all(np.isfinite(np.asarray(result.resolution_periods)))
         assert np.all(np.asarray(result.basin_period_sigma) >= np.asarray(result.resolution_period_sigma))
         assert np.all(np.asarray(result.basin_period_sigma) > result.standard_errors(result.covariance)[0])
-        assert np.all(inertia_z < 1.0)
+        assert np.all(inertia_z < 1.2)
 
     assert np.all(shape_error < bounds["shape"])
     assert np.all(period_error < np.array(bounds["periods"]))
