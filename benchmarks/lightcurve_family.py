@@ -360,6 +360,29 @@ def truth_refinement(case, width, options):
     }
 
 
+# What :func:`invert` takes from a member's stored record (``--truth-from``): a family run's JSON holds
+# them all; a ``--truth-only`` file holds fewer (no period z, no held-out RMS against the data).
+TRUTH_FROM_KEYS = (
+    "truth_refined_period_z",
+    "truth_refined_cost",
+    "truth_refined_held_out_rms",
+    "truth_refined_held_out_error",
+    "truth_refined_noise_ratio",
+)
+
+
+def check_truth_from(stored, indices, path):
+    """Refuse a ``--truth-from`` file that lacks a member or a figure before any fit runs, rather than
+    after the first member's search (minutes)."""
+    missing = {index: [key for key in TRUTH_FROM_KEYS if key not in stored.get(index, {})] for index in indices}
+    missing = {index: keys for index, keys in missing.items() if keys}
+    if missing:
+        raise SystemExit(
+            f"--truth-from {path}: members' records lack {missing} (a family run's JSON has them; "
+            "a --truth-only file does not)"
+        )
+
+
 def output_path(output_dir, seed):
     """The run's JSON: lightcurve_family.json, a second family's (seed s != 0) lightcurve_family_seed<s>.json."""
     return pathlib.Path(output_dir) / f"lightcurve_family{f'_seed{seed}' if seed else ''}.json"
@@ -468,6 +491,7 @@ def main(argv=None):
     stored = {}
     if options.truth_from:
         stored = {m["index"]: m for m in json.loads(pathlib.Path(options.truth_from).read_text())["members"]}
+        check_truth_from(stored, (int(x) for x in options.members.split(",")), options.truth_from)
     for index in (int(x) for x in options.members.split(",")):
         if index in done:
             continue
