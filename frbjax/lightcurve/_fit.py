@@ -110,12 +110,13 @@ amplitude that twelve of the plan's rounds missed.  The bound is one standard de
 misfit's warning (three): a finely faceted body, outside the model's family, leaves residuals that no
 round removes, up to about 3.2 standard deviations on the truth's own refinement, and with the
 warning's bound two such members ran twelve rounds each for nothing, one of them 20 minutes on two
-cores (docs/lightcurve-search.md, "Rounds past four that take turns" and "Seed 2 at (100, 4)").  With ``stop_at_noise=True`` the rounds stop at the first whose
-winner is within the warning's bound (past ``search_rounds``, the search's), in about a quarter of the
-time where that is the first.  The lowest cost of all the rounds' refined starts wins; a winner above
-the warning's bound after the last round warns: the search has missed the data's basin, or the model
-does not follow the body, or sigma understates the noise (docs/lightcurve-search.md: the rounds on the
-tumbler family of benchmarks/lightcurve_family.py).
+cores (docs/lightcurve-search.md, "Rounds past four that take turns" and "Seed 2 at (100, 4)").
+With ``stop_at_noise=True`` the rounds stop at the first whose winner is within the warning's bound
+(past ``search_rounds``, the search's), in about a quarter of the time where that is the first.  The
+lowest cost of all the rounds' refined starts wins; a winner above the warning's bound after the last
+round warns: the search has missed the data's basin, or the model does not follow the body, or sigma
+understates the noise (docs/lightcurve-search.md: the rounds on the tumbler family of
+benchmarks/lightcurve_family.py).
 
 The pole's mirror image
 -----------------------
