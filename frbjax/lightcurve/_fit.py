@@ -647,8 +647,8 @@ def _warn_of_misfit(result, bound, sigma, within_model_error, stacklevel=3):
     if within_model_error:
         cause = (
             "within what a body outside the model's family leaves, so no further round was searched (they run "
-            "above (s / sigma)^2 = 1 + 4 sqrt(2 / dof)): the model may not follow the body's shape, or sigma "
-            "understates the noise, or the search missed the data's basin by little"
+            f"above (s / sigma)^2 = 1 + {_SEARCH_AGAIN_SIGMAS:g} sqrt(2 / dof)): the model may not follow the body's "
+            "shape, or sigma understates the noise, or the search missed the data's basin by little"
         )
     else:
         cause = (
