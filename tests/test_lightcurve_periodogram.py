@@ -143,6 +143,25 @@ def test_principal_axis_rotator_proposed_first():
     assert result.fit_options(0) == dict(periods=result.proposals[0], principal_axis=True)
 
 
+def test_faint_rotator_period_halved_at_most_to_its_half():
+    # A rotator whose light curve stands about 80 units of chi-square above 1% noise (harmonics 1 and
+    # 2 of 0.6%, like the third family's rotator 1): its halves fit 19 and then 45 units worse in the
+    # single-period series.  The period is halved while the half fits within three standard
+    # deviations of the chi-square difference (27 units here), so once: P / 2, then P, are proposed.
+    # A fixed allowance of 8 units per coefficient (160) halved it twice until 2026-12-07, proposing
+    # P / 4, P / 2 and P / 8.
+    period = 0.65
+    times, night, rng = nights(16, 24, 60, seed=4)
+    phase = 2 * np.pi * times / period
+    signal = 0.006 * np.cos(2 * phase + 0.2) + 0.006 * np.sin(phase + 0.4)
+    values = signal + 0.01 * rng.normal(size=len(times)) + rng.normal(size=16)[night]
+    result = tumbler_periodogram(times, np.exp(values), lightcurve=night, period_range=(0.1, 5.0))
+    print(result.modes[:3], result.proposals[:3])
+    assert result.modes[:3] == ["PA", "PA", "PA"]
+    assert result.proposals[0][0] <= period / 2 <= result.proposals[0][1]
+    assert result.proposals[1][0] <= period <= result.proposals[1][1]
+
+
 def test_psi_harmonics_fade_toward_the_pole():
     # Every spherical harmonic of azimuthal order j about L carries sin^|j| theta (DLMF 14.30.1,
     # 14.7.10): the geometric series' psi harmonic j at aspect theta (the pole's turns) is its equator-on column times

@@ -70,8 +70,10 @@ The search (all linear least squares, numpy, vectorised over frequencies):
    geometry fixes: on the family the truth's own reading ranks higher among the aliases
    (docs/lightcurve-search.md).
 5. Principal-axis comparison: the best single period with 2 (psi_order + phi_order) harmonics,
-   drifting alike, moved to its double while that fits within the noise's allowance (a period's
-   half fits as well; with the geometry the comparison is then made in the geometric series, the
+   drifting alike, halved (at most twice) while its half fits as well, within three standard
+   deviations of the two series' chi-square difference, 3 sqrt(2 C) units of the noise's variance for
+   C coefficients each (a period's double fits as well as it does: its harmonics are the double's;
+   with the geometry the comparison is then made in the geometric series, the
    period's harmonics up to 2 (psi + phi) of ``geometric_orders`` turning with the bisector's azimuth
    like psi's).  When no reading lowers its RMS by more than the noise allows, the period,
    its double and its half are proposed first as a principal-axis rotator's; otherwise the single
@@ -614,12 +616,16 @@ def tumbler_periodogram(
         one_period.append((float(np.min(trial)), float(f + offsets[int(np.argmin(trial))])))
     rss_pa, f_pa = min(one_period) if one_period else (float(rss_one.min()), float(best_one))
     pa_dof = rich.dof - 2 * len(pa_harmonics) * (drift + 1)
-    # A period's multiples fit as well as it does (its harmonics are theirs): the shortest period
-    # that fits within the noise's allowance is taken.
+    # A period's multiples fit as well as it does (its harmonics are theirs): the period is halved
+    # while its half fits as well, within three standard deviations of the chi-square difference of
+    # the two series (C coefficients each, half of each's not the other's: a variance of 2 C in units
+    # of the noise's variance).  The bound is the noise's, not a share of the signal: a faint
+    # rotator's whole light curve may stand only a few such deviations above the noise.
+    coefficients = 2 * len(pa_harmonics) * (drift + 1)
     for _ in range(2):
         offsets = (np.arange(9) - 4) * step / 2
         trial = rich.rss((2 * f_pa + offsets)[:, None], pa_harmonics[:, None])
-        allowance = 8 * len(pa_harmonics) * (drift + 1) * rss_pa / max(pa_dof, 1)
+        allowance = 3 * np.sqrt(2 * coefficients) * rss_pa / max(pa_dof, 1)
         if 2 * f_pa > f_high or float(np.min(trial)) > rss_pa + allowance:
             break
         rss_pa, f_pa = float(np.min(trial)), float(2 * f_pa + offsets[int(np.argmin(trial))])
