@@ -149,7 +149,7 @@ def test_faint_rotator_period_halved_at_most_to_its_half():
     # single-period series.  The period is halved while the half fits within three standard
     # deviations of the chi-square difference (27 units here), so once: P / 2, then P, are proposed.
     # A fixed allowance of 8 units per coefficient (160) halved it twice until 2026-12-07, proposing
-    # P / 4, P / 2 and P / 8.
+    # P / 4 and P / 2 (P / 8 lies outside the band) and then the tumbling readings.
     period = 0.65
     times, night, rng = nights(16, 24, 60, seed=4)
     phase = 2 * np.pi * times / period
