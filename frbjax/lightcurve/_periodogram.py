@@ -71,17 +71,17 @@ The search (all linear least squares, numpy, vectorised over frequencies):
    (docs/lightcurve-search.md).
 5. Principal-axis comparison: the best single period with 2 (psi_order + phi_order) harmonics,
    drifting alike, halved (at most twice) while its half fits as well, within three standard
-   deviations of the two series' chi-square difference, 3 sqrt(2 C) units of the noise's variance for
-   C coefficients each (a period's double fits as well as it does: its harmonics are the double's;
-   with the geometry the comparison is then made in the geometric series, the
-   period's harmonics up to 2 (psi + phi) of ``geometric_orders`` turning with the bisector's azimuth
-   like psi's).  When no reading lowers its RMS by more than the noise allows, the period,
-   its double and its half are proposed first as a principal-axis rotator's; otherwise the single
-   period follows the readings, in a full list in the last reading's slot unless it fits worse than
-   that reading by more than the same allowance (a clear tumbler's list keeps its readings; on the
-   family that recovers two truths ranked last).  Each centre becomes a range of +- ``tolerance`` / T
-   in frequency (the periods' uncertainty at the full span), at most +- ``max_width`` relative, and
-   the list is cut at ``max_proposals``.
+   deviations of the two series' chi-square difference, 3 sqrt(2 C) units of the noise's variance
+   for C coefficients each (a period's double fits as well as it does: its harmonics are the
+   double's).  With the geometry the comparison is then made in the geometric series, the period's
+   harmonics up to 2 (psi + phi) of ``geometric_orders`` turning with the bisector's azimuth like
+   psi's.  When no reading lowers its RMS by more than the noise allows, the period, its double and
+   its half are proposed first as a principal-axis rotator's; otherwise the single period follows
+   the readings, in a full list in the last reading's slot unless it fits worse than that reading by
+   more than the same allowance (a clear tumbler's list keeps its readings; on the family that
+   recovers two truths ranked last).  Each centre becomes a range of +- ``tolerance`` / T in
+   frequency (the periods' uncertainty at the full span), at most +- ``max_width`` relative, and the
+   list is cut at ``max_proposals``.
 
 The ranges are for :func:`fit_lightcurve`'s ``periods``; ``mode`` tells which mode the reading assumed
 (fit with ``mode="both"`` to let the fit decide).  The lattice the light curves determine is only as
@@ -615,13 +615,13 @@ def tumbler_periodogram(
         trial = rich.rss((f + offsets)[:, None], pa_harmonics[:, None])
         one_period.append((float(np.min(trial)), float(f + offsets[int(np.argmin(trial))])))
     rss_pa, f_pa = min(one_period) if one_period else (float(rss_one.min()), float(best_one))
-    pa_dof = rich.dof - 2 * len(pa_harmonics) * (drift + 1)
+    coefficients = 2 * len(pa_harmonics) * (drift + 1)
+    pa_dof = rich.dof - coefficients
     # A period's multiples fit as well as it does (its harmonics are theirs): the period is halved
     # while its half fits as well, within three standard deviations of the chi-square difference of
     # the two series (C coefficients each, half of each's not the other's: a variance of 2 C in units
     # of the noise's variance).  The bound is the noise's, not a share of the signal: a faint
     # rotator's whole light curve may stand only a few such deviations above the noise.
-    coefficients = 2 * len(pa_harmonics) * (drift + 1)
     for _ in range(2):
         offsets = (np.arange(9) - 4) * step / 2
         trial = rich.rss((2 * f_pa + offsets)[:, None], pa_harmonics[:, None])
