@@ -75,11 +75,12 @@ The search (all linear least squares, numpy, vectorised over frequencies):
    for C coefficients each (a period's double fits as well as it does: its harmonics are the
    double's).  With the geometry the comparison is then made in the geometric series, the period's
    harmonics up to 2 (psi + phi) of ``geometric_orders`` turning with the bisector's azimuth like
-   psi's.  When no reading lowers its RMS by more than the noise allows, the period, its double and
-   its half are proposed first as a principal-axis rotator's; otherwise the single period follows
-   the readings, in a full list in the last reading's slot unless it fits worse than that reading by
-   more than the same allowance (a clear tumbler's list keeps its readings; on the family that
-   recovers two truths ranked last).  Each centre becomes a range of +- ``tolerance`` / T in
+   psi's.  When no reading lowers its chi-square below the single period's by more than the
+   tumbling test's allowance (five units of the noise's variance per extra coefficient), the period,
+   its double and its half are proposed first as a principal-axis rotator's; otherwise the single
+   period follows the readings, in a full list in the last reading's slot unless it fits worse than
+   that reading by more than the same allowance (a clear tumbler's list keeps its readings; on the
+   family that recovers two truths ranked last).  Each centre becomes a range of +- ``tolerance`` / T in
    frequency (the periods' uncertainty at the full span), at most +- ``max_width`` relative, and the
    list is cut at ``max_proposals``.
 
